@@ -1,0 +1,35 @@
+# svgf: every target sets itself up (virtualenv + editable install) on a fresh machine.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+SVGF   := $(VENV)/bin/svgf
+
+.PHONY: venv demo test lint bench results clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m svgf_cli.demo
+
+test: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
+bench: $(STAMP)
+	$(PY) bench/run.py
+
+results: $(STAMP)
+	$(PY) -m svgf_cli.results
+
+clean:
+	rm -rf $(VENV) demo bench/out results .pytest_cache .ruff_cache

@@ -1,0 +1,3 @@
+"""svgf: batch Spatiotemporal Variance-Guided Filtering for OpenEXR sequences."""
+
+__version__ = "0.1.0"

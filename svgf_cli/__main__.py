@@ -1,0 +1,3 @@
+from svgf_cli.cli import main
+
+main()

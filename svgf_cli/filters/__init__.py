@@ -1,0 +1,1 @@
+"""SVGF stages as plain array kernels; knows arrays, nothing about files."""

@@ -1,0 +1,92 @@
+"""SVGF parameters: one dataclass with the paper's defaults, documented once.
+
+Every field's ``metadata["help"]`` is the single place its meaning is written down; the CLI
+builds one ``--option`` per field from it (``svgf_cli.commands.options``), the README table
+is generated from the same text, and the resolved values are stored in every output's
+metadata as ``svgf/params``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+
+def _p(default: Any, help: str, **extra: Any) -> Any:
+    return field(default=default, metadata={"help": help, **extra})
+
+
+@dataclass(frozen=True)
+class SVGFParams:
+    """Resolved SVGF parameters. Defaults are Schied et al. 2017 (``--preset paper``)."""
+
+    # Temporal accumulation (paper section 4.1).
+    alpha: float = _p(0.2, "Minimum colour blend factor; alpha = max(alpha, 1/history_length).")
+    moments_alpha: float = _p(0.2, "Minimum blend factor of the luminance moments.")
+    history_cap: int = _p(32, "Maximum history length in frames.")
+    temporal: bool = _p(True, "Reuse history through motion vectors (off: every frame cold).")
+    depth_tolerance: float = _p(
+        10.0, "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient + 0.01)."
+    )
+    normal_tolerance: float = _p(
+        16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01)."
+    )
+    # Variance estimation (paper section 4.2).
+    variance_history_threshold: int = _p(
+        4, "Below this history length the variance is estimated spatially (7x7 bilateral)."
+    )
+    spatial_variance_radius: int = _p(3, "Radius of the spatial variance estimate (3 = 7x7).")
+    # A-trous wavelet filter (paper section 4.3).
+    atrous_iterations: int = _p(5, "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none.")
+    feedback_iteration: int = _p(
+        0, "A-trous iteration whose output becomes the colour history (-1 = unfiltered)."
+    )
+    sigma_luminance: float = _p(4.0, "sigma_l: luminance edge-stopping against sqrt(variance).")
+    sigma_normal: float = _p(128.0, "sigma_n: exponent of the normal edge-stopping weight.")
+    sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.")
+    # Demodulation (paper section 4).
+    albedo_epsilon: float = _p(1e-3, "Albedo floor for demodulation; below it a pixel is not demodulated.")
+    # Optional extras from the lecture notes; all off unless asked.
+    firefly_clamp: float = _p(
+        0.0, "Clamp input luminance to mean + k*sigma of the 3x3 neighbourhood before accumulation (0 = off)."
+    )
+    history_clamp: float = _p(
+        0.0, "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame (0 = off)."
+    )
+    taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
+    taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
+
+    def to_json(self) -> str:
+        """Stable JSON of every field (sorted keys), stored in output metadata."""
+        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+
+    def replace(self, **changes: Any) -> SVGFParams:
+        return dataclasses.replace(self, **changes)
+
+
+PRESETS: dict[str, SVGFParams] = {
+    # Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128, sigma_z 1, 5 iterations,
+    # first iteration fed back as history.
+    "paper": SVGFParams(),
+    # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
+    "falcor": SVGFParams(
+        alpha=0.05,
+        moments_alpha=0.2,
+        sigma_luminance=10.0,
+        atrous_iterations=4,
+        feedback_iteration=1,
+    ),
+}
+
+
+def resolve_params(preset: str = "paper", **overrides: Any) -> SVGFParams:
+    """Start from a preset and apply the overrides that are not None."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
+    changes = {k: v for k, v in overrides.items() if v is not None}
+    unknown = set(changes) - {f.name for f in dataclasses.fields(SVGFParams)}
+    if unknown:
+        raise ValueError(f"unknown parameter(s): {', '.join(sorted(unknown))}")
+    return PRESETS[preset].replace(**changes)
