@@ -28,7 +28,14 @@ class SVGFParams:
     history_cap: int = _p(32, "Maximum history length in frames.")
     temporal: bool = _p(True, "Reuse history through motion vectors (off: every frame cold).")
     depth_tolerance: float = _p(
-        10.0, "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient + 0.01)."
+        10.0,
+        "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient"
+        " + depth_slack * z).",
+    )
+    depth_slack: float = _p(
+        0.002,
+        "Depth-relative slack of the reprojection depth test (scale-free stand-in for"
+        " Falcor's absolute 0.01).",
     )
     normal_tolerance: float = _p(
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01)."
@@ -38,6 +45,16 @@ class SVGFParams:
         4, "Below this history length the variance is estimated spatially (7x7 bilateral)."
     )
     spatial_variance_radius: int = _p(3, "Radius of the spatial variance estimate (3 = 7x7).")
+    spatial_variance_sigma_luminance: float = _p(
+        10.0,
+        "Weak luminance edge-stop of the spatial variance estimate: exp(-|dl| / sigma)"
+        " (Falcor's raw phiColor).",
+    )
+    spatial_variance_blur_color: bool = _p(
+        False,
+        "Also replace short-history colour by the spatially filtered colour (Falcor; the"
+        " paper filters only the variance).",
+    )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(5, "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none.")
     feedback_iteration: int = _p(
@@ -47,13 +64,19 @@ class SVGFParams:
     sigma_normal: float = _p(128.0, "sigma_n: exponent of the normal edge-stopping weight.")
     sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.")
     # Demodulation (paper section 4).
-    albedo_epsilon: float = _p(1e-3, "Albedo floor for demodulation; below it a pixel is not demodulated.")
+    albedo_epsilon: float = _p(
+        1e-3, "Albedo floor for demodulation; below it in all channels a pixel is not demodulated."
+    )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
-        0.0, "Clamp input luminance to mean + k*sigma of the 3x3 neighbourhood before accumulation (0 = off)."
+        0.0,
+        "Clamp input luminance to mean + k*sigma of the 8 neighbours before accumulation"
+        " (0 = off).",
     )
     history_clamp: float = _p(
-        0.0, "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame (0 = off)."
+        0.0,
+        "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame"
+        " (0 = off).",
     )
     taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
     taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
@@ -77,6 +100,7 @@ PRESETS: dict[str, SVGFParams] = {
         sigma_luminance=10.0,
         atrous_iterations=4,
         feedback_iteration=1,
+        spatial_variance_blur_color=True,
     ),
 }
 

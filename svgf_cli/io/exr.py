@@ -1,16 +1,26 @@
-"""OpenEXR reading and writing through OpenImageIO. Knows files and channels, not filtering."""
+"""OpenEXR reading and writing through OpenImageIO. Knows files and channels, not filtering.
+
+Reading: `read_info` (header only), `read_frame` (the roles a `LayerMapping` resolves to, as
+a `Frame`), `read_rgb` (plain R,G,B). Writing: `write_exr` (atomic, checked), with
+`check_compression` refusing lossy codecs on data channels.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Mapping
+import re
+from collections.abc import Collection, Iterable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
 
-from svgf_cli.errors import SvgfError
+from svgf_cli.errors import InputError, SvgfError, UsageError
+from svgf_cli.frame import Frame
+from svgf_cli.io.layers import LayerMapping, ResolvedLayers, resolve_layers, to_backward_pixels
 
 
 class ExrWriteError(SvgfError):
@@ -61,7 +71,12 @@ def write_exr(
     spec = oiio.ImageSpec(w, h, len(names), oiio.TypeDesc("float"))
     spec.channelnames = tuple(names)
     spec.channelformats = tuple(formats)
+    check_compression(compression, names, float_channels=[n for n in names if not is_half(n)])
     spec.attribute("compression", compression)
+    # OpenImageIO stamps the current time as DateTime unless one is given; an empty value
+    # suppresses it, so the same inputs give byte-identical files. A passed-through
+    # DateTime (the render's) still wins.
+    spec.attribute("DateTime", "")
     for key, value in (attributes or {}).items():
         _set_attribute(spec, key, value)
 
@@ -86,22 +101,477 @@ def write_exr(
 
 
 def _set_attribute(spec: oiio.ImageSpec, key: str, value: Any) -> None:
-    """Set one header attribute, choosing the EXR type from the Python value."""
-    if isinstance(value, bool):
-        spec.attribute(key, int(value))
-    elif isinstance(value, (int, np.integer)):
-        spec.attribute(key, int(value))
-    elif isinstance(value, (float, np.floating)):
-        spec.attribute(key, float(value))
-    elif isinstance(value, str):
-        spec.attribute(key, value)
-    elif isinstance(value, np.ndarray) and value.shape == (4, 4):
-        spec.attribute(key, oiio.TypeDesc("matrix"), tuple(float(v) for v in value.ravel()))
-    elif isinstance(value, (tuple, list)) and len(value) == 16:
-        spec.attribute(key, oiio.TypeDesc("matrix"), tuple(float(v) for v in value))
-    else:
-        # Anything else (already-typed OIIO values from a passthrough) as its repr-free str.
-        try:
+    """Set one header attribute, choosing the EXR type from the Python value.
+
+    An attribute OpenImageIO cannot store is dropped rather than failing the write.
+    """
+    with contextlib.suppress(Exception):
+        if isinstance(value, TypedAttribute):
+            spec.attribute(key, oiio.TypeDesc(value.type_name), value.value)
+        elif isinstance(value, (bool, int, np.integer)):
+            spec.attribute(key, int(value))
+        elif isinstance(value, (float, np.floating)):
+            spec.attribute(key, float(value))
+        elif isinstance(value, str):
             spec.attribute(key, value)
-        except Exception:  # noqa: BLE001 - an attribute we cannot carry is dropped, not fatal
-            pass
+        elif isinstance(value, np.ndarray) and value.shape == (4, 4):
+            spec.attribute(key, oiio.TypeDesc("matrix"), tuple(float(v) for v in value.ravel()))
+        elif isinstance(value, (tuple, list)) and len(value) == 16:
+            spec.attribute(key, oiio.TypeDesc("matrix"), tuple(float(v) for v in value))
+        else:
+            spec.attribute(key, value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Compression rules
+
+LOSSLESS_COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "htj2k")
+# Lossy for every channel: B44 quantises half data; DWA's DCT hits every channel whose name
+# ends in R, G, B, Y, RY or BY (so N.Y and motion.Y), which is why it is refused wholesale.
+LOSSY_COMPRESSIONS = ("b44", "b44a", "dwaa", "dwab")
+# PXR24 is exact for half and 16/32-bit integers but rounds float32 to 24 bits.
+FLOAT_LOSSY_COMPRESSIONS = ("pxr24",)
+COMPRESSIONS = LOSSLESS_COMPRESSIONS + FLOAT_LOSSY_COMPRESSIONS + LOSSY_COMPRESSIONS
+
+_COLOUR_CHANNELS = frozenset("RGBA")
+
+
+def is_colour_channel(name: str) -> bool:
+    """``R``, ``G``, ``B``, ``A`` or a layer's ``*.R/*.G/*.B/*.A``: may be stored lossily."""
+    return name.rpartition(".")[2] in _COLOUR_CHANNELS
+
+
+def compression_name(compression: str) -> str:
+    """``"dwaa:45"`` -> ``"dwaa"``; raises UsageError for a name OpenEXR does not have."""
+    base = compression.strip().lower().partition(":")[0]
+    if base not in COMPRESSIONS:
+        raise UsageError(
+            f"unknown EXR compression {compression!r} (choose from {', '.join(COMPRESSIONS)})"
+        )
+    return base
+
+
+def check_compression(
+    compression: str,
+    channel_names: Iterable[str],
+    *,
+    float_channels: Collection[str] | None = None,
+) -> None:
+    """Refuse a lossy codec when data channels (normals, depth, motion, ids...) are written.
+
+    Colour channels (``R,G,B,A`` and ``*.R/*.G/*.B/*.A``) may be lossy. ``pxr24`` is refused
+    only when a data channel is float (``float_channels`` None means all are float).
+    """
+    base = compression_name(compression)
+    data = [n for n in channel_names if not is_colour_channel(n)]
+    if base in LOSSY_COMPRESSIONS and data:
+        raise UsageError(
+            f"compression {base} is lossy and would corrupt data channel(s) "
+            f"{', '.join(data[:6])}{' ...' if len(data) > 6 else ''}; use zip, zips or piz"
+        )
+    if base in FLOAT_LOSSY_COMPRESSIONS:
+        floats = data if float_channels is None else [n for n in data if n in float_channels]
+        if floats:
+            raise UsageError(
+                f"compression {base} rounds float data channel(s) {', '.join(floats[:6])} "
+                "to 24 bits; use zip, zips or piz"
+            )
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+
+# Header attributes that describe the file's structure rather than its content: a writer
+# sets its own, so they are not passed through.
+_STRUCTURAL_ATTRIBUTES = frozenset(
+    {
+        "channels",
+        "compression",
+        "dataWindow",
+        "displayWindow",
+        "tiles",
+        "chunkCount",
+        "lineOrder",
+        "type",
+        "name",
+        "version",
+        "planarconfig",
+        "textureformat",
+        "wrapmodes",
+        "fovcot",
+    }
+)
+_STRUCTURAL_PREFIXES = ("oiio:", "openexr:")
+
+# Depth at or beyond this is background: Cycles writes 1e10 and Arnold huge values there.
+FAR_DEPTH = 1e9
+
+_RADIANCE_ROLES = ("color", "direct", "indirect", "emission")
+
+
+@dataclass(frozen=True)
+class TypedAttribute:
+    """A header attribute with an explicit OIIO type (``float2``, ``int[4]``, ``timecode``...)."""
+
+    type_name: str
+    value: Any
+
+
+@dataclass
+class ExrPart:
+    """One part (OIIO subimage) of an EXR file."""
+
+    index: int
+    name: str
+    channels: list[str]
+    channel_types: list[str]
+    data_window: tuple[int, int, int, int]  # x, y, width, height
+    compression: str
+
+
+@dataclass
+class ExrInfo:
+    """What the header says: size, channels of every part, pass-through attributes."""
+
+    path: Path
+    width: int
+    height: int
+    channels: list[str]
+    channel_types: list[str]
+    attributes: dict[str, Any]
+    compression: str
+    parts: list[str]
+    part_info: list[ExrPart] = field(default_factory=list)
+    display_window: tuple[int, int, int, int] = (0, 0, 0, 0)
+
+    def channel_type(self, name: str) -> str:
+        return self.channel_types[self.channels.index(name)]
+
+
+@dataclass
+class ReadResult:
+    """A decoded frame plus everything a caller may want to log or pass through."""
+
+    frame: Frame
+    alpha: np.ndarray | None
+    info: ExrInfo
+    resolved: ResolvedLayers
+    warnings: list[str]
+
+
+def set_io_threads(threads: int) -> None:
+    """Threads OpenImageIO may use (0 = all cores) for its own work and EXR decompression."""
+    oiio.attribute("threads", int(threads))
+    oiio.attribute("exr_threads", int(threads))
+
+
+def _one_line(message: str) -> str:
+    """OpenImageIO's (often repeated, multi-line) error text as one short line."""
+    text = " ".join(message.split())
+    # OpenEXR prefixes every message with "EXR Error (<path>): "; the path is already named.
+    pieces = [p.strip(" :") for p in re.split(r"EXR Error \([^)]*\):?", text)]
+    unique = list(dict.fromkeys(p for p in pieces if p))
+    text = "; ".join(unique)
+    if len(text) > 300:
+        text = text[:297] + "..."
+    return text or "unknown OpenImageIO error"
+
+
+def _open(path: Path) -> oiio.ImageInput:
+    """Open ``path`` for reading or raise InputError naming the file and the reason."""
+    if not path.exists():
+        raise InputError("file not found", str(path))
+    if path.is_dir():
+        raise InputError("is a directory, not an EXR file", str(path))
+    try:
+        with open(path, "rb") as handle:
+            magic = handle.read(4)
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", str(path)) from exc
+    if magic != b"\x76\x2f\x31\x01":
+        raise InputError("not an OpenEXR file (bad magic number)", str(path))
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise InputError(f"cannot open EXR: {_one_line(oiio.geterror())}", str(path))
+    return image
+
+
+def _attribute_value(attr: Any) -> Any:
+    """A header attribute as a Python value `write_exr` can write back unchanged."""
+    type_name = str(attr.type)
+    value = attr.value
+    if type_name in ("string", "int", "float"):
+        return value
+    if type_name == "matrix":
+        return np.asarray(value, dtype=np.float32).reshape(4, 4)
+    return TypedAttribute(type_name, value)
+
+
+def _header_attributes(spec: oiio.ImageSpec) -> dict[str, Any]:
+    attributes: dict[str, Any] = {}
+    for attr in spec.extra_attribs:
+        name = attr.name
+        if name in _STRUCTURAL_ATTRIBUTES or name.startswith(_STRUCTURAL_PREFIXES):
+            continue
+        attributes[name] = _attribute_value(attr)
+    return attributes
+
+
+def _channel_types(spec: oiio.ImageSpec) -> list[str]:
+    formats = list(spec.channelformats)
+    if not formats:
+        return [str(spec.format)] * spec.nchannels
+    return [str(f) for f in formats]
+
+
+def _read_header(image: oiio.ImageInput, path: Path) -> ExrInfo:
+    parts: list[ExrPart] = []
+    first_spec: oiio.ImageSpec | None = None
+    index = 0
+    while image.seek_subimage(index, 0):
+        spec = image.spec()
+        if spec.deep:
+            raise InputError("deep EXR parts are not supported", str(path))
+        if first_spec is None:
+            first_spec = spec.copy()
+        parts.append(
+            ExrPart(
+                index=index,
+                name=spec.get_string_attribute("oiio:subimagename") or "",
+                channels=list(spec.channelnames),
+                channel_types=_channel_types(spec),
+                data_window=(spec.x, spec.y, spec.width, spec.height),
+                compression=spec.get_string_attribute("compression") or "none",
+            )
+        )
+        index += 1
+    if first_spec is None:
+        raise InputError(f"no readable part: {_one_line(image.geterror())}", str(path))
+    channels = [name for part in parts for name in part.channels]
+    types = [t for part in parts for t in part.channel_types]
+    return ExrInfo(
+        path=path,
+        width=first_spec.width,
+        height=first_spec.height,
+        channels=channels,
+        channel_types=types,
+        attributes=_header_attributes(first_spec),
+        compression=parts[0].compression,
+        parts=[part.name for part in parts],
+        part_info=parts,
+        display_window=(
+            first_spec.full_x,
+            first_spec.full_y,
+            first_spec.full_width,
+            first_spec.full_height,
+        ),
+    )
+
+
+def read_info(path: str | os.PathLike[str]) -> ExrInfo:
+    """Read only the header(s). InputError for a missing, non-EXR or corrupt file."""
+    path = Path(path)
+    image = _open(path)
+    try:
+        return _read_header(image, path)
+    finally:
+        image.close()
+
+
+def _to_planar(pixels: np.ndarray) -> np.ndarray:
+    """(H, W, C) interleaved -> C-contiguous (C, H, W), a few rows at a time.
+
+    A row block stays in cache while it is scattered into the planes; measured about 4x
+    faster than ``np.ascontiguousarray(pixels.transpose(2, 0, 1))`` at 1080p.
+    """
+    height, width, count = pixels.shape
+    planar = np.empty((count, height, width), dtype=np.float32)
+    rows = 4
+    for top in range(0, height, rows):
+        planar[:, top : top + rows, :] = pixels[top : top + rows].transpose(2, 0, 1)
+    return planar
+
+
+class _Planes:
+    """Channels read from a file, kept as planar blocks so roles can be zero-copy views."""
+
+    def __init__(self) -> None:
+        self.where: dict[str, tuple[np.ndarray, int]] = {}
+
+    def plane(self, name: str) -> np.ndarray:
+        block, index = self.where[name]
+        return block[index]
+
+    def gather(self, names: tuple[str, ...]) -> np.ndarray:
+        """(len(names), H, W) float32, C-contiguous: a view when the channels are adjacent."""
+        blocks = {id(self.where[n][0]) for n in names}
+        indices = [self.where[n][1] for n in names]
+        if len(blocks) == 1 and indices == list(range(indices[0], indices[0] + len(names))):
+            block = self.where[names[0]][0]
+            return block[indices[0] : indices[0] + len(names)]
+        return np.ascontiguousarray(np.stack([self.plane(n) for n in names]))
+
+
+def _read_channels(image: oiio.ImageInput, info: ExrInfo, names: Iterable[str]) -> _Planes:
+    """Read ``names`` (each found in one part) as float32 planes.
+
+    Per part, one ``read_image`` over the channel range spanning every wanted channel: it
+    costs about the same as a full read and much less than several range reads, which
+    each decode the whole file again (measurements in docs/readme/io.md).
+    """
+    wanted = list(dict.fromkeys(names))
+    located: dict[int, list[tuple[str, int]]] = {}
+    for name in wanted:
+        for part in info.part_info:
+            if name in part.channels:
+                located.setdefault(part.index, []).append((name, part.channels.index(name)))
+                break
+        else:  # resolve_layers only returns channels the header listed
+            raise InputError(f"channel {name} not found in any part", str(info.path))
+
+    windows = {info.part_info[i].data_window for i in located}
+    if len(windows) > 1:
+        shown = "; ".join(
+            f"part {info.part_info[i].name or i} {info.part_info[i].data_window}" for i in located
+        )
+        raise InputError(
+            f"parts holding the needed channels have different data windows ({shown})",
+            str(info.path),
+        )
+
+    planes = _Planes()
+    for part_index, entries in located.items():
+        begin = min(i for _, i in entries)
+        end = max(i for _, i in entries) + 1
+        pixels = image.read_image(part_index, 0, begin, end, "float")
+        if pixels is None:
+            raise InputError(
+                f"cannot read pixels: {_one_line(image.geterror() or oiio.geterror())}",
+                str(info.path),
+            )
+        pixels = np.asarray(pixels, dtype=np.float32)
+        if pixels.ndim == 2:  # a one-channel read may come back as (H, W)
+            pixels = pixels[:, :, None]
+        block = _to_planar(pixels)
+        for name, channel in entries:
+            planes.where[name] = (block, channel - begin)
+    return planes
+
+
+def _scrub(
+    role: str, data: np.ndarray, path: Path, warnings: list[str], clamp_negative: bool
+) -> None:
+    """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem."""
+    bad = ~np.isfinite(data)
+    count = int(np.count_nonzero(bad))
+    if count:
+        data[bad] = 0.0
+        warnings.append(f"{path}: {count} NaN/Inf values in {role} scrubbed to 0")
+    if clamp_negative:
+        negative = data < 0
+        count = int(np.count_nonzero(negative))
+        if count:
+            data[negative] = 0.0
+            warnings.append(f"{path}: {count} negative values in {role} clamped to 0")
+
+
+def read_frame(
+    path: str | os.PathLike[str],
+    mapping: LayerMapping,
+    motion_convention: str | None = None,
+) -> ReadResult:
+    """Read the channels ``mapping`` resolves to and return them as a clean `Frame`.
+
+    ``motion_convention`` None uses ``mapping.motion_convention`` (the preset's, or what
+    ``--motion-convention`` set). Cleaning rules: depth non-finite, <= 0 or >= FAR_DEPTH
+    -> 0 (background); normals non-finite -> 0 then renormalised; NaN/Inf in radiance,
+    albedo, emission, motion -> 0 with a counted warning; negative radiance/albedo -> 0 with
+    a counted warning; mesh id rounded to int32, NaN -> -1, absent -> -1 on background and 0
+    elsewhere. Raises InputError (one line, naming the file) for anything unreadable.
+    """
+    path = Path(path)
+    convention = motion_convention or mapping.motion_convention
+    image = _open(path)
+    try:
+        info = _read_header(image, path)
+        resolved = resolve_layers(mapping, info.channels, str(path))
+        roles = resolved.roles_to_read()
+        names = [name for role in roles for name in (resolved[role] or ())]
+        planes = _read_channels(image, info, names)
+    finally:
+        image.close()
+
+    warnings: list[str] = []
+    values: dict[str, np.ndarray] = {}
+    for role in roles:
+        channel_names = resolved[role]
+        assert channel_names is not None
+        values[role] = planes.gather(channel_names)
+    height, width = values["depth"].shape[1:]
+
+    for role in (*_RADIANCE_ROLES, "albedo"):
+        if role in values:
+            _scrub(role, values[role], path, warnings, clamp_negative=True)
+
+    depth = values["depth"][0]
+    with np.errstate(invalid="ignore"):
+        depth[~(np.isfinite(depth) & (depth > 0) & (depth < FAR_DEPTH))] = 0.0
+
+    normal = values["normal"]
+    _scrub("normal", normal, path, warnings, clamp_negative=False)
+    length = np.sqrt(np.einsum("chw,chw->hw", normal, normal))
+    nonzero = length > 0
+    normal[:, nonzero] /= length[nonzero]
+
+    motion = values["motion"]
+    _scrub("motion", motion, path, warnings, clamp_negative=False)
+    motion = to_backward_pixels(motion, convention)
+
+    if "id" in values:
+        raw_id = values["id"][0]
+        finite = np.isfinite(raw_id)
+        limit = float(np.iinfo(np.int32).max)
+        mesh_id = np.full((height, width), -1, dtype=np.int32)
+        mesh_id[finite] = np.clip(np.rint(raw_id[finite]), -limit, limit).astype(np.int32)
+    else:
+        mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
+
+    alpha = None
+    if "alpha" in values:
+        alpha = np.ascontiguousarray(values["alpha"][0])
+        _scrub("alpha", alpha, path, warnings, clamp_negative=False)
+
+    frame = Frame(
+        albedo=values["albedo"],
+        normal=normal,
+        depth=np.ascontiguousarray(depth),
+        motion=motion,
+        mesh_id=mesh_id,
+        direct=values.get("direct"),
+        indirect=values.get("indirect"),
+        color=None if resolved.split else values.get("color"),
+        emission=values.get("emission"),
+    )
+    frame.validate()
+    return ReadResult(frame=frame, alpha=alpha, info=info, resolved=resolved, warnings=warnings)
+
+
+def read_rgb(path: str | os.PathLike[str]) -> tuple[np.ndarray, ExrInfo]:
+    """Plain ``R,G,B`` as a (3, H, W) float32 array (references, denoised outputs).
+
+    NaN/Inf are left as they are: evaluation should see what the file holds.
+    """
+    path = Path(path)
+    image = _open(path)
+    try:
+        info = _read_header(image, path)
+        missing = [c for c in ("R", "G", "B") if c not in info.channels]
+        if missing:
+            raise InputError(
+                f"missing channel(s) {', '.join(missing)}; file has: {', '.join(info.channels)}",
+                str(path),
+            )
+        planes = _read_channels(image, info, ("R", "G", "B"))
+    finally:
+        image.close()
+    return np.ascontiguousarray(planes.gather(("R", "G", "B"))), info

@@ -1,0 +1,139 @@
+"""Benchmark of the SVGF filter core: ms/frame per stage at 1280x720 and 1920x1080.
+
+Synthetic but realistic input: a textured ground plane and spheres (depth, normals, mesh ids
+from the analytic geometry), heavy-tailed 1-spp-like noise on direct and indirect, emission
+on one object, a background strip, and a camera pan of one pixel per frame with exact
+backward motion. A warm-up sequence excludes JIT compilation and the cold first frames; the
+timed frames are in steady state (most pixels have history >= 4).
+
+Run: ``.venv/bin/python bench/bench_filters.py [--frames N] [--sizes 1280x720,1920x1080]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+
+import numpy as np
+
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.params import resolve_params
+from svgf_cli.frame import Frame
+
+F32 = np.float32
+STAGES = ("gradients", "demodulate", "reproject", "variance", "atrous", "modulate")
+
+
+class SceneCanvas:
+    """An analytic scene rendered once on a canvas wider than the frame; frames are crops."""
+
+    def __init__(self, width: int, height: int, pan: int, seed: int = 0) -> None:
+        self.width, self.height, self.pan = width, height, pan
+        cw = width + pan
+        y, x = np.mgrid[0:height, 0:cw].astype(np.float64)
+        horizon = 0.3 * height
+        depth = np.zeros((height, cw))
+        normal = np.zeros((3, height, cw))
+        mesh = np.full((height, cw), -1, dtype=np.int32)
+        ground = y > horizon
+        depth[ground] = 2.0 * height / (y[ground] - horizon + 1.0)
+        normal[1][ground] = -1.0
+        mesh[ground] = 0
+        rng = np.random.default_rng(seed)
+        for sphere in range(6):
+            cx = rng.uniform(0.1, 0.9) * cw
+            cy = rng.uniform(0.35, 0.8) * height
+            radius = rng.uniform(0.06, 0.16) * height
+            dz = ((x - cx) ** 2 + (y - cy) ** 2) / radius**2
+            inside = dz < 1.0
+            cap = np.sqrt(np.clip(1.0 - dz, 0.0, 1.0))
+            zs = 3.0 + sphere * 0.4 - cap * 0.5
+            closer = inside & ((depth <= 0) | (zs < depth))
+            depth[closer] = zs[closer]
+            normal[0][closer] = ((x - cx) / radius)[closer]
+            normal[1][closer] = ((y - cy) / radius)[closer]
+            normal[2][closer] = -cap[closer]
+            mesh[closer] = sphere + 1
+        self.depth = depth.astype(F32)
+        self.normal = normal.astype(F32)
+        self.mesh = mesh
+        checker = ((np.floor(x / 24) + np.floor(y / 24)) % 2).astype(np.float64)
+        self.albedo = np.stack([0.3 + 0.5 * checker, 0.4 + 0.3 * checker, 0.5 + 0.1 * checker])
+        self.albedo = self.albedo.astype(F32)
+        light = 0.5 + 0.5 * np.clip(-normal[1] * 0.6 - normal[2] * 0.8, 0.0, 1.0)
+        self.direct = np.stack([light * 1.0, light * 0.9, light * 0.8]).astype(F32)
+        self.indirect = (0.3 * self.direct[::-1]).astype(F32)
+        self.emission = np.zeros((3, height, cw), dtype=F32)
+        self.emission[:, mesh == 1] = 2.0
+        self.rng = rng
+
+    def frame(self, index: int) -> Frame:
+        x0 = self.pan - (index % (self.pan + 1))  # camera pans right: content moves left
+        sl = np.s_[..., x0:x0 + self.width]
+        h, w = self.height, self.width
+
+        def crop(a: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(a[sl])
+
+        albedo = crop(self.albedo)
+        spp = self.rng.exponential(1.0, (2, h, w)).astype(F32)
+        emission = crop(self.emission)
+        direct = albedo * crop(self.direct) * spp[0] + emission
+        indirect = albedo * crop(self.indirect) * spp[1]
+        motion = np.zeros((2, h, w), dtype=F32)
+        motion[0] = 1.0 if index % (self.pan + 1) else 0.0
+        return Frame(
+            albedo=albedo, normal=crop(self.normal), depth=crop(self.depth), motion=motion,
+            mesh_id=crop(self.mesh), direct=np.ascontiguousarray(direct, dtype=F32),
+            indirect=np.ascontiguousarray(indirect, dtype=F32), emission=emission,
+        )
+
+
+def bench_size(width: int, height: int, frames: int, warmup: int, preset: str) -> dict[str, float]:
+    canvas = SceneCanvas(width, height, pan=warmup + frames + 1)
+    inputs = [canvas.frame(i) for i in range(warmup + frames)]
+    denoiser = Denoiser(resolve_params(preset))
+    for frame in inputs[:warmup]:
+        denoiser.process(frame)
+    totals = dict.fromkeys(STAGES, 0.0)
+    wall = 0.0
+    for frame in inputs[warmup:]:
+        start = time.perf_counter()
+        denoiser.process(frame)
+        wall += time.perf_counter() - start
+        for stage, seconds in denoiser.stage_seconds.items():
+            totals[stage] = totals.get(stage, 0.0) + seconds
+    result = {stage: 1e3 * seconds / frames for stage, seconds in totals.items()}
+    result["total"] = 1e3 * wall / frames
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=5, help="timed frames per size")
+    parser.add_argument("--warmup", type=int, default=6, help="untimed frames first")
+    parser.add_argument("--sizes", default="1280x720,1920x1080")
+    parser.add_argument("--preset", default="paper")
+    args = parser.parse_args(argv)
+    print(f"SVGF filter core, preset {args.preset}, direct + indirect, "
+          f"{args.frames} timed frames after {args.warmup} warm-up frames")
+    for size in args.sizes.split(","):
+        width, height = (int(v) for v in size.lower().split("x"))
+        result = bench_size(width, height, args.frames, args.warmup, args.preset)
+        pixels = width * height
+        stages = "  ".join(f"{s} {result.get(s, 0.0):7.1f}" for s in STAGES)
+        extra = sorted(set(result) - set(STAGES) - {"total"})
+        if extra:
+            stages += "  " + "  ".join(f"{s} {result[s]:7.1f}" for s in extra)
+        print(f"{width}x{height}: ms/frame  {stages}")
+        print(f"{width}x{height}: total {result['total']:7.1f} ms/frame  "
+              f"{1e6 * result['total'] / pixels:6.1f} ns/pixel")
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    print(f"peak RSS {peak_mb:.0f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

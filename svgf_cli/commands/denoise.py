@@ -1,0 +1,301 @@
+"""`svgf denoise INPUTS... -o OUTPUT`: SVGF over an EXR sequence (wiring only).
+
+The work lives elsewhere: `farm.job` resolves frames/outputs and checks them before anything
+is written, `runner` drives the Denoiser, `farm.dask_backend` runs chunks on Dask.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import click
+
+from svgf_cli import __version__
+from svgf_cli.commands.options import describe_params, params_from_options, svgf_param_options
+from svgf_cli.errors import UsageError
+from svgf_cli.farm.progress import PROGRESS_MODES, Progress
+from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS
+
+DEBUG_CHANNEL_EXAMPLE = ("variance", "history_length")  # data layers, for the codec check
+
+
+def parse_warmup(text: str) -> int | None:
+    """``all`` -> None (replay from the first frame), else a frame count >= 0."""
+    if text.strip().lower() == "all":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise UsageError(f"--warmup {text!r}: expected a number of frames or 'all'") from None
+    if value < 0:
+        raise UsageError(f"--warmup {value}: must be >= 0")
+    return value
+
+
+def _check_combinations(o: dict[str, Any]) -> None:
+    if o["workers"] is not None and o["scheduler"] is not None:
+        raise UsageError("--workers and --scheduler contradict each other; give one")
+    if o["workers"] is not None and o["workers"] < 1:
+        raise UsageError(f"--workers {o['workers']}: must be at least 1")
+    if o["chunk_size"] is not None and o["chunk_size"] < 1:
+        raise UsageError(f"--chunk-size {o['chunk_size']}: must be at least 1")
+    distributed = o["workers"] is not None or o["scheduler"] is not None
+    if (o["save_history"] or o["load_history"]) and (distributed or o["chunk_size"]):
+        raise UsageError(
+            "--save-history/--load-history continue one sequential run; they cannot be "
+            "combined with --chunk-size, --workers or --scheduler"
+        )
+    if o["threads"] is not None and o["threads"] < 0:
+        raise UsageError(f"--threads {o['threads']}: must be >= 0 (0 = all cores)")
+
+
+@click.command(
+    "denoise",
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
+@click.argument("inputs", nargs=-1, required=True, metavar="INPUTS...")
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    metavar="PATTERN|DIR",
+    help="Output pattern (den.####.exr, %04d, @, $F4) or a directory (same file names).",
+)
+@svgf_param_options
+@click.option(
+    "--preset-aovs",
+    type=click.Choice(sorted(AOV_PRESETS)),
+    default="svgf",
+    show_default=True,
+    help="Channel names of the renderer that wrote the inputs.",
+)
+@click.option(
+    "--aov",
+    "aovs",
+    multiple=True,
+    metavar="ROLE=CHANNELS",
+    help="Override one role's channels, e.g. motion=Vector.X,Vector.Y (repeatable).",
+)
+@click.option(
+    "--motion-convention",
+    type=click.Choice(MOTION_CONVENTIONS),
+    default=None,
+    help="Meaning of the motion channels [default: the AOV preset's].",
+)
+@click.option(
+    "-f",
+    "--frames",
+    "frames_spec",
+    metavar="SPEC",
+    help="Frames to write: 1001-1100, 1,5,7-9, 1001-1100x2 [default: all on disk].",
+)
+@click.option(
+    "--warmup",
+    default="all",
+    show_default=True,
+    metavar="N|all",
+    help="Frames processed, not written, before the first output frame; 'all' replays from "
+    "the first frame (bit-identical to one sequential run).",
+)
+@click.option("--allow-gaps", is_flag=True, help="A missing frame resets history (WARNING).")
+@click.option(
+    "--skip-existing",
+    is_flag=True,
+    help="Keep existing outputs; rebuild history for the first missing one by warm-up.",
+)
+@click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@click.option("--float", "float_output", is_flag=True, help="Write float RGBA (default half).")
+@click.option(
+    "--compression",
+    metavar="CODEC",
+    help="Output compression (zip, zips, piz, ...) [default: the input's]; lossy codecs are "
+    "refused for data layers.",
+)
+@click.option(
+    "--debug-aovs",
+    is_flag=True,
+    help="Also write variance, history length and the filtered direct/indirect (float).",
+)
+@click.option(
+    "--save-history",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Save the filter history after the last frame (npz).",
+)
+@click.option(
+    "--load-history",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Continue from a saved history (replaces warm-up).",
+)
+@click.option(
+    "--threads",
+    type=int,
+    default=None,
+    metavar="N",
+    help="Compute and I/O threads (0 = all cores) [default: all].",
+)
+@click.option("-q", "--quiet", is_flag=True, help="No start-up log or automatic progress.")
+@click.option("-v", "--verbose", is_flag=True, help="Per-frame timings and the chunk plan.")
+@click.option(
+    "--progress",
+    "progress_mode",
+    type=click.Choice(PROGRESS_MODES),
+    default="auto",
+    show_default=True,
+    help="bar on a terminal, else one 'Progress: N%' line per frame.",
+)
+@click.option("--dry-run", is_flag=True, help="Check everything, print the plan, write nothing.")
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    metavar="N",
+    help="Run chunks on a local Dask cluster of N worker processes.",
+)
+@click.option(
+    "--scheduler",
+    metavar="tcp://HOST:PORT",
+    help="Run chunks on an existing Dask scheduler (shared storage).",
+)
+@click.option(
+    "--chunk-size",
+    type=int,
+    default=None,
+    metavar="N",
+    help="Output frames per chunk; each chunk replays its own warm-up.",
+)
+def command(**options: Any) -> None:
+    """Denoise an EXR sequence with SVGF (Schied et al. 2017).
+
+    INPUTS is one pattern (in.####.exr, in.%04d.exr, in.@.exr, in.$F4.exr, or a concrete
+    frame such as in.1001.exr) or a list of files.
+    """
+    from svgf_cli.farm.job import build_job
+    from svgf_cli.io.exr import check_compression, compression_name, read_info
+    from svgf_cli.io.layers import build_mapping, resolve_layers
+    from svgf_cli.runner import RunConfig, RunStats, load_history, run_sequence, stop_on_signals
+
+    params = params_from_options(options["preset"], options)
+    warmup = parse_warmup(options["warmup"])
+    _check_combinations(options)
+    mapping = build_mapping(options["preset_aovs"], options["aovs"], options["motion_convention"])
+    compression = options["compression"]
+    if compression is not None:
+        names = ["R", "G", "B", "A", *(DEBUG_CHANNEL_EXAMPLE if options["debug_aovs"] else ())]
+        compression_name(compression)
+        check_compression(compression, names)
+
+    history = load_history(options["load_history"]) if options["load_history"] else None
+    distributed = options["workers"] is not None or options["scheduler"] is not None
+    job = build_job(
+        options["inputs"],
+        options["output"],
+        frames_spec=options["frames_spec"],
+        warmup=warmup,
+        allow_gaps=options["allow_gaps"],
+        skip_existing=options["skip_existing"],
+        overwrite=options["overwrite"],
+        chunk_size=options["chunk_size"],
+        history_last_frame=history.last_frame if history is not None else None,
+    )
+    progress = Progress(
+        options["progress_mode"],
+        job.frames_to_write,
+        quiet=options["quiet"],
+        verbose=options["verbose"],
+    )
+    threads = _apply_threads(options["threads"], options["workers"])
+
+    first_input = job.chunk_tasks[0][0].input if job.chunk_tasks else job.timeline[0][1]
+    info = read_info(first_input)
+    resolved = resolve_layers(mapping, info.channels, str(first_input))
+    progress.info(f"svgf {__version__} denoise")
+    progress.info(f"Threads: {threads}")
+    progress.info(f"Preset: {options['preset']}")
+    progress.info(f"Parameters: {describe_params(params)}")
+    progress.info(
+        f"Layers ({options['preset_aovs']} AOVs, motion {mapping.motion_convention}, "
+        f"from {first_input}):\n{resolved.describe()}"
+    )
+    selected = len(job.selected)
+    progress.info(
+        f"Frames: {job.frames_to_write} to write of {selected} selected, "
+        f"{len(job.timeline)} on disk; warm-up {options['warmup']}"
+        + (f"; {len(job.skipped_existing)} existing skipped" if job.skipped_existing else "")
+        + (f"; history from {history.path} (frame {history.last_frame})" if history else "")
+    )
+    for warning in job.warnings:
+        progress.warning(warning)
+    if options["dry_run"]:
+        for line in job.describe():
+            click.echo(line)
+        return
+    if not job.chunks:
+        progress.finish(f"Nothing to do: all {selected} outputs exist")
+        return
+    for path in {p.parent for p in job.outputs.values()}:
+        path.mkdir(parents=True, exist_ok=True)
+    for line in job.describe():
+        progress.detail(line)
+
+    config = RunConfig(
+        params=params,
+        preset=options["preset"],
+        mapping=mapping,
+        half=not options["float_output"],
+        compression=compression,
+        debug_aovs=options["debug_aovs"],
+        warmup_label=options["warmup"].strip().lower(),
+        # Dask workers set their own threads; a remote scheduler's workers keep theirs
+        # unless --threads was given.
+        threads=(threads if options["workers"] else options["threads"]) if distributed else None,
+    )
+    if distributed:
+        from svgf_cli.farm.dask_backend import run_chunks_dask
+
+        with stop_on_signals(immediate=True):
+            stats = run_chunks_dask(
+                job.chunk_tasks,
+                config,
+                progress,
+                workers=options["workers"],
+                scheduler=options["scheduler"],
+                overwrite=options["overwrite"],
+            )
+    else:
+        stats = RunStats()
+        with stop_on_signals() as stop:
+            for tasks in job.chunk_tasks:
+                stats.merge(
+                    run_sequence(
+                        tasks,
+                        config,
+                        progress,
+                        stop=stop,
+                        history=history,
+                        save_history_to=options["save_history"],
+                    )
+                )
+    written = max(stats.frames_written, 1)
+    progress.finish(
+        f"Done: {stats.frames_written} frame(s) written, {stats.frames_processed} processed in "
+        f"{stats.wall_seconds:.1f} s ({stats.wall_seconds / written:.2f} s/frame; read "
+        f"{stats.read_seconds:.1f} s, compute {stats.compute_seconds:.1f} s, write "
+        f"{stats.write_seconds:.1f} s)"
+    )
+
+
+def _apply_threads(threads: int | None, workers: int | None) -> int:
+    """Set numba/OpenImageIO threads for this process; return the per-process count."""
+    import numba
+
+    from svgf_cli.farm.dask_backend import set_compute_threads
+
+    available = numba.config.NUMBA_NUM_THREADS
+    if workers:
+        # Each worker process gets its share unless --threads says otherwise.
+        return threads or max(1, (os.cpu_count() or 1) // workers)
+    count = threads or available
+    set_compute_threads(count)
+    return min(count, available)

@@ -1,0 +1,152 @@
+"""`svgf evaluate`: score a denoised sequence (and baselines) against a reference.
+
+Wiring only: options -> EvaluationRequest -> run_evaluation -> table / JSON / plot / sheet.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import click
+
+from svgf_cli.commands.options import params_from_options, svgf_param_options
+from svgf_cli.errors import InputError, SvgfError, UsageError
+from svgf_cli.evaluate.baselines import BASELINES
+from svgf_cli.io.layers import AOV_PRESETS
+
+
+def _frames(spec: str | None, option: str) -> list[int] | None:
+    if spec is None:
+        return None
+    from svgf_cli.io.patterns import parse_frame_spec
+
+    try:
+        return parse_frame_spec(spec)
+    except ValueError as exc:
+        raise UsageError(f"{option}: {exc}") from exc
+
+
+def _write_text(path: str, text: str) -> None:
+    target = Path(path)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from exc
+
+
+@click.command("evaluate")
+@click.argument("denoised", metavar="DENOISED_PATTERN")
+@click.option(
+    "--reference", "-r", required=True, metavar="PATTERN", help="Converged reference frames."
+)
+@click.option(
+    "--input",
+    "-i",
+    "input_pattern",
+    metavar="PATTERN",
+    help="Noisy input frames (with G-buffer): adds an 'input' row; needed by --baseline.",
+)
+@click.option(
+    "--baseline",
+    "baselines",
+    multiple=True,
+    type=click.Choice(BASELINES),
+    help="Also produce and score this method from --input (repeatable).",
+)
+@click.option("--frames", metavar="SPEC", help="Frames to evaluate, e.g. 1-10 or 1,5,9.")
+@click.option("--json", "json_path", metavar="FILE", help="Write the full report as JSON.")
+@click.option("--plot", "plot_path", metavar="FILE.png", help="Write per-frame error plots.")
+@click.option(
+    "--contact-sheet", "sheet_path", metavar="FILE.png", help="Write a labelled contact sheet."
+)
+@click.option(
+    "--contact-frames",
+    metavar="SPEC",
+    help="Frames shown on the contact sheet [default: first, middle, last].",
+)
+@click.option(
+    "--preset-aovs",
+    "layers",
+    type=click.Choice(sorted(AOV_PRESETS)),
+    default="svgf",
+    show_default=True,
+    help="AOV channel-name preset used to read --input (as in `svgf denoise`).",
+)
+@click.option("--per-frame", is_flag=True, help="Also print every method's per-frame table.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress lines on stderr.")
+@svgf_param_options
+def command(
+    denoised: str,
+    reference: str,
+    input_pattern: str | None,
+    baselines: tuple[str, ...],
+    frames: str | None,
+    json_path: str | None,
+    plot_path: str | None,
+    sheet_path: str | None,
+    contact_frames: str | None,
+    layers: str,
+    per_frame: bool,
+    quiet: bool,
+    preset: str,
+    **param_options: Any,
+) -> None:
+    """Score DENOISED_PATTERN (e.g. 'out/den.####.exr') against --reference.
+
+    Per frame and as a mean: RMSE and relMSE on linear radiance; PSNR, SSIM, FLIP and the
+    temporal (flicker) error on tone-mapped images. With --input and --baseline the raw
+    input, Intel OIDN, plain temporal accumulation and a-trous without temporal reuse are
+    produced in memory and ranked alongside. The SVGF parameter options set the parameters
+    of the accumulate/atrous baselines (use the ones the sequence was denoised with).
+    """
+    from svgf_cli.evaluate.contact import default_contact_frames, write_contact_sheet
+    from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
+    from svgf_cli.evaluate.plot import write_plot
+
+    params = params_from_options(preset, param_options)
+    frame_list = _frames(frames, "--frames")
+    contact_list = _frames(contact_frames, "--contact-frames")
+    if contact_list is not None and sheet_path is None:
+        raise UsageError("--contact-frames needs --contact-sheet")
+    if contact_list is None and sheet_path is not None:
+        from svgf_cli.evaluate.engine import resolve_frames
+        from svgf_cli.io.patterns import SequencePattern
+
+        evaluated = resolve_frames(SequencePattern.parse(denoised), denoised, frame_list)
+        contact_list = default_contact_frames(evaluated)
+
+    request = EvaluationRequest(
+        output=denoised,
+        reference=reference,
+        input=input_pattern,
+        frames=frame_list,
+        baselines=baselines,
+        params=params,
+        preset=preset,
+        layers=layers,
+        contact_frames=contact_list or (),
+    )
+    log = None if quiet else (lambda msg: click.echo(f"evaluate: {msg}", err=True))
+    report, contacts = run_evaluation(request, log=log)
+
+    click.echo(report.format_table(per_frame=per_frame))
+    if json_path:
+        _write_text(json_path, report.to_json())
+    if plot_path:
+        write_plot(report, plot_path)
+    if sheet_path:
+        write_contact_sheet(report, contacts, sheet_path)
+
+    flagged = report.flagged
+    if flagged:
+        name, first = flagged[0]
+        raise InputError(
+            f"{len(flagged)} output frame(s) hold NaN or infinite pixels (first: {name} frame "
+            f"{first.frame}, {first.nonfinite_pixels} pixel(s)); their scores are undefined",
+            first.file,
+        )

@@ -1,0 +1,147 @@
+"""`svgf inspect FILE...`: what is in an EXR and which channels each role would use."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import click
+import numpy as np
+
+from svgf_cli.errors import InputError
+from svgf_cli.io.exr import ExrInfo, TypedAttribute, read_info
+from svgf_cli.io.layers import (
+    AOV_PRESETS,
+    MOTION_CONVENTIONS,
+    ROLES,
+    LayerMapping,
+    ResolvedLayers,
+    build_mapping,
+    resolve_layers,
+)
+
+
+def _json_value(value: Any) -> Any:
+    if isinstance(value, TypedAttribute):
+        return _json_value(value.value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (tuple, list)):
+        return [_json_value(v) for v in value]
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    return str(value)
+
+
+def _report(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> dict[str, Any]:
+    return {
+        "path": str(info.path),
+        "width": info.width,
+        "height": info.height,
+        "compression": info.compression,
+        "parts": [
+            {
+                "index": part.index,
+                "name": part.name,
+                "compression": part.compression,
+                "data_window": list(part.data_window),
+                "channels": [
+                    {"name": name, "type": kind}
+                    for name, kind in zip(part.channels, part.channel_types, strict=True)
+                ],
+            }
+            for part in info.part_info
+        ],
+        "preset": mapping.preset,
+        "motion_convention": mapping.motion_convention,
+        "roles": {role: list(resolved[role] or ()) or None for role in ROLES},
+        "signals": list(resolved.signal_roles),
+        "missing": dict(resolved.missing),
+        "notes": list(resolved.notes),
+        "attributes": {k: _json_value(v) for k, v in sorted(info.attributes.items())},
+    }
+
+
+def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str:
+    lines = [
+        f"{info.path}",
+        f"  resolution {info.width}x{info.height}, {len(info.part_info)} part(s), "
+        f"compression {info.compression}",
+    ]
+    for part in info.part_info:
+        label = f"part {part.index}" + (f" ({part.name})" if part.name else "")
+        x, y, w, h = part.data_window
+        lines.append(
+            f"  {label}: {len(part.channels)} channel(s), {part.compression}, "
+            f"data window {w}x{h}+{x}+{y}"
+        )
+        for name, kind in zip(part.channels, part.channel_types, strict=True):
+            lines.append(f"    {name:<28} {kind}")
+    lines.append(f"  roles ({mapping.preset} preset, motion {mapping.motion_convention}):")
+    lines.extend(f"  {line}" for line in resolved.describe().splitlines())
+    if resolved.missing:
+        lines.append(f"  missing: {', '.join(resolved.missing)}")
+    else:
+        lines.append("  missing: nothing; ready for svgf denoise")
+    if info.attributes:
+        lines.append(f"  attributes: {', '.join(sorted(info.attributes))}")
+    return "\n".join(lines)
+
+
+@click.command("inspect")
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option(
+    "--preset-aovs",
+    type=click.Choice(sorted(AOV_PRESETS)),
+    default="svgf",
+    show_default=True,
+    help="Renderer layer-name preset used to resolve the roles.",
+)
+@click.option(
+    "--aov",
+    "aovs",
+    multiple=True,
+    metavar="ROLE=CHANNELS",
+    help="Override a role's channels, e.g. motion=Vector.X,Vector.Y (repeatable).",
+)
+@click.option(
+    "--motion-convention",
+    type=click.Choice(MOTION_CONVENTIONS),
+    default=None,
+    help="How the motion layer is encoded (default: the preset's).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document for scripts.")
+@click.option(
+    "--check",
+    is_flag=True,
+    help="Exit 3 when a file lacks a required role (pre-flight for farm jobs).",
+)
+def command(
+    files: tuple[str, ...],
+    preset_aovs: str,
+    aovs: tuple[str, ...],
+    motion_convention: str | None,
+    as_json: bool,
+    check: bool,
+) -> None:
+    """Show the parts, channels, compression and role mapping of EXR FILES."""
+    mapping = build_mapping(preset_aovs, aovs, motion_convention=motion_convention)
+    reports: list[dict[str, Any]] = []
+    first_missing: InputError | None = None
+    for index, name in enumerate(files):
+        info = read_info(name)
+        resolved = resolve_layers(mapping, info.channels, name, strict=False)
+        if resolved.missing and first_missing is None:
+            first_missing = InputError(
+                f"missing channel(s) for {', '.join(resolved.missing)}", name
+            )
+        if as_json:
+            reports.append(_report(info, mapping, resolved))
+        else:
+            if index:
+                click.echo("")
+            click.echo(_text(info, mapping, resolved))
+    if as_json:
+        click.echo(json.dumps({"files": reports}, indent=2))
+    if check and first_missing is not None:
+        raise first_missing

@@ -1,0 +1,184 @@
+"""`svgf trace`: render an animated OBJ scene into SVGF input frames (and references)."""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from svgf_cli.errors import OutputExistsError, UsageError
+from svgf_cli.io.patterns import SequencePattern, parse_frame_spec
+
+_RESOLUTION = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
+
+
+def parse_resolution(text: str) -> tuple[int, int]:
+    match = _RESOLUTION.match(text)
+    if match is None:
+        raise UsageError(f"--resolution {text!r}: expected WIDTHxHEIGHT, e.g. 640x360")
+    width, height = int(match.group(1)), int(match.group(2))
+    if width < 1 or height < 1 or width * height > 1 << 26:
+        raise UsageError(f"--resolution {text!r}: width and height must be positive")
+    return width, height
+
+
+def _output_paths(pattern_text: str, frames: list[int], option: str) -> list[Path]:
+    pattern = SequencePattern.parse(pattern_text)
+    if not pattern.is_sequence and len(frames) > 1:
+        raise UsageError(
+            f"{option} {pattern_text!r} has no frame token (####, @, %04d, $F4) but "
+            f"{len(frames)} frames are requested"
+        )
+    return [pattern.path(frame) for frame in frames]
+
+
+def resolve_threads(threads: int) -> int:
+    """0 means every core; never more than numba was configured for."""
+    import numba
+
+    available = int(numba.config.NUMBA_NUM_THREADS)
+    wanted = os.cpu_count() or 1 if threads <= 0 else threads
+    return max(1, min(wanted, available))
+
+
+@click.command(name="trace")
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o", "--output", "output", required=True, metavar="PATTERN",
+    help="Output frame pattern, e.g. 'seq/in.####.exr' (also @, %04d, $F4).",
+)  # fmt: skip
+@click.option("-f", "--frames", default="1", show_default=True, metavar="SPEC",
+              help="Frames to render: 1-48, 1,5,7-9, 1-10x2.")
+@click.option("--resolution", default="640x360", show_default=True, metavar="WxH")
+@click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
+@click.option("--max-depth", type=int, default=5, show_default=True,
+              help="Maximum bounces (1 = direct lighting only; pbrt's convention).")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Base seed; each frame's seed derives from (seed, frame).")
+@click.option("--animation", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Camera/object keyframes (JSON); default: a static camera framing the scene.")
+@click.option("--reference", default=None, metavar="PATTERN",
+              help="Also write converged reference frames (R,G,B + direct/indirect, float).")
+@click.option("--reference-spp", type=int, default=512, show_default=True)
+@click.option("--overwrite", is_flag=True, help="Replace existing output files.")
+@click.option("--float", "float_radiance", is_flag=True,
+              help="Write radiance layers as float instead of half.")
+@click.option("--threads", type=int, default=0, show_default=True, help="Threads (0 = all cores).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress output.")
+def command(
+    scene: Path,
+    output: str,
+    frames: str,
+    resolution: str,
+    spp: int,
+    max_depth: int,
+    seed: int,
+    animation: Path | None,
+    reference: str | None,
+    reference_spp: int,
+    overwrite: bool,
+    float_radiance: bool,
+    threads: int,
+    quiet: bool,
+) -> None:
+    """Path-trace SCENE (OBJ + MTL) into SVGF input frames.
+
+    Each frame holds R,G,B = direct + indirect, direct.*, indirect.*, emission.*, albedo.*,
+    N.*, Z, P.*, motion.X/Y (backward, pixels) and id; primary rays go through pixel centres
+    so the G-buffer is noise-free.
+    """
+    width, height = parse_resolution(resolution)
+    try:
+        frame_list = parse_frame_spec(frames)
+    except ValueError as exc:
+        raise UsageError(f"--frames: {exc}") from exc
+    if spp < 1:
+        raise UsageError(f"--spp {spp}: must be at least 1")
+    if max_depth < 0:
+        raise UsageError(f"--max-depth {max_depth}: must be >= 0")
+    if reference is not None and reference_spp < 1:
+        raise UsageError(f"--reference-spp {reference_spp}: must be at least 1")
+
+    out_paths = _output_paths(output, frame_list, "--output")
+    ref_paths = _output_paths(reference, frame_list, "--reference") if reference else []
+    clash = set(out_paths) & set(ref_paths)
+    if clash:
+        raise UsageError(f"--output and --reference name the same file {sorted(clash)[0]}")
+    if not overwrite:
+        for path in out_paths + ref_paths:
+            if path.exists():
+                raise OutputExistsError("output exists (use --overwrite to replace it)", str(path))
+
+    # Heavy imports only once the arguments are known to be good.
+    import numba
+
+    from svgf_cli.io.exr import write_exr
+    from svgf_trace.animation import Animation, load_animation
+    from svgf_trace.output import frame_attributes, input_channels, reference_channels
+    from svgf_trace.render import TraceStats, render_frame
+    from svgf_trace.scene import load_obj
+
+    loaded = load_obj(scene)
+    anim = (
+        load_animation(animation, [o.name for o in loaded.objects]) if animation else Animation()
+    )
+    n_threads = resolve_threads(threads)
+    numba.set_num_threads(n_threads)
+    for path in out_paths + ref_paths:
+        path.parent.mkdir(parents=True, exist_ok=True)
+
+    say = (lambda _msg: None) if quiet else (lambda msg: click.echo(msg))
+    say(
+        f"Tracing {scene} ({loaded.triangle_count} triangles, {len(loaded.objects)} objects) "
+        f"at {width}x{height}, {spp} spp, max depth {max_depth}, seed {seed}"
+        + (f", reference {reference_spp} spp" if reference else "")
+        + f"; using {n_threads} threads on cpu"
+    )
+    stats = TraceStats()
+    use_bar = not quiet and sys.stdout.isatty()
+    started = time.perf_counter()
+    bar = click.progressbar(length=len(frame_list), label="Tracing") if use_bar else None
+    try:
+        if bar is not None:
+            bar.__enter__()
+        for done, frame in enumerate(frame_list, start=1):
+            result, ref = render_frame(
+                loaded, anim, frame, width, height, spp, max_depth, seed,
+                reference_spp=reference_spp if reference else 0,
+                threads=n_threads, stats=stats,
+            )  # fmt: skip
+            channels, half = input_channels(result, half_radiance=not float_radiance)
+            attrs = frame_attributes(
+                result, frame=frame, spp=spp, seed=seed, max_depth=max_depth, kind="input"
+            )
+            write_exr(out_paths[done - 1], channels, attributes=attrs, half=half,
+                      compression="piz")
+            if ref is not None:
+                ref_attrs = frame_attributes(
+                    ref, frame=frame, spp=reference_spp, seed=seed, max_depth=max_depth,
+                    kind="reference",
+                )
+                write_exr(ref_paths[done - 1], reference_channels(ref), attributes=ref_attrs,
+                          half=False, compression="piz")
+            if bar is not None:
+                bar.update(1)
+            elif not quiet:
+                per_frame = (time.perf_counter() - started) / done
+                percent = int(100 * done / len(frame_list))
+                click.echo(
+                    f"Progress: {percent}% (frame {frame}, {done}/{len(frame_list)}, "
+                    f"{per_frame:.1f} s/frame)"
+                )
+    finally:
+        if bar is not None:
+            bar.__exit__(None, None, None)
+    elapsed = time.perf_counter() - started
+    say(
+        f"Wrote {len(frame_list)} frame(s) to {output}"
+        + (f" and references to {reference}" if reference else "")
+        + f" in {elapsed:.1f} s ({stats.rays / max(elapsed, 1e-9) / 1e6:.2f} Mrays/s)"
+    )

@@ -1,0 +1,1 @@
+"""`svgf evaluate`: image-quality and temporal-stability metrics, baselines, reports, plots."""

@@ -1,0 +1,294 @@
+"""Run an evaluation: read the sequences, produce the baselines, score every method per frame.
+
+Frames are streamed: per frame the reference, the denoised file, the input frame and every
+baseline's image are held once, plus each method's previous display image (for the temporal
+error) and the display images of the contact-sheet frames. Every file is checked before
+any work starts, so a missing reference fails in a second, not after the baselines ran.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from svgf_cli import __version__
+from svgf_cli.errors import InputError, UsageError
+from svgf_cli.evaluate import metrics
+from svgf_cli.evaluate.baselines import BASELINES, Method, make_method
+from svgf_cli.evaluate.report import EvaluationReport, FrameScore, MethodResult
+from svgf_cli.filters.params import PRESETS, SVGFParams
+from svgf_cli.frame import Frame
+from svgf_cli.io.patterns import SequencePattern
+
+SVGF = "svgf"
+INPUT = "input"
+
+Log = Callable[[str], None]
+
+
+@dataclass
+class EvaluationRequest:
+    """What to compare: file patterns, frames, baselines and their parameters."""
+
+    output: str
+    reference: str
+    input: str | None = None
+    frames: Sequence[int] | None = None
+    baselines: Sequence[str] = ()
+    params: SVGFParams = field(default_factory=lambda: PRESETS["paper"])
+    preset: str = "paper"
+    layers: str = "svgf"
+    contact_frames: Sequence[int] = ()
+
+
+@dataclass
+class ContactFrame:
+    """Display images of one frame for the contact sheet, keyed by method name."""
+
+    frame: int
+    reference: np.ndarray
+    images: dict[str, np.ndarray]
+    error_map: np.ndarray | None  # FLIP map of the svgf output; None when it is flagged
+
+
+@dataclass
+class _Track:
+    """One method's running state: its results and its previous display image."""
+
+    result: MethodResult
+    method: Method | None = None  # None: read from files (the svgf output)
+    previous: np.ndarray | None = None
+    previous_frame: int | None = None
+
+
+def resolve_frames(output: SequencePattern, text: str, spec: Sequence[int] | None) -> list[int]:
+    """The frames to evaluate: ``spec`` when given, else every output frame on disk."""
+    if spec is not None:
+        frames = sorted(set(spec))
+        if not frames:
+            raise UsageError("--frames selects no frame")
+        return frames
+    frames = output.frames_on_disk()
+    if not frames:
+        where = output.directory if str(output.directory) else Path(".")
+        reason = "no denoised files match the pattern"
+        if not where.is_dir():
+            reason += f" (directory {where} does not exist)"
+        raise InputError(reason, text)
+    return frames
+
+
+def _require(path: Path, what: str, frame: int) -> None:
+    if not path.is_file():
+        raise InputError(f"{what} for frame {frame} not found", str(path))
+
+
+def _check_shape(image: np.ndarray, reference: np.ndarray, path: Path, ref_path: Path) -> None:
+    if image.shape[1:] != reference.shape[1:]:
+        h, w = image.shape[1:]
+        rh, rw = reference.shape[1:]
+        raise InputError(
+            f"resolution {w}x{h} does not match the reference {ref_path} ({rw}x{rh})", str(path)
+        )
+
+
+def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str, object]:
+    settings: dict[str, object] = {
+        "svgf_version": __version__,
+        "tone_map": metrics.TONE_MAP_DESCRIPTION,
+        "relmse_epsilon": metrics.RELMSE_EPSILON,
+        "ssim": {
+            "window": metrics.SSIM_WINDOW,
+            "sigma": metrics.SSIM_SIGMA,
+            "k1": metrics.SSIM_K1,
+            "k2": metrics.SSIM_K2,
+            "on": "tone-mapped R, G, B separately, then averaged; valid pixels only",
+        },
+        "flip": {"mode": metrics.FLIP_MODE, "on": "tone-mapped sRGB images", "ppd": 67},
+        "temporal": "consecutive frame numbers only; undefined on a method's first frame",
+        "baselines": list(request.baselines),
+    }
+    if any(b in ("accumulate", "atrous") for b in request.baselines):
+        settings["preset"] = request.preset
+        settings["params"] = json.loads(request.params.to_json())
+    if oidn_version is not None:
+        settings["oidn"] = {
+            "package": f"pyoidn {oidn_version}",
+            "filter": "RT",
+            "hdr": True,
+            "clean_aux": True,
+            "quality": "high",
+        }
+    return settings
+
+
+def _source(name: str, request: EvaluationRequest) -> str:
+    if name == SVGF:
+        return SequencePattern.parse(request.output).display
+    if name == INPUT:
+        assert request.input is not None
+        return SequencePattern.parse(request.input).display
+    return {
+        "oidn": "baseline: Intel OIDN per frame (RT, HDR, clean albedo + normal)",
+        "accumulate": "baseline: SVGF temporal accumulation only (atrous_iterations=0)",
+        "atrous": "baseline: SVGF a-trous without temporal reuse (temporal=False)",
+    }[name]
+
+
+def run_evaluation(
+    request: EvaluationRequest, log: Log | None = None
+) -> tuple[EvaluationReport, list[ContactFrame]]:
+    """Score the denoised sequence, the raw input and the baselines against the reference."""
+    say = log or (lambda _msg: None)
+    unknown = [b for b in request.baselines if b not in BASELINES]
+    if unknown:
+        raise UsageError(f"unknown baseline {unknown[0]!r} (choose from {', '.join(BASELINES)})")
+    baselines = list(dict.fromkeys(request.baselines))
+    if baselines and request.input is None:
+        raise UsageError("--baseline needs --input: the baselines run on the noisy input frames")
+
+    out_pattern = SequencePattern.parse(request.output)
+    ref_pattern = SequencePattern.parse(request.reference)
+    in_pattern = SequencePattern.parse(request.input) if request.input else None
+    frames = resolve_frames(out_pattern, request.output, request.frames)
+    # Temporal baselines must see every frame in between, not only the scored ones.
+    fed = list(range(frames[0], frames[-1] + 1)) if "accumulate" in baselines else frames
+    for frame in frames:
+        _require(out_pattern.path(frame), "denoised output", frame)
+        _require(ref_pattern.path(frame), "reference", frame)
+    if in_pattern is not None:
+        for frame in fed:
+            _require(in_pattern.path(frame), "input", frame)
+    missing_contact = sorted(set(request.contact_frames) - set(frames))
+    if missing_contact:
+        raise UsageError(f"--contact-frames {missing_contact[0]} is not an evaluated frame")
+
+    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)))]
+    oidn_version = None
+    for name in baselines:
+        method = make_method(name, request.params)
+        tracks.append(_Track(MethodResult(name, _source(name, request)), method))
+        if name == "oidn":
+            from importlib.metadata import version
+
+            oidn_version = version("pyoidn")
+    if in_pattern is not None:
+        input_method = make_method(INPUT, request.params)
+        tracks.append(_Track(MethodResult(INPUT, _source(INPUT, request)), input_method))
+
+    from svgf_cli.io.exr import read_frame, read_rgb
+    from svgf_cli.io.layers import build_mapping
+
+    mapping = build_mapping(request.layers)
+    scored = set(frames)
+    contact_wanted = set(request.contact_frames)
+    contacts: list[ContactFrame] = []
+    ref_previous: np.ndarray | None = None
+    ref_previous_frame: int | None = None
+
+    for index, frame in enumerate(fed):
+        input_frame: Frame | None = None
+        if in_pattern is not None:
+            input_frame = read_frame(in_pattern.path(frame), mapping).frame
+        if frame not in scored:
+            # Only advance the stateful baselines through the gap.
+            for track in tracks:
+                if track.method is not None and track.result.name != INPUT:
+                    assert input_frame is not None
+                    track.method.process(input_frame)
+            continue
+        say(f"frame {frame} ({index + 1}/{len(fed)})")
+        ref_path = ref_pattern.path(frame)
+        reference, _ = read_rgb(ref_path)
+        bad = metrics.nonfinite_pixels(reference)
+        if bad:
+            raise InputError(f"reference has {bad} NaN or infinite pixel(s)", str(ref_path))
+        if input_frame is not None and in_pattern is not None:
+            _check_shape(input_frame.albedo, reference, in_pattern.path(frame), ref_path)
+        ref_display = metrics.tone_map(reference)
+        contact = ContactFrame(frame, ref_display, {}, None) if frame in contact_wanted else None
+        for track in tracks:
+            if track.method is None:
+                path = out_pattern.path(frame)
+                image, _ = read_rgb(path)
+                _check_shape(image, reference, path, ref_path)
+                file = str(path)
+            else:
+                assert input_frame is not None
+                image = track.method.process(input_frame)
+                is_input = track.result.name == INPUT and in_pattern is not None
+                file = str(in_pattern.path(frame)) if is_input else None
+            consecutive = (
+                track.previous_frame is not None
+                and track.previous_frame == frame - 1
+                and ref_previous_frame == frame - 1
+            )
+            score, display, flip_map = score_frame(
+                frame,
+                image,
+                reference,
+                ref_display,
+                previous=track.previous if consecutive else None,
+                ref_previous=ref_previous if consecutive else None,
+            )
+            score.file = file
+            track.result.frames.append(score)
+            track.previous = display
+            track.previous_frame = frame if display is not None else None
+            if contact is not None:
+                contact.images[track.result.name] = (
+                    display if display is not None else np.zeros_like(ref_display)
+                )
+                if track.result.name == SVGF:
+                    contact.error_map = flip_map
+        ref_previous, ref_previous_frame = ref_display, frame
+        if contact is not None:
+            contacts.append(contact)
+
+    report = EvaluationReport(
+        frames=frames,
+        methods=[t.result for t in tracks],
+        inputs={
+            "output": request.output,
+            "reference": request.reference,
+            "input": request.input,
+        },
+        settings=_settings(request, oidn_version),
+    )
+    return report, contacts
+
+
+def score_frame(
+    frame: int,
+    image: np.ndarray,
+    reference: np.ndarray,
+    ref_display: np.ndarray,
+    previous: np.ndarray | None = None,
+    ref_previous: np.ndarray | None = None,
+) -> tuple[FrameScore, np.ndarray | None, np.ndarray | None]:
+    """Every metric of one image against its reference.
+
+    Returns the score, the image's display version (None when flagged) and its FLIP error
+    map. An image with NaN/Inf pixels is flagged: no metric is computed for it.
+    """
+    bad = metrics.nonfinite_pixels(image)
+    if bad:
+        return FrameScore(frame, {k: None for k in metrics.METRIC_KEYS}, bad), None, None
+    display = metrics.tone_map(image)
+    flip_mean, flip_map = metrics.flip(display, ref_display)
+    temporal = None
+    if previous is not None and ref_previous is not None:
+        temporal = metrics.temporal_error(display, previous, ref_display, ref_previous)
+    values = {
+        "rmse": metrics.rmse(image, reference),
+        "relmse": metrics.relmse(image, reference),
+        "psnr": metrics.psnr(display, ref_display),
+        "ssim": metrics.ssim(display, ref_display),
+        "flip": flip_mean,
+        "temporal": temporal,
+    }
+    return FrameScore(frame, values), display, flip_map

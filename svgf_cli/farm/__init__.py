@@ -1,0 +1,1 @@
+"""Render-farm support: chunk plans, progress reporting and the Dask backend."""

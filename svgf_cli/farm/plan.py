@@ -1,0 +1,99 @@
+"""Chunk plans: which frames a chunk replays for history and which it writes.
+
+SVGF is recursive, so a chunk that starts mid-sequence replays a warm-up window of earlier
+frames (processed, never written) before its first output frame. The plan is independent of
+any execution engine: the local runner, `svgf plan` and the Dask backend all consume it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One independent unit of work.
+
+    ``read`` is the inclusive range of timeline frames processed (warm-up plus written
+    frames); ``write`` the frames written, sorted. Frames in ``read`` that are not in
+    ``write`` are processed only to build history.
+    """
+
+    index: int
+    read_start: int
+    read_end: int
+    write: tuple[int, ...]
+
+    @property
+    def write_start(self) -> int:
+        return self.write[0]
+
+    @property
+    def write_end(self) -> int:
+        return self.write[-1]
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "chunk": self.index,
+            "read": [self.read_start, self.read_end],
+            "write": [self.write_start, self.write_end],
+            "frames": format_frame_spec(self.write),
+        }
+
+
+def plan_chunks(
+    write_frames: Sequence[int],
+    timeline: Sequence[int],
+    *,
+    chunk_size: int | None,
+    warmup: int | None,
+) -> list[Chunk]:
+    """Split ``write_frames`` into chunks of at most ``chunk_size`` output frames.
+
+    ``timeline`` lists every frame that can be processed, in processing order; each written
+    frame must be in it. ``warmup`` counts timeline frames replayed before a chunk's first
+    output (clamped at the timeline start); None means "all": replay from the first frame of
+    the timeline, which reproduces the sequential run exactly.
+    """
+    if chunk_size is not None and chunk_size < 1:
+        raise ValueError(f"chunk size must be at least 1, got {chunk_size}")
+    if warmup is not None and warmup < 0:
+        raise ValueError(f"warm-up must be >= 0 or 'all', got {warmup}")
+    position = {frame: i for i, frame in enumerate(timeline)}
+    missing = [f for f in write_frames if f not in position]
+    if missing:
+        raise ValueError(f"frame {missing[0]} is not in the sequence")
+    ordered = sorted(set(write_frames), key=position.__getitem__)
+    if not ordered:
+        return []
+    size = chunk_size or len(ordered)
+    chunks: list[Chunk] = []
+    for index, begin in enumerate(range(0, len(ordered), size)):
+        group = tuple(ordered[begin : begin + size])
+        first = position[group[0]]
+        start = 0 if warmup is None else max(0, first - warmup)
+        chunks.append(Chunk(index, timeline[start], group[-1], group))
+    return chunks
+
+
+def format_frame_spec(frames: Sequence[int]) -> str:
+    """Compact frame spec (``1001-1025``, ``1-9x2``, ``1,5,7-9``) that `--frames` parses."""
+    frames = list(frames)
+    parts: list[str] = []
+    i = 0
+    while i < len(frames):
+        j = i
+        step = frames[i + 1] - frames[i] if i + 1 < len(frames) else 0
+        if step > 0:
+            while j + 1 < len(frames) and frames[j + 1] - frames[j] == step:
+                j += 1
+        # A stepped run only pays off from three frames on; a pair is two singles.
+        if j - i >= 2 or (j - i == 1 and step == 1):
+            suffix = "" if step == 1 else f"x{step}"
+            parts.append(f"{frames[i]}-{frames[j]}{suffix}")
+            i = j + 1
+        else:
+            parts.append(str(frames[i]))
+            i += 1
+    return ",".join(parts)

@@ -1,0 +1,179 @@
+"""Edge-avoiding a-trous wavelet filter (paper section 4.3, equations 1-5).
+
+One iteration at step ``s`` (1, 2, 4, ...) filters every signal with the 5x5 B3-spline
+kernel ``h = (1/16, 1/4, 3/8, 1/4, 1/16)`` dilated by ``s``, each tap weighted by
+``w = w_z * w_n * w_l``:
+
+* ``w_z = exp(-|z(p) - z(q)| / (sigma_z |grad z(p) . (p - q)| + eps))``  (eq. 3)
+* ``w_n = max(0, n(p) . n(q)) ** sigma_n``                                (eq. 4)
+* ``w_l = exp(-|l(p) - l(q)| / (sigma_l sqrt(g3x3(Var(l(p)))) + eps))``  (eq. 5)
+
+``c' = sum(h w c) / sum(h w)`` (eq. 1) and the variance is carried with squared weights,
+``Var' = sum(h^2 w^2 Var) / (sum h w)^2`` (eq. 2). ``g3x3`` is the 3x3 Gaussian (1/4 centre,
+1/8 edge, 1/16 corner), renormalised over in-image surface pixels; it only drives w_l.
+
+Direct and indirect share the geometry: ``h * w_n`` and the w_z exponent are computed once
+per tap and both signals' luminance stops are applied in the same pass (``exp`` of the summed
+exponents, one fast polynomial exp per signal and tap).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.edges import tap_geometry
+from svgf_cli.filters.fastmath import fast_exp, luminance
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_ONE = F32(1.0)
+_VARIANCE_EPSILON = F32(1e-10)
+_B3 = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0], dtype=np.float32)
+# g3x3 weights are the outer product of (1/4, 1/2, 1/4): 1/16 corner, 1/8 edge, 1/4 centre.
+_G1 = np.array([0.25, 0.5, 0.25], dtype=np.float32)
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+def luminance_stop_guides(
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    depth: np.ndarray,
+    sigma_luminance: np.float32,
+    out_luminance: np.ndarray,
+    out_inverse_scale: np.ndarray,
+) -> None:
+    """Per pixel and signal: ``l(p)`` and ``1 / (sigma_l sqrt(g3x3(Var)) + eps)`` (eq. 5)."""
+    num_signals = illumination.shape[0]
+    height, width = depth.shape
+    for y in prange(height):
+        for s in range(num_signals):
+            r = illumination[s, 0, y]
+            g = illumination[s, 1, y]
+            b = illumination[s, 2, y]
+            lum = out_luminance[s, y]
+            for x in range(width):
+                lum[x] = luminance(r[x], g[x], b[x])
+            inv_scale = out_inverse_scale[s, y]
+            for x in range(width):
+                total = _ZERO
+                weight = _ZERO
+                for dy in range(-1, 2):
+                    yy = y + dy
+                    if yy < 0 or yy >= height:
+                        continue
+                    for dx in range(-1, 2):
+                        xx = x + dx
+                        if xx < 0 or xx >= width or depth[yy, xx] <= _ZERO:
+                            continue
+                        k = _G1[dy + 1] * _G1[dx + 1]
+                        total += k * variance[s, yy, xx]
+                        weight += k
+                filtered = total / weight if weight > _ZERO else variance[s, y, x]
+                inv_scale[x] = _ONE / (sigma_luminance * np.sqrt(max(filtered, _ZERO)
+                                                                  + _VARIANCE_EPSILON))
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+def atrous_iteration(
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
+    depth: np.ndarray,
+    ddx: np.ndarray,
+    ddy: np.ndarray,
+    normal: np.ndarray,
+    step: int,
+    sigma_depth: np.float32,
+    squarings: int,
+    sigma_normal: np.float32,
+    out_illumination: np.ndarray,
+    out_variance: np.ndarray,
+) -> None:
+    """One a-trous iteration at ``step`` over (S, 3, H, W) illumination and (S, H, W) variance.
+
+    ``guide_*`` come from :func:`luminance_stop_guides` for the same input. Background
+    pixels (zero normal) receive no weight from surfaces and pass through unchanged.
+    """
+    num_signals = illumination.shape[0]
+    height, width = depth.shape
+    centre = _B3[2] * _B3[2]
+    for y in prange(height):
+        # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
+        acc = np.empty((num_signals, 5, width), dtype=np.float32)
+        depth_exponent = np.empty(width, dtype=np.float32)
+        normal_weight = np.empty(width, dtype=np.float32)
+        for s in range(num_signals):
+            sum_w = acc[s, 0]
+            sum_r = acc[s, 1]
+            sum_g = acc[s, 2]
+            sum_b = acc[s, 3]
+            sum_v = acc[s, 4]
+            r = illumination[s, 0, y]
+            g = illumination[s, 1, y]
+            b = illumination[s, 2, y]
+            v = variance[s, y]
+            for x in range(width):
+                sum_w[x] = centre
+                sum_r[x] = centre * r[x]
+                sum_g[x] = centre * g[x]
+                sum_b[x] = centre * b[x]
+                sum_v[x] = centre * centre * v[x]
+        for oy in range(-2, 3):
+            yy = y + oy * step
+            if yy < 0 or yy >= height:
+                continue
+            for ox in range(-2, 3):
+                if ox == 0 and oy == 0:
+                    continue
+                d = ox * step
+                x0 = max(0, -d)
+                x1 = min(width, width - d)
+                count = x1 - x0
+                if count <= 0:
+                    continue
+                kernel = _B3[ox + 2] * _B3[oy + 2]
+                tap_geometry(
+                    depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
+                    normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
+                    depth[yy, x0 + d:x1 + d],
+                    normal[0, yy, x0 + d:x1 + d], normal[1, yy, x0 + d:x1 + d],
+                    normal[2, yy, x0 + d:x1 + d],
+                    F32(d), F32(oy * step), sigma_depth, squarings, sigma_normal,
+                    depth_exponent, normal_weight, count,
+                )
+                for s in range(num_signals):
+                    l_p = guide_luminance[s, y, x0:x1]
+                    inv_p = guide_inverse_scale[s, y, x0:x1]
+                    l_q = guide_luminance[s, yy, x0 + d:x1 + d]
+                    r_q = illumination[s, 0, yy, x0 + d:x1 + d]
+                    g_q = illumination[s, 1, yy, x0 + d:x1 + d]
+                    b_q = illumination[s, 2, yy, x0 + d:x1 + d]
+                    v_q = variance[s, yy, x0 + d:x1 + d]
+                    sum_w = acc[s, 0, x0:x1]
+                    sum_r = acc[s, 1, x0:x1]
+                    sum_g = acc[s, 2, x0:x1]
+                    sum_b = acc[s, 3, x0:x1]
+                    sum_v = acc[s, 4, x0:x1]
+                    for i in range(count):
+                        w = (kernel * normal_weight[i]) * fast_exp(
+                            -(depth_exponent[i] + abs(l_p[i] - l_q[i]) * inv_p[i])
+                        )
+                        sum_w[i] += w
+                        sum_r[i] += w * r_q[i]
+                        sum_g[i] += w * g_q[i]
+                        sum_b[i] += w * b_q[i]
+                        sum_v[i] += (w * w) * v_q[i]
+        for s in range(num_signals):
+            sum_w = acc[s, 0]
+            o_r = out_illumination[s, 0, y]
+            o_g = out_illumination[s, 1, y]
+            o_b = out_illumination[s, 2, y]
+            o_v = out_variance[s, y]
+            for x in range(width):
+                inv = _ONE / sum_w[x]
+                o_r[x] = acc[s, 1, x] * inv
+                o_g[x] = acc[s, 2, x] * inv
+                o_b[x] = acc[s, 3, x] * inv
+                o_v[x] = acc[s, 4, x] * (inv * inv)

@@ -1,0 +1,106 @@
+"""Optional outlier clamps from the lecture notes (both off by default: they bias).
+
+* :func:`firefly_clamp` (before accumulation): a pixel whose luminance exceeds the mean +
+  ``k`` standard deviations of its 8 neighbours is scaled down to that limit (hue kept).
+  The centre is left out of the statistics, otherwise a firefly would widen its own bound.
+* :func:`history_clamp` (against ghosting): the reprojected history colour is clamped per
+  channel to the current frame's 3x3 mean +- ``k`` sigma, so stale history that no longer
+  matches the neighbourhood (moving shadows, lights switching) is pulled back.
+
+Neighbour statistics use only in-image, non-background pixels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import luminance
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_ONE = F32(1.0)
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+def firefly_clamp(
+    illumination: np.ndarray, depth: np.ndarray, k: np.float32, out: np.ndarray
+) -> None:
+    """Clamp luminance to mean + k*sigma of the 8 neighbours, scaling rgb. (S, 3, H, W)."""
+    num_signals = illumination.shape[0]
+    height, width = depth.shape
+    for y in prange(height):
+        for x in range(width):
+            for s in range(num_signals):
+                r = illumination[s, 0, y, x]
+                g = illumination[s, 1, y, x]
+                b = illumination[s, 2, y, x]
+                out[s, 0, y, x] = r
+                out[s, 1, y, x] = g
+                out[s, 2, y, x] = b
+                if depth[y, x] <= _ZERO:
+                    continue
+                count = 0
+                total = _ZERO
+                total_sq = _ZERO
+                for yy in range(max(y - 1, 0), min(y + 2, height)):
+                    for xx in range(max(x - 1, 0), min(x + 2, width)):
+                        if (yy == y and xx == x) or depth[yy, xx] <= _ZERO:
+                            continue
+                        lum_q = luminance(
+                            illumination[s, 0, yy, xx],
+                            illumination[s, 1, yy, xx],
+                            illumination[s, 2, yy, xx],
+                        )
+                        count += 1
+                        total += lum_q
+                        total_sq += lum_q * lum_q
+                if count == 0:
+                    continue
+                mean = total / F32(count)
+                sigma = np.sqrt(max(total_sq / F32(count) - mean * mean, _ZERO))
+                limit = max(mean + k * sigma, _ZERO)
+                lum = luminance(r, g, b)
+                if lum > limit:
+                    scale = limit / lum
+                    out[s, 0, y, x] = r * scale
+                    out[s, 1, y, x] = g * scale
+                    out[s, 2, y, x] = b * scale
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+def history_clamp(
+    history: np.ndarray,
+    history_length: np.ndarray,
+    current: np.ndarray,
+    depth: np.ndarray,
+    k: np.float32,
+) -> None:
+    """In place: clamp each history channel to the current 3x3 mean +- k*sigma.
+
+    ``history`` and ``current`` are (S, 3, H, W); pixels without history are left alone.
+    """
+    num_signals = history.shape[0]
+    height, width = depth.shape
+    for y in prange(height):
+        for x in range(width):
+            if history_length[y, x] <= _ZERO or depth[y, x] <= _ZERO:
+                continue
+            for s in range(num_signals):
+                for c in range(3):
+                    count = 0
+                    total = _ZERO
+                    total_sq = _ZERO
+                    for yy in range(max(y - 1, 0), min(y + 2, height)):
+                        for xx in range(max(x - 1, 0), min(x + 2, width)):
+                            if depth[yy, xx] <= _ZERO:
+                                continue
+                            v = current[s, c, yy, xx]
+                            count += 1
+                            total += v
+                            total_sq += v * v
+                    mean = total / F32(count)
+                    sigma = np.sqrt(max(total_sq / F32(count) - mean * mean, _ZERO))
+                    lo = mean - k * sigma
+                    hi = mean + k * sigma
+                    history[s, c, y, x] = min(max(history[s, c, y, x], lo), hi)

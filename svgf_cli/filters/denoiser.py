@@ -1,0 +1,398 @@
+"""The SVGF denoiser: owns the history buffers and runs the stages in order.
+
+Per frame: geometry gradients -> demodulate (+ optional firefly clamp) -> reproject the
+history (+ optional history clamp) -> accumulate -> variance -> a-trous iterations (the
+``feedback_iteration`` output becomes next frame's colour history) -> remodulate, add
+emission, sum the signals, restore background -> optional TAA.
+
+All buffers are float32 structure-of-arrays planes, allocated once per resolution and
+reused, so memory does not grow with the sequence length.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
+from svgf_cli.filters.clamp import firefly_clamp, history_clamp
+from svgf_cli.filters.edges import normal_squarings
+from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
+from svgf_cli.filters.modulate import demodulate, remodulate, restore_background
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.reproject import accumulate, reproject
+from svgf_cli.filters.taa import taa_resolve
+from svgf_cli.filters.variance import estimate_variance
+from svgf_cli.frame import DenoisedFrame, Frame
+
+F32 = np.float32
+
+# Arrays that make up the persistent history; state() returns exactly these (plus metadata).
+_HISTORY_KEYS = (
+    "history_illumination",
+    "history_moments",
+    "history_length",
+    "prev_depth",
+    "prev_normal",
+    "prev_mesh_id",
+)
+
+
+@dataclass
+class _Workspace:
+    """Per-frame scratch buffers for one resolution and signal count (reused every frame)."""
+
+    height: int
+    width: int
+    num_signals: int
+    planes: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        h, w, s = self.height, self.width, self.num_signals
+        shapes: dict[str, tuple[int, ...]] = {
+            "normal": (3, h, w),
+            "ddx": (h, w),
+            "ddy": (h, w),
+            "depth_slope": (h, w),
+            "normal_width": (h, w),
+            "illumination": (s, 3, h, w),
+            "clamped": (s, 3, h, w),
+            "resampled_illumination": (s, 3, h, w),
+            "resampled_moments": (s, 2, h, w),
+            "resampled_length": (h, w),
+            "accumulated": (s, 3, h, w),
+            "moments": (s, 2, h, w),
+            "history_length": (h, w),
+            "variance": (s, h, w),
+            "blurred": (s, 3, h, w),
+            "ping_illumination": (s, 3, h, w),
+            "pong_illumination": (s, 3, h, w),
+            "ping_variance": (s, h, w),
+            "pong_variance": (s, h, w),
+            "guide_luminance": (s, h, w),
+            "guide_inverse_scale": (s, h, w),
+            "radiance": (3, h, w),
+            "signal_radiance": (3, h, w),
+            "original": (3, h, w),
+            "taa": (3, h, w),
+        }
+        self.planes = {name: np.zeros(shape, dtype=F32) for name, shape in shapes.items()}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.planes[name]
+
+
+class Denoiser:
+    """Spatiotemporal variance-guided filtering of a frame sequence (Schied et al. 2017).
+
+    Feed frames in sequence order to :meth:`process`; the history persists between calls.
+    ``stage_seconds`` holds the wall time of each stage of the last frame (for benchmarks).
+    """
+
+    def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
+        _check_params(params)
+        self.params = params
+        self.debug_layers = debug_layers
+        self._squarings = normal_squarings(params.sigma_normal)
+        self._work: _Workspace | None = None
+        self._signal_names: tuple[str, ...] | None = None
+        self._history: dict[str, np.ndarray] | None = None
+        self._taa_previous: np.ndarray | None = None
+        self._frames_processed = 0
+        self.stage_seconds: dict[str, float] = {}
+
+    # ----------------------------------------------------------------- public API
+    @property
+    def frames_processed(self) -> int:
+        """Frames processed since construction or the last :meth:`reset`."""
+        return self._frames_processed
+
+    def reset(self) -> None:
+        """Drop all history: the next frame is processed cold."""
+        self._history = None
+        self._taa_previous = None
+        self._signal_names = None
+        self._frames_processed = 0
+
+    def process(self, frame: Frame) -> DenoisedFrame:
+        """Denoise the next frame of the sequence."""
+        frame.validate()
+        signals = frame.signals()
+        names = tuple(name for name, _ in signals)
+        height, width = frame.height, frame.width
+        work = self._workspace(height, width, len(signals))
+        if self._signal_names is not None and self._signal_names != names:
+            raise ValueError(
+                f"signals changed from {'+'.join(self._signal_names)} to {'+'.join(names)}"
+            )
+        self._signal_names = names
+        p = self.params
+        timings: dict[str, float] = {}
+        clock = time.perf_counter()
+
+        def lap(stage: str) -> None:
+            nonlocal clock
+            now = time.perf_counter()
+            timings[stage] = timings.get(stage, 0.0) + now - clock
+            clock = now
+
+        depth = frame.depth
+        normal = work["normal"]
+        unit_normals(frame.normal, depth, normal)
+        depth_gradients(depth, work["ddx"], work["ddy"], work["depth_slope"])
+        normal_gradient(normal, depth, work["normal_width"])
+        lap("gradients")
+
+        # Demodulate each signal; emission belongs to direct (split) or color (combined).
+        emission = frame.emission
+        has_emission = emission is not None
+        emission_plane = emission if emission is not None else work["radiance"]
+        eps = F32(p.albedo_epsilon)
+        illumination = work["illumination"]
+        original = work["original"]
+        original.fill(0.0)
+        for index, (_, signal) in enumerate(signals):
+            demodulate(signal, emission_plane, has_emission and index == 0, frame.albedo, eps,
+                       illumination[index])
+            original += signal
+        if p.firefly_clamp > 0.0:
+            firefly_clamp(illumination, depth, F32(p.firefly_clamp), work["clamped"])
+            illumination = work["clamped"]
+        lap("demodulate")
+
+        resampled_length = work["resampled_length"]
+        history = self._history
+        if p.temporal and history is not None:
+            reproject(
+                frame.motion, depth, normal, frame.mesh_id, work["depth_slope"],
+                work["normal_width"], history["prev_depth"], history["prev_normal"],
+                history["prev_mesh_id"], history["history_illumination"],
+                history["history_moments"], history["history_length"],
+                F32(p.depth_tolerance), F32(p.depth_slack), F32(p.normal_tolerance),
+                work["resampled_illumination"], work["resampled_moments"], resampled_length,
+            )
+            if p.history_clamp > 0.0:
+                history_clamp(work["resampled_illumination"], resampled_length, illumination,
+                              depth, F32(p.history_clamp))
+        else:
+            resampled_length.fill(0.0)
+        accumulated = work["accumulated"]
+        moments = work["moments"]
+        history_length = work["history_length"]
+        accumulate(
+            illumination, work["resampled_illumination"], work["resampled_moments"],
+            resampled_length, depth, F32(p.alpha), F32(p.moments_alpha), F32(p.history_cap),
+            accumulated, moments, history_length,
+        )
+        lap("reproject")
+
+        variance = work["variance"]
+        blurred = work["blurred"] if p.spatial_variance_blur_color else None
+        estimate_variance(
+            accumulated, moments, history_length, depth, work["ddx"], work["ddy"], normal,
+            history_threshold=float(p.variance_history_threshold),
+            radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
+            sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
+            sigma_normal=p.sigma_normal, out_variance=variance, out_illumination=blurred,
+        )
+        filtered = blurred if blurred is not None else accumulated
+        lap("variance")
+
+        # The colour history: the unfiltered accumulation unless an iteration feeds back.
+        feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
+        history_source = filtered if feedback < 0 else None
+        filtered_variance = variance
+        targets = (
+            (work["ping_illumination"], work["ping_variance"]),
+            (work["pong_illumination"], work["pong_variance"]),
+        )
+        for iteration in range(p.atrous_iterations):
+            luminance_stop_guides(filtered, filtered_variance, depth, F32(p.sigma_luminance),
+                                  work["guide_luminance"], work["guide_inverse_scale"])
+            out_illumination, out_variance = targets[iteration % 2]
+            atrous_iteration(
+                filtered, filtered_variance, work["guide_luminance"],
+                work["guide_inverse_scale"], depth, work["ddx"], work["ddy"], normal,
+                1 << iteration, F32(p.sigma_depth), self._squarings, F32(p.sigma_normal),
+                out_illumination, out_variance,
+            )
+            filtered, filtered_variance = out_illumination, out_variance
+            if iteration == feedback:
+                history_source = filtered
+        lap("atrous")
+
+        # Keep the history before the ping-pong buffers are reused by the next frame.
+        assert history_source is not None
+        self._store_history(frame, history_source, moments, history_length)
+        lap("reproject")
+
+        radiance = work["radiance"]
+        radiance.fill(0.0)
+        layers: dict[str, np.ndarray] = {}
+        signal_radiance = work["signal_radiance"]
+        for index, (name, signal) in enumerate(signals):
+            remodulate(filtered[index], emission_plane, has_emission and index == 0,
+                       frame.albedo, eps, signal_radiance)
+            radiance += signal_radiance
+            if self.debug_layers:
+                restore_background(signal_radiance, signal, depth)
+                for c, channel in enumerate("RGB"):
+                    layers[f"{name}.{channel}"] = signal_radiance[c].copy()
+                layers[f"variance.{name}"] = variance[index].copy()
+        restore_background(radiance, original, depth)
+        if self.debug_layers:
+            layers["history_length"] = history_length.copy()
+        lap("modulate")
+
+        if p.taa:
+            if self._taa_previous is None:
+                self._taa_previous = radiance.copy()
+            else:
+                taa_resolve(radiance, self._taa_previous, frame.motion, F32(p.taa_alpha),
+                            work["taa"])
+                np.copyto(self._taa_previous, work["taa"])
+            output = self._taa_previous.copy()
+            lap("taa")
+        else:
+            output = radiance.copy()
+
+        self._frames_processed += 1
+        self.stage_seconds = timings
+        return DenoisedFrame(color=output, layers=layers)
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Everything needed to continue the sequence bit-identically (copies)."""
+        state: dict[str, np.ndarray] = {
+            "params": _encode(self.params.to_json()),
+            "frames_processed": np.array(self._frames_processed, dtype=np.int64),
+        }
+        if self._signal_names is not None:
+            state["signals"] = _encode(",".join(self._signal_names))
+        if self._history is not None:
+            for key in _HISTORY_KEYS:
+                state[key] = self._history[key].copy()
+        if self._taa_previous is not None:
+            state["taa_previous"] = self._taa_previous.copy()
+        return state
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from :meth:`state`; ValueError if it was saved with other params/shapes."""
+        try:
+            saved_params = _decode(state["params"])
+            frames = int(np.asarray(state["frames_processed"]))
+        except (KeyError, TypeError, ValueError, UnicodeDecodeError) as exc:
+            raise ValueError(f"not a denoiser state: {exc}") from exc
+        if json.loads(saved_params) != json.loads(self.params.to_json()):
+            raise ValueError("denoiser state was saved with different parameters")
+        names = tuple(_decode(state["signals"]).split(",")) if "signals" in state else None
+        history: dict[str, np.ndarray] | None = None
+        if "history_illumination" in state:
+            if names is None:
+                raise ValueError("denoiser state has history but no signal names")
+            missing = [k for k in _HISTORY_KEYS if k not in state]
+            if missing:
+                raise ValueError(f"denoiser state lacks {', '.join(missing)}")
+            height, width = np.asarray(state["prev_depth"]).shape
+            s = len(names)
+            expected = {
+                "history_illumination": ((s, 3, height, width), F32),
+                "history_moments": ((s, 2, height, width), F32),
+                "history_length": ((height, width), F32),
+                "prev_depth": ((height, width), F32),
+                "prev_normal": ((3, height, width), F32),
+                "prev_mesh_id": ((height, width), np.int32),
+            }
+            history = {}
+            for key, (shape, dtype) in expected.items():
+                array = np.asarray(state[key])
+                if array.shape != shape:
+                    raise ValueError(f"denoiser state {key}: shape {array.shape}, expected {shape}")
+                history[key] = np.array(array, dtype=dtype, copy=True, order="C")
+        taa_previous = None
+        if "taa_previous" in state:
+            taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
+            if history is not None and taa_previous.shape[1:] != history["prev_depth"].shape:
+                raise ValueError("denoiser state taa_previous does not match the history shape")
+        self._history = history
+        self._taa_previous = taa_previous
+        self._signal_names = names
+        self._frames_processed = frames
+
+    # ----------------------------------------------------------------- internals
+    def _resolution(self) -> tuple[int, int] | None:
+        if self._history is not None:
+            h, w = self._history["prev_depth"].shape
+            return int(w), int(h)
+        if self._taa_previous is not None:
+            return int(self._taa_previous.shape[2]), int(self._taa_previous.shape[1])
+        return None
+
+    def _workspace(self, height: int, width: int, num_signals: int) -> _Workspace:
+        previous = self._resolution()
+        if previous is not None and previous != (width, height):
+            raise ValueError(
+                f"resolution changed from {previous[0]}x{previous[1]} to {width}x{height}"
+            )
+        work = self._work
+        if work is None or (work.height, work.width, work.num_signals) != (
+            height, width, num_signals
+        ):
+            work = _Workspace(height, width, num_signals)
+            self._work = work
+        return work
+
+    def _store_history(
+        self,
+        frame: Frame,
+        illumination: np.ndarray,
+        moments: np.ndarray,
+        history_length: np.ndarray,
+    ) -> None:
+        history = self._history
+        if history is None or history["history_illumination"].shape != illumination.shape:
+            history = {
+                "history_illumination": np.empty_like(illumination),
+                "history_moments": np.empty_like(moments),
+                "history_length": np.empty_like(history_length),
+                "prev_depth": np.empty_like(frame.depth),
+                "prev_normal": np.empty_like(frame.normal),
+                "prev_mesh_id": np.empty_like(frame.mesh_id),
+            }
+            self._history = history
+        assert self._work is not None
+        np.copyto(history["history_illumination"], illumination)
+        np.copyto(history["history_moments"], moments)
+        np.copyto(history["history_length"], history_length)
+        np.copyto(history["prev_depth"], frame.depth)
+        np.copyto(history["prev_normal"], self._work["normal"])
+        np.copyto(history["prev_mesh_id"], frame.mesh_id)
+
+
+def _check_params(p: SVGFParams) -> None:
+    if p.atrous_iterations < 0:
+        raise ValueError("atrous_iterations must be >= 0")
+    if p.atrous_iterations > 12:
+        raise ValueError("atrous_iterations must be <= 12 (step 4096)")
+    if not 0.0 < p.alpha <= 1.0 or not 0.0 < p.moments_alpha <= 1.0:
+        raise ValueError("alpha and moments_alpha must lie in (0, 1]")
+    if p.history_cap < 1:
+        raise ValueError("history_cap must be >= 1")
+    if p.sigma_normal <= 0.0 or p.sigma_luminance <= 0.0 or p.sigma_depth <= 0.0:
+        raise ValueError("sigma_normal, sigma_luminance and sigma_depth must be > 0")
+    if p.spatial_variance_sigma_luminance <= 0.0 or p.spatial_variance_radius < 0:
+        raise ValueError("spatial variance sigma must be > 0 and radius >= 0")
+    if p.albedo_epsilon <= 0.0:
+        raise ValueError("albedo_epsilon must be > 0")
+    if not 0.0 < p.taa_alpha <= 1.0:
+        raise ValueError("taa_alpha must lie in (0, 1]")
+
+
+def _encode(text: str) -> np.ndarray:
+    return np.frombuffer(text.encode("utf-8"), dtype=np.uint8).copy()
+
+
+def _decode(array: np.ndarray) -> str:
+    return np.asarray(array, dtype=np.uint8).tobytes().decode("utf-8")

@@ -1,0 +1,279 @@
+"""Temporal accumulation (paper section 4.1): backproject, test, resample, blend.
+
+Two kernels, so each step can be tested alone:
+
+* :func:`reproject` resamples last frame's history (illumination, moments, history length)
+  at the backprojected position ``(x + motion.x, y + motion.y)`` in pixel-index space. It
+  tries the 2x2 bilinear taps, each bounds-checked and tested for consistency (previous pixel
+  not background, same mesh id, depth within ``depth_tolerance * (slope + depth_slack * z)``,
+  normal within ``normal_tolerance * (fwidth_n + 0.01)``); the bilinear weights are
+  renormalised over the taps that pass and the pixel is rejected when their sum is < 0.01.
+  Failing that, a plain average over the passing taps of the 3x3 around the rounded position;
+  failing that, a disocclusion (history length 0). The history length of the taps is combined
+  with the *same* weights as the colour (never ``max``, which ghosts at disocclusions).
+* :func:`accumulate` blends: ``h = min(cap, h_prev + 1)`` on success else 1,
+  ``c = lerp(c_hist, c, max(alpha, 1/h))`` and the luminance moments
+  ``(l, l^2)`` likewise with ``max(moments_alpha, 1/h)`` (paper equation 6).
+
+Departures from Falcor (svgf-anchors.md section 3.1): the mesh-id test is back (the paper
+has it); each tap is bounds-checked on its own; the depth slack is relative to depth
+(``depth_slack * z``, default 0.002) instead of Falcor's absolute 0.01, so the test does not
+depend on the scene's units; history length is resampled, not read nearest-neighbour.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import luminance
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_ONE = F32(1.0)
+_NORMAL_SLACK = F32(0.01)
+_MIN_BILINEAR_WEIGHT = F32(0.01)
+
+
+@njit(inline="always", fastmath=True, cache=True, boundscheck=False)
+def _tap_consistent(
+    tx: int,
+    ty: int,
+    z: np.float32,
+    nx: np.float32,
+    ny: np.float32,
+    nz: np.float32,
+    mesh: np.int32,
+    max_depth_diff: np.float32,
+    max_normal_diff_sq: np.float32,
+    prev_depth: np.ndarray,
+    prev_normal: np.ndarray,
+    prev_mesh_id: np.ndarray,
+) -> bool:
+    height, width = prev_depth.shape
+    if tx < 0 or ty < 0 or tx >= width or ty >= height:
+        return False
+    z_prev = prev_depth[ty, tx]
+    if z_prev <= _ZERO:
+        return False
+    if prev_mesh_id[ty, tx] != mesh:
+        return False
+    if abs(z_prev - z) > max_depth_diff:
+        return False
+    dx = nx - prev_normal[0, ty, tx]
+    dy = ny - prev_normal[1, ty, tx]
+    dz = nz - prev_normal[2, ty, tx]
+    return dx * dx + dy * dy + dz * dz <= max_normal_diff_sq
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+def reproject(
+    motion: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray,
+    mesh_id: np.ndarray,
+    depth_slope: np.ndarray,
+    normal_width: np.ndarray,
+    prev_depth: np.ndarray,
+    prev_normal: np.ndarray,
+    prev_mesh_id: np.ndarray,
+    prev_illumination: np.ndarray,
+    prev_moments: np.ndarray,
+    prev_history_length: np.ndarray,
+    depth_tolerance: np.float32,
+    depth_slack: np.float32,
+    normal_tolerance: np.float32,
+    out_illumination: np.ndarray,
+    out_moments: np.ndarray,
+    out_history_length: np.ndarray,
+) -> None:
+    """Resample the history of every signal at the backprojected position.
+
+    ``prev_illumination`` is (S, 3, H, W), ``prev_moments`` (S, 2, H, W). Writes the
+    resampled history into the ``out_*`` arrays; ``out_history_length`` is the resampled
+    previous history length, 0 where the history is rejected (disocclusion).
+    """
+    num_signals = prev_illumination.shape[0]
+    height, width = depth.shape
+    fwidth = F32(width)
+    fheight = F32(height)
+    for y in prange(height):
+        for x in range(width):
+            z = depth[y, x]
+            px = F32(x) + motion[0, y, x]
+            py = F32(y) + motion[1, y, x]
+            # Positions this far outside cannot reach a tap (and NaN motion fails every
+            # comparison), which also keeps the int conversions below in range.
+            reachable = (
+                z > _ZERO
+                and px > F32(-2.0)
+                and py > F32(-2.0)
+                and px < fwidth + F32(1.0)
+                and py < fheight + F32(1.0)
+            )
+            if not reachable:
+                out_history_length[y, x] = _ZERO
+                for s in range(num_signals):
+                    for c in range(3):
+                        out_illumination[s, c, y, x] = _ZERO
+                    out_moments[s, 0, y, x] = _ZERO
+                    out_moments[s, 1, y, x] = _ZERO
+                continue
+            nx = normal[0, y, x]
+            ny = normal[1, y, x]
+            nz = normal[2, y, x]
+            mesh = mesh_id[y, x]
+            max_depth_diff = depth_tolerance * (depth_slope[y, x] + depth_slack * z)
+            max_normal_diff = normal_tolerance * (normal_width[y, x] + _NORMAL_SLACK)
+            max_normal_diff_sq = max_normal_diff * max_normal_diff
+
+            fx0 = np.floor(px)
+            fy0 = np.floor(py)
+            x0 = int(fx0)
+            y0 = int(fy0)
+            fx = px - fx0
+            fy = py - fy0
+            w00 = (_ONE - fx) * (_ONE - fy)
+            w10 = fx * (_ONE - fy)
+            w01 = (_ONE - fx) * fy
+            w11 = fx * fy
+            if not _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+                w00 = _ZERO
+            if not _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+                w10 = _ZERO
+            if not _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+                w01 = _ZERO
+            if not _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+                w11 = _ZERO
+            weight_sum = w00 + w10 + w01 + w11
+            if weight_sum >= _MIN_BILINEAR_WEIGHT:
+                inv = _ONE / weight_sum
+                w00 *= inv
+                w10 *= inv
+                w01 *= inv
+                w11 *= inv
+                # Taps with zero weight may lie outside the image: clamp their index.
+                xa = min(max(x0, 0), width - 1)
+                xb = min(max(x0 + 1, 0), width - 1)
+                ya = min(max(y0, 0), height - 1)
+                yb = min(max(y0 + 1, 0), height - 1)
+                out_history_length[y, x] = (
+                    w00 * prev_history_length[ya, xa]
+                    + w10 * prev_history_length[ya, xb]
+                    + w01 * prev_history_length[yb, xa]
+                    + w11 * prev_history_length[yb, xb]
+                )
+                for s in range(num_signals):
+                    for c in range(3):
+                        plane = prev_illumination[s, c]
+                        out_illumination[s, c, y, x] = (
+                            w00 * plane[ya, xa] + w10 * plane[ya, xb]
+                            + w01 * plane[yb, xa] + w11 * plane[yb, xb]
+                        )
+                    for c in range(2):
+                        plane = prev_moments[s, c]
+                        out_moments[s, c, y, x] = (
+                            w00 * plane[ya, xa] + w10 * plane[ya, xb]
+                            + w01 * plane[yb, xa] + w11 * plane[yb, xb]
+                        )
+                continue
+
+            # 3x3 box of consistent taps around the rounded previous position.
+            cx = int(np.floor(px + F32(0.5)))
+            cy = int(np.floor(py + F32(0.5)))
+            count = 0
+            h_sum = _ZERO
+            for s in range(num_signals):
+                for c in range(3):
+                    out_illumination[s, c, y, x] = _ZERO
+                out_moments[s, 0, y, x] = _ZERO
+                out_moments[s, 1, y, x] = _ZERO
+            for ty in range(cy - 1, cy + 2):
+                for tx in range(cx - 1, cx + 2):
+                    if not _tap_consistent(tx, ty, z, nx, ny, nz, mesh, max_depth_diff,
+                                           max_normal_diff_sq, prev_depth, prev_normal,
+                                           prev_mesh_id):
+                        continue
+                    count += 1
+                    h_sum += prev_history_length[ty, tx]
+                    for s in range(num_signals):
+                        for c in range(3):
+                            out_illumination[s, c, y, x] += prev_illumination[s, c, ty, tx]
+                        out_moments[s, 0, y, x] += prev_moments[s, 0, ty, tx]
+                        out_moments[s, 1, y, x] += prev_moments[s, 1, ty, tx]
+            if count == 0:
+                out_history_length[y, x] = _ZERO
+                continue
+            inv = _ONE / F32(count)
+            out_history_length[y, x] = h_sum * inv
+            for s in range(num_signals):
+                for c in range(3):
+                    out_illumination[s, c, y, x] *= inv
+                out_moments[s, 0, y, x] *= inv
+                out_moments[s, 1, y, x] *= inv
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+def accumulate(
+    illumination: np.ndarray,
+    history_illumination: np.ndarray,
+    history_moments: np.ndarray,
+    history_length_prev: np.ndarray,
+    depth: np.ndarray,
+    alpha: np.float32,
+    moments_alpha: np.float32,
+    history_cap: np.float32,
+    out_illumination: np.ndarray,
+    out_moments: np.ndarray,
+    out_history_length: np.ndarray,
+) -> None:
+    """Exponential moving average with adaptive alpha (paper eq. 6, alpha = max(a, 1/h)).
+
+    ``history_length_prev`` is the output of :func:`reproject` (0 = no history). Background
+    pixels get history length 0 and their current illumination.
+    """
+    num_signals = illumination.shape[0]
+    height, width = depth.shape
+    for y in prange(height):
+        for x in range(width):
+            h_prev = history_length_prev[y, x]
+            if depth[y, x] <= _ZERO:
+                h = _ZERO
+                a = _ONE
+                a_m = _ONE
+                h_prev = _ZERO
+            elif h_prev > _ZERO:
+                h = min(history_cap, h_prev + _ONE)
+                a = max(alpha, _ONE / h)
+                a_m = max(moments_alpha, _ONE / h)
+            else:
+                h = _ONE
+                a = _ONE
+                a_m = _ONE
+            out_history_length[y, x] = h
+            for s in range(num_signals):
+                r = illumination[s, 0, y, x]
+                g = illumination[s, 1, y, x]
+                b = illumination[s, 2, y, x]
+                lum = luminance(r, g, b)
+                if h_prev > _ZERO:
+                    hr = history_illumination[s, 0, y, x]
+                    hg = history_illumination[s, 1, y, x]
+                    hb = history_illumination[s, 2, y, x]
+                    m1 = history_moments[s, 0, y, x]
+                    m2 = history_moments[s, 1, y, x]
+                    out_illumination[s, 0, y, x] = hr + a * (r - hr)
+                    out_illumination[s, 1, y, x] = hg + a * (g - hg)
+                    out_illumination[s, 2, y, x] = hb + a * (b - hb)
+                    out_moments[s, 0, y, x] = m1 + a_m * (lum - m1)
+                    out_moments[s, 1, y, x] = m2 + a_m * (lum * lum - m2)
+                else:
+                    out_illumination[s, 0, y, x] = r
+                    out_illumination[s, 1, y, x] = g
+                    out_illumination[s, 2, y, x] = b
+                    out_moments[s, 0, y, x] = lum
+                    out_moments[s, 1, y, x] = lum * lum

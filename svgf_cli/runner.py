@@ -1,0 +1,551 @@
+"""The sequential driver shared by local runs, local chunks and Dask tasks.
+
+Given the ordered frames of one chunk (``FrameTask``: frame number, input path, output path
+or None for a history-only frame), it runs the Denoiser frame by frame. The next frame's read
+runs in a reader thread while the current frame is filtered, and the previous frame's write
+runs in a writer thread, each at most one deep: memory holds about three frames whatever the
+sequence length. SIGINT/SIGTERM finish the frame in flight and then stop (exit 130/143).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from svgf_cli import __version__
+from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, SvgfError, UsageError
+from svgf_cli.farm.progress import Progress
+from svgf_cli.filters.params import SVGFParams
+
+# Header keys that describe the file's layout rather than its content: the writer sets its
+# own, so copying the input's would contradict the output (or confuse OpenImageIO).
+_STRUCTURAL_ATTRIBUTES = {
+    "compression",
+    "channelnames",
+    "dataWindow",
+    "displayWindow",
+    "lineOrder",
+    "tiles",
+    "chunkCount",
+    "version",
+    "type",
+    "name",
+    "oiio:subimages",
+    "oiio:subimagename",
+    "oiio:BitsPerSample",
+    "oiio:ColorSpace",
+    "openexr:chunkCount",
+    "openexr:lineOrder",
+    "openexr:dwaCompressionLevel",
+    "openexr:zipCompressionLevel",
+    "tile_width",
+    "tile_height",
+    "tiled",
+}
+
+COLOR_CHANNELS = ("R", "G", "B", "A")
+
+
+@dataclass(frozen=True)
+class FrameTask:
+    """One frame of a chunk. ``output`` None: processed for history only, never written."""
+
+    frame: int
+    input: Path
+    output: Path | None
+    reset_history: bool = False  # --allow-gaps: a frame before this one is missing
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything a chunk needs besides its frames; picklable (shipped to Dask workers)."""
+
+    params: SVGFParams
+    preset: str
+    mapping: Any  # svgf_cli.io.layers.LayerMapping
+    half: bool = True
+    compression: str | None = None  # None: the input's compression
+    debug_aovs: bool = False
+    warmup_label: str = "all"
+    threads: int | None = None
+
+
+@dataclass
+class RunStats:
+    """What a run did and where its time went (seconds, summed over frames)."""
+
+    frames_processed: int = 0
+    frames_written: int = 0
+    read_seconds: float = 0.0
+    compute_seconds: float = 0.0
+    write_seconds: float = 0.0
+    wait_read_seconds: float = 0.0
+    wall_seconds: float = 0.0
+    last_frame: int | None = None
+    written: list[int] = field(default_factory=list)
+
+    def merge(self, other: RunStats) -> None:
+        self.frames_processed += other.frames_processed
+        self.frames_written += other.frames_written
+        self.read_seconds += other.read_seconds
+        self.compute_seconds += other.compute_seconds
+        self.write_seconds += other.write_seconds
+        self.wait_read_seconds += other.wait_read_seconds
+        self.wall_seconds += other.wall_seconds
+        self.written.extend(other.written)
+        if other.last_frame is not None:
+            self.last_frame = other.last_frame
+
+
+class Interrupted(SvgfError):
+    """SIGINT/SIGTERM arrived; the frame in flight was finished first."""
+
+    def __init__(self, signum: int, detail: str) -> None:
+        name = signal.Signals(signum).name
+        super().__init__(f"interrupted by {name}; {detail}")
+        self.signum = signum
+        self.exit_code = EXIT_SIGINT if signum == signal.SIGINT else EXIT_SIGTERM
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_rebuild_interrupted, (self.signum, str(self)))
+
+
+def _rebuild_interrupted(signum: int, message: str) -> Interrupted:
+    exc = Interrupted.__new__(Interrupted)
+    SvgfError.__init__(exc, message)
+    exc.signum = signum
+    exc.exit_code = EXIT_SIGINT if signum == signal.SIGINT else EXIT_SIGTERM
+    return exc
+
+
+class StopFlag:
+    """Set by the signal handlers; polled between frames."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+
+@contextmanager
+def stop_on_signals(immediate: bool = False) -> Iterator[StopFlag]:
+    """Turn SIGINT/SIGTERM into a stop request for the duration of the block.
+
+    The first signal only sets the flag (the runner finishes the frame in flight, then
+    raises ``Interrupted``); a second one, or any signal with ``immediate``, raises at once.
+    Outside the main thread (Dask workers) signals cannot be caught: the flag stays unset.
+    """
+    flag = StopFlag()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+
+    def handler(signum: int, _frame: Any) -> None:
+        if immediate or flag.signum is not None:
+            raise Interrupted(signum, "stopped at once; rerun with --skip-existing to resume")
+        flag.signum = signum
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield flag
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+class DenoiserLike(Protocol):
+    frames_processed: int
+
+    def process(self, frame: Any) -> Any: ...
+    def reset(self) -> None: ...
+    def state(self) -> dict[str, np.ndarray]: ...
+    def load_state(self, state: dict[str, np.ndarray]) -> None: ...
+
+
+def _default_denoiser(params: SVGFParams, debug_layers: bool) -> DenoiserLike:
+    from svgf_cli.filters.denoiser import Denoiser
+
+    return Denoiser(params, debug_layers=debug_layers)
+
+
+def _default_reader(path: Path, mapping: Any) -> Any:
+    from svgf_cli.io.exr import read_frame
+
+    return read_frame(path, mapping, mapping.motion_convention)
+
+
+# -- history files ------------------------------------------------------------------------
+
+_STATE_PREFIX = "state__"
+
+
+@dataclass(frozen=True)
+class HistoryFile:
+    """A saved Denoiser state plus what it was computed from."""
+
+    path: Path
+    state: dict[str, np.ndarray]
+    last_frame: int
+    params_json: str
+    width: int
+    height: int
+
+
+def load_history(path: Path) -> HistoryFile:
+    """Read a ``--save-history`` file; InputError (exit 3) when missing or not one of ours."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: np.array(data[name]) for name in data.files}
+    except FileNotFoundError:
+        raise InputError("history file not found", str(path)) from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read history file: {exc}", str(path)) from None
+    try:
+        last_frame = int(arrays["svgf_last_frame"])
+        params_json = str(arrays["svgf_params"])
+        height, width = (int(v) for v in arrays["svgf_shape"])
+    except (KeyError, ValueError, TypeError):
+        raise InputError("not an svgf history file (no svgf_* metadata)", str(path)) from None
+    state = {
+        name[len(_STATE_PREFIX) :]: value
+        for name, value in arrays.items()
+        if name.startswith(_STATE_PREFIX)
+    }
+    return HistoryFile(path, state, last_frame, params_json, width, height)
+
+
+def save_history(
+    path: Path,
+    state: Mapping[str, np.ndarray],
+    last_frame: int,
+    params: SVGFParams,
+    shape: tuple[int, int],
+    last_input: Path,
+) -> None:
+    """Write the Denoiser state atomically (temp name, then rename)."""
+    payload = {f"{_STATE_PREFIX}{k}": np.asarray(v) for k, v in state.items()}
+    payload["svgf_last_frame"] = np.array(last_frame, dtype=np.int64)
+    payload["svgf_params"] = np.array(params.to_json())
+    payload["svgf_shape"] = np.array(shape, dtype=np.int64)
+    payload["svgf_version"] = np.array(__version__)
+    payload["svgf_input"] = np.array(str(last_input))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as handle:
+            np.savez(handle, **payload)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def check_history_params(history: HistoryFile, params: SVGFParams) -> None:
+    """Refuse a state computed with other parameters (exit 2), naming what differs."""
+    if history.params_json == params.to_json():
+        return
+    try:
+        saved = json.loads(history.params_json)
+    except ValueError:
+        saved = {}
+    current = json.loads(params.to_json())
+    diffs = [
+        f"{k} {saved.get(k)!r} (saved) != {current.get(k)!r}"
+        for k in sorted(set(saved) | set(current))
+        if saved.get(k) != current.get(k)
+    ]
+    raise UsageError(
+        "history was saved with different parameters: " + ("; ".join(diffs) or "unknown"),
+        str(history.path),
+    )
+
+
+# -- the driver -----------------------------------------------------------------------------
+
+
+def output_attributes(
+    input_attributes: Mapping[str, Any], config: RunConfig, task: FrameTask
+) -> dict[str, Any]:
+    """Input header attributes passed through, plus ``svgf/*`` provenance.
+
+    Everything here is a function of the options and the frame, never of the run (no
+    timestamps, no host names), so a resumed or retried frame is byte-identical.
+    """
+    attributes = {k: v for k, v in input_attributes.items() if k not in _STRUCTURAL_ATTRIBUTES}
+    attributes.update(
+        {
+            "svgf/version": __version__,
+            "svgf/preset": config.preset,
+            "svgf/params": config.params.to_json(),
+            "svgf/frame": int(task.frame),
+            "svgf/input": str(task.input),
+            "svgf/warmup": config.warmup_label,
+        }
+    )
+    software = str(input_attributes.get("Software", "")).strip()
+    tag = f"svgf {__version__}"
+    attributes["Software"] = (
+        f"{software}; {tag}" if software and tag not in software else (software or tag)
+    )
+    return attributes
+
+
+def build_output_channels(
+    denoised: Any, alpha: np.ndarray | None, debug_aovs: bool
+) -> dict[str, np.ndarray]:
+    color = denoised.color
+    height, width = color.shape[1:]
+    channels: dict[str, np.ndarray] = {
+        "R": color[0],
+        "G": color[1],
+        "B": color[2],
+        "A": alpha if alpha is not None else np.ones((height, width), np.float32),
+    }
+    if debug_aovs:
+        for name, plane in denoised.layers.items():
+            if name in channels:
+                raise ValueError(f"debug layer {name!r} clashes with an output channel")
+            channels[name] = plane
+    return channels
+
+
+def choose_compression(
+    config: RunConfig, input_compression: str | None, channels: Mapping[str, np.ndarray]
+) -> str:
+    """The explicit --compression, else the input's; a lossy input codec falls back to zip
+    when data layers (debug AOVs) are written, since they must stay exact."""
+    from svgf_cli.io.exr import check_compression
+
+    if config.compression:
+        return config.compression
+    inherited = input_compression or "zip"
+    try:
+        check_compression(inherited, list(channels))
+    except SvgfError:
+        return "zip"
+    return inherited
+
+
+def _scrub_output(color: np.ndarray) -> int:
+    """Last line of defence: no NaN/Inf may reach an output. Returns how many were fixed."""
+    bad = ~np.isfinite(color)
+    count = int(np.count_nonzero(bad))
+    if count:
+        color[bad] = 0.0
+    return count
+
+
+def run_sequence(
+    tasks: Sequence[FrameTask],
+    config: RunConfig,
+    progress: Progress,
+    *,
+    stop: StopFlag | None = None,
+    history: HistoryFile | None = None,
+    save_history_to: Path | None = None,
+    warmup_total: int | None = None,
+    on_first_frame: Callable[[Any], None] | None = None,
+    make_denoiser: Callable[[SVGFParams, bool], DenoiserLike] = _default_denoiser,
+    read: Callable[[Path, Any], Any] = _default_reader,
+) -> RunStats:
+    """Run the Denoiser over ``tasks`` in order, writing the frames that have an output.
+
+    Raises InputError (exit 3) for an unreadable frame or a resolution change (the frames
+    before it are written, nothing for it), UsageError for a history file from other
+    parameters, Interrupted after a SIGINT/SIGTERM once the frame in flight is written.
+    """
+    from svgf_cli.io.exr import write_exr
+
+    stats = RunStats()
+    if not tasks:
+        return stats
+    started = time.perf_counter()
+    try:
+        denoiser = make_denoiser(config.params, config.debug_aovs)
+    except ValueError as exc:
+        raise UsageError(f"invalid SVGF parameters: {exc}") from None
+    if warmup_total is None:
+        warmup_total = sum(1 for t in tasks if t.output is None)
+    warmup_seen = 0
+    size: tuple[int, int] | None = None
+    size_source: Path | None = None
+    if history is not None:
+        check_history_params(history, config.params)
+
+    def timed_read(task: FrameTask) -> tuple[Any, float]:
+        t0 = time.perf_counter()
+        try:
+            result = read(task.input, config.mapping)
+        except SvgfError:
+            raise
+        except FileNotFoundError:
+            raise InputError("input file not found", str(task.input)) from None
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise InputError(f"cannot read: {exc}", str(task.input)) from None
+        return result, time.perf_counter() - t0
+
+    def timed_write(
+        task: FrameTask,
+        channels: dict[str, np.ndarray],
+        attributes: dict[str, Any],
+        compression: str,
+    ) -> float:
+        t0 = time.perf_counter()
+        assert task.output is not None
+        half = dict.fromkeys(COLOR_CHANNELS, config.half)
+        write_exr(task.output, channels, attributes=attributes, half=half, compression=compression)
+        return time.perf_counter() - t0
+
+    reader = ThreadPoolExecutor(1, thread_name_prefix="svgf-read")
+    writer = ThreadPoolExecutor(1, thread_name_prefix="svgf-write")
+    pending: tuple[FrameTask, Future[float], float] | None = None
+
+    def finish_pending() -> None:
+        nonlocal pending
+        if pending is None:
+            return
+        task, future, frame_started = pending
+        pending = None
+        stats.write_seconds += future.result()
+        stats.frames_written += 1
+        stats.written.append(task.frame)
+        progress.frame_done(task.frame, time.perf_counter() - frame_started)
+
+    try:
+        next_read: Future[tuple[Any, float]] | None = reader.submit(timed_read, tasks[0])
+        frame_started = time.perf_counter()
+        for position, task in enumerate(tasks):
+            assert next_read is not None
+            t_wait = time.perf_counter()
+            result, read_seconds = next_read.result()
+            stats.wait_read_seconds += time.perf_counter() - t_wait
+            stats.read_seconds += read_seconds
+            # Prefetch the next frame while this one is filtered (queue depth one).
+            next_read = (
+                reader.submit(timed_read, tasks[position + 1])
+                if position + 1 < len(tasks)
+                else None
+            )
+            frame = result.frame
+            for message in result.warnings:
+                text = str(message)
+                progress.warning(text if str(task.input) in text else f"{task.input}: {text}")
+            frame_size = (frame.width, frame.height)
+            if size is None:
+                size, size_source = frame_size, task.input
+                if on_first_frame is not None:
+                    on_first_frame(result)
+                if history is not None:
+                    if (history.width, history.height) != frame_size:
+                        raise InputError(
+                            f"resolution {frame_size[0]}x{frame_size[1]} does not match the "
+                            f"history in {history.path} ({history.width}x{history.height})",
+                            str(task.input),
+                        )
+                    try:
+                        denoiser.load_state(history.state)
+                    except ValueError as exc:
+                        raise InputError(f"cannot use history: {exc}", str(history.path)) from None
+            elif frame_size != size:
+                raise InputError(
+                    f"resolution changed from {size[0]}x{size[1]} ({size_source}) to "
+                    f"{frame_size[0]}x{frame_size[1]}",
+                    str(task.input),
+                )
+            if task.reset_history:
+                denoiser.reset()
+            t0 = time.perf_counter()
+            try:
+                denoised = denoiser.process(frame)
+            except ValueError as exc:
+                raise InputError(str(exc), str(task.input)) from None
+            stats.compute_seconds += time.perf_counter() - t0
+            stats.frames_processed += 1
+            stats.last_frame = task.frame
+            fixed = _scrub_output(denoised.color)
+            if fixed:
+                progress.warning(f"{task.input}: {fixed} non-finite output value(s) set to 0")
+
+            if task.output is None:
+                warmup_seen += 1
+                progress.warmup(task.frame, warmup_seen, warmup_total)
+                frame_started = time.perf_counter()
+            else:
+                channels = build_output_channels(denoised, result.alpha, config.debug_aovs)
+                attributes = output_attributes(result.info.attributes, config, task)
+                compression = choose_compression(config, result.info.compression, channels)
+                # One write in flight: wait for the previous one before queueing this one.
+                finish_pending()
+                pending = (
+                    task,
+                    writer.submit(timed_write, task, channels, attributes, compression),
+                    frame_started,
+                )
+                frame_started = time.perf_counter()
+            progress.detail(
+                f"frame {task.frame}: read {read_seconds:.3f} s, "
+                f"compute {time.perf_counter() - t0:.3f} s"
+            )
+            if stop:
+                finish_pending()
+                assert stop.signum is not None
+                raise Interrupted(
+                    stop.signum,
+                    f"frame {task.frame} was the last one finished; "
+                    "rerun with --skip-existing to resume",
+                )
+        finish_pending()
+    finally:
+        # Never leave a write half-done: wait for it even when unwinding an error.
+        if pending is not None:
+            # The original error is the one to report.
+            with contextlib.suppress(Exception):
+                pending[1].result()
+        reader.shutdown(wait=True, cancel_futures=True)
+        writer.shutdown(wait=True)
+    if save_history_to is not None and size is not None and stats.last_frame is not None:
+        save_history(
+            save_history_to,
+            denoiser.state(),
+            stats.last_frame,
+            config.params,
+            (size[1], size[0]),
+            tasks[-1].input,
+        )
+    stats.wall_seconds = time.perf_counter() - started
+    return stats
+
+
+def pending_tasks(tasks: Sequence[FrameTask], overwrite: bool) -> list[FrameTask]:
+    """Retry-safe view of a chunk: outputs that already exist are not written again.
+
+    Writes are atomic, so an existing output is a complete one; with ``overwrite`` every
+    output is written (deterministic, so a retry rewrites identical bytes).
+    """
+    if overwrite:
+        return list(tasks)
+    return [
+        t
+        if t.output is None or not t.output.exists()
+        else FrameTask(t.frame, t.input, None, t.reset_history)
+        for t in tasks
+    ]
+
+
+def trim_tail(tasks: Sequence[FrameTask]) -> list[FrameTask]:
+    """Drop history-only frames after the last written one (nothing depends on them)."""
+    last = max((i for i, t in enumerate(tasks) if t.output is not None), default=-1)
+    return list(tasks[: last + 1])

@@ -1,0 +1,481 @@
+"""The wavefront integrator and the per-frame layers.
+
+A frame is rendered as: build the world-space geometry for the frame (rigid object
+transforms applied) and one Embree scene; intersect all primary rays once (through pixel
+centres, shared by every sample); then, per batch of samples, bounce by bounce: shade every
+active path (numba), trace all shadow rays (Embree OCCLUDED), trace all continuation rays
+(Embree INTERSECT), compact. Embree calls are split across threads (embreex releases the GIL).
+
+Seeds: the frame key is ``SeedSequence([seed, frame, stream])`` (stream 0 for the noisy
+input, 1 for the reference, so the reference's samples are independent of the input's);
+each path's numbers come from hashing (frame key, sample index, pixel, dimension).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+from svgf_trace import kernels
+from svgf_trace.animation import Animation
+from svgf_trace.camera import Camera, default_camera
+from svgf_trace.scene import Scene
+
+RR_DEPTH = 3
+# Paths in flight per batch: bounds memory (about 200 bytes per path) for references.
+MAX_PATHS_PER_BATCH = 1 << 20
+# Below this many rays one Embree call beats splitting across threads.
+MIN_RAYS_PER_THREAD = 16384
+
+STREAM_INPUT = 0
+STREAM_REFERENCE = 1
+
+
+@dataclass
+class TraceStats:
+    """Counters for the benchmark: rays traced and wall time inside Embree calls."""
+
+    rays: int = 0
+    embree_seconds: float = 0.0
+    build_seconds: float = 0.0
+
+
+@dataclass
+class EmbreeTracer:
+    """One committed Embree scene of triangle soup; primID is the triangle index."""
+
+    vertices: np.ndarray  # (T, 3, 3) float64 world space
+    threads: int = 1
+    stats: TraceStats = field(default_factory=TraceStats)
+
+    def __post_init__(self) -> None:
+        start = time.perf_counter()
+        self._scene = rtcore_scene.EmbreeScene()
+        flat = np.ascontiguousarray(self.vertices.reshape(-1, 3), dtype=np.float32)
+        indices = np.arange(flat.shape[0], dtype=np.int32).reshape(-1, 3)
+        self._mesh = TriangleMesh(self._scene, flat, indices)
+        # The first query commits the scene; do it here, single-threaded, so concurrent
+        # queries never race on the commit.
+        self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32))
+        self.stats.build_seconds += time.perf_counter() - start
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def _chunks(self, n: int) -> list[slice]:
+        parts = min(self.threads, max(1, n // MIN_RAYS_PER_THREAD))
+        bounds = np.linspace(0, n, parts + 1).astype(int)
+        return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+    def intersect(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Closest hits: (primID (-1 = miss), u, v, t) for float32 ``(n, 3)`` rays."""
+        n = origins.shape[0]
+        start = time.perf_counter()
+        chunks = self._chunks(n)
+
+        def run(part: slice) -> dict[str, np.ndarray]:
+            return self._scene.run(origins[part], directions[part], output=1)
+
+        if self._pool is None or len(chunks) == 1:
+            results = [run(c) for c in chunks]
+        else:
+            results = list(self._pool.map(run, chunks))
+        self.stats.embree_seconds += time.perf_counter() - start
+        self.stats.rays += n
+        if len(results) == 1:
+            r = results[0]
+            return r["primID"], r["u"], r["v"], r["tfar"]
+        return tuple(  # type: ignore[return-value]
+            np.concatenate([r[k] for r in results]) for k in ("primID", "u", "v", "tfar")
+        )
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, dists: np.ndarray) -> np.ndarray:
+        """True where something lies between the origin and ``dists`` along the ray."""
+        n = origins.shape[0]
+        if n == 0:
+            return np.zeros(0, dtype=bool)
+        start = time.perf_counter()
+        chunks = self._chunks(n)
+
+        def run(part: slice) -> np.ndarray:
+            # embreex writes into the dists array it is given: hand it a private copy.
+            tfar = np.array(dists[part], dtype=np.float32)
+            return self._scene.run(origins[part], directions[part], dists=tfar, query="OCCLUDED")
+
+        if self._pool is None or len(chunks) == 1:
+            results = [run(c) for c in chunks]
+        else:
+            results = list(self._pool.map(run, chunks))
+        self.stats.embree_seconds += time.perf_counter() - start
+        self.stats.rays += n
+        return np.concatenate(results) != -1
+
+
+@dataclass
+class FrameGeometry:
+    """Everything the kernels need for one frame, in world space."""
+
+    frame: int
+    camera: Camera
+    prev_camera: Camera
+    tri_v: np.ndarray
+    tri_prev_v: np.ndarray
+    tri_ng: np.ndarray
+    tri_ns: np.ndarray
+    tri_has_ns: np.ndarray
+    tri_uv: np.ndarray
+    tri_mat: np.ndarray
+    tri_obj: np.ndarray
+    mat_kd: np.ndarray
+    mat_ke: np.ndarray
+    tex_off: np.ndarray
+    tex_w: np.ndarray
+    tex_h: np.ndarray
+    tex_data: np.ndarray
+    light_tri: np.ndarray
+    light_cdf: np.ndarray
+    tri_light_pdf: np.ndarray
+    eps: float
+    tracer: EmbreeTracer
+
+
+def _object_pivots(scene: Scene) -> dict[str, np.ndarray]:
+    pivots = {}
+    for obj in scene.objects:
+        pts = scene.positions[obj.start : obj.stop].reshape(-1, 3)
+        pivots[obj.name] = (pts.min(axis=0) + pts.max(axis=0)) * 0.5
+    return pivots
+
+
+def world_vertices(scene: Scene, animation: Animation, frame: float) -> tuple[np.ndarray, list]:
+    """World-space triangle vertices at ``frame`` and the per-object 4x4 matrices."""
+    pivots = _object_pivots(scene)
+    out = scene.positions.copy()
+    matrices = []
+    for obj in scene.objects:
+        matrix = animation.object_matrix(obj.name, frame, pivots[obj.name])
+        matrices.append(matrix)
+        if not np.array_equal(matrix, np.eye(4)):
+            block = scene.positions[obj.start : obj.stop]
+            out[obj.start : obj.stop] = block @ matrix[:3, :3].T + matrix[:3, 3]
+    return out, matrices
+
+
+def frame_camera(scene: Scene, animation: Animation, frame: float, width: int, height: int) -> Camera:
+    if animation.has_camera:
+        return animation.camera(frame, width, height)
+    lo, hi = scene.bounds()
+    return default_camera(lo, hi, width, height)
+
+
+def _pack_materials(scene: Scene) -> tuple[np.ndarray, ...]:
+    count = len(scene.materials)
+    kd = np.array([m.kd for m in scene.materials], dtype=np.float64).reshape(count, 3)
+    ke = np.array([m.ke for m in scene.materials], dtype=np.float64).reshape(count, 3)
+    off = np.full(count, -1, dtype=np.int64)
+    tw = np.zeros(count, dtype=np.int64)
+    th = np.zeros(count, dtype=np.int64)
+    chunks = []
+    cursor = 0
+    for i, m in enumerate(scene.materials):
+        if m.texture is not None:
+            off[i] = cursor
+            th[i], tw[i] = m.texture.shape[:2]
+            chunks.append(m.texture.reshape(-1))
+            cursor += m.texture.size
+    data = np.concatenate(chunks) if chunks else np.zeros(3, dtype=np.float32)
+    return kd, ke, off, tw, th, np.ascontiguousarray(data, dtype=np.float32)
+
+
+def prepare_frame(
+    scene: Scene,
+    animation: Animation,
+    frame: int,
+    width: int,
+    height: int,
+    threads: int = 1,
+    stats: TraceStats | None = None,
+) -> FrameGeometry:
+    """World geometry, lights, cameras (this and the previous frame) and the Embree scene."""
+    tri_v, matrices = world_vertices(scene, animation, frame)
+    tri_prev_v, _ = world_vertices(scene, animation, frame - 1)
+    camera = frame_camera(scene, animation, frame, width, height)
+    prev_camera = frame_camera(scene, animation, frame - 1, width, height)
+
+    cross = np.cross(tri_v[:, 1] - tri_v[:, 0], tri_v[:, 2] - tri_v[:, 0])
+    double_area = np.linalg.norm(cross, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tri_ng = np.where(double_area[:, None] > 0, cross / double_area[:, None], 0.0)
+    area = double_area * 0.5
+
+    # Shading normals: the inverse transpose of each object's linear part.
+    tri_ns = scene.normals.copy()
+    for obj, matrix in zip(scene.objects, matrices, strict=True):
+        linear = matrix[:3, :3]
+        if not np.array_equal(linear, np.eye(3)):
+            normal_matrix = np.linalg.inv(linear).T
+            tri_ns[obj.start : obj.stop] = scene.normals[obj.start : obj.stop] @ normal_matrix.T
+
+    kd, ke, tex_off, tex_w, tex_h, tex_data = _pack_materials(scene)
+    tri_ke = ke[scene.material]
+    luminance = tri_ke @ np.array([0.2126, 0.7152, 0.0722])
+    power = np.where(luminance > 0, area * luminance, 0.0)
+    light_tri = np.flatnonzero(power > 0).astype(np.int32)
+    tri_light_pdf = np.zeros(len(area))
+    if len(light_tri):
+        total = power[light_tri].sum()
+        light_cdf = np.cumsum(power[light_tri]) / total
+        light_cdf[-1] = 1.0
+        # Area-measure pdf of a point on light triangle i: pmf_i / area_i.
+        tri_light_pdf[light_tri] = (power[light_tri] / total) / area[light_tri]
+    else:
+        light_cdf = np.ones(0)
+
+    extent = float(np.abs(tri_v).max()) if tri_v.size else 1.0
+    eps = 1e-4 * max(extent, 1e-3)
+    tracer = EmbreeTracer(tri_v, threads=threads, stats=stats or TraceStats())
+    return FrameGeometry(
+        frame=frame,
+        camera=camera,
+        prev_camera=prev_camera,
+        tri_v=tri_v,
+        tri_prev_v=tri_prev_v,
+        tri_ng=np.ascontiguousarray(tri_ng),
+        tri_ns=np.ascontiguousarray(tri_ns),
+        tri_has_ns=scene.has_normals,
+        tri_uv=scene.uvs,
+        tri_mat=scene.material,
+        tri_obj=scene.object_index,
+        mat_kd=kd,
+        mat_ke=ke,
+        tex_off=tex_off,
+        tex_w=tex_w,
+        tex_h=tex_h,
+        tex_data=tex_data,
+        light_tri=light_tri,
+        light_cdf=light_cdf,
+        tri_light_pdf=tri_light_pdf,
+        eps=eps,
+        tracer=tracer,
+    )
+
+
+@dataclass
+class PrimaryHits:
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    t: np.ndarray
+    origins: np.ndarray  # float32 (HW, 3)
+    directions: np.ndarray  # float32 (HW, 3)
+
+
+def trace_primary(geo: FrameGeometry) -> PrimaryHits:
+    dirs, eye = geo.camera.primary_rays()
+    directions = np.ascontiguousarray(dirs, dtype=np.float32)
+    origins = np.ascontiguousarray(np.broadcast_to(eye.astype(np.float32), directions.shape))
+    prim, u, v, t = geo.tracer.intersect(origins, directions)
+    return PrimaryHits(prim, u, v, t, origins, directions)
+
+
+def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
+    """The noise-free primary-hit layers, each ``(H, W)`` or ``(H, W, k)`` float32."""
+    cam = geo.camera
+    n = hits.prim.shape[0]
+    out_p = np.empty((n, 3))
+    out_n = np.empty((n, 3))
+    out_albedo = np.empty((n, 3))
+    out_emission = np.empty((n, 3))
+    out_z = np.empty(n)
+    out_id = np.empty(n)
+    out_motion = np.empty((n, 2))
+    kernels.gbuffer_kernel(
+        hits.prim, hits.u, hits.v, hits.directions.astype(np.float64),
+        np.asarray(cam.position, float), cam.forward,
+        geo.tri_v, geo.tri_prev_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv,
+        geo.tri_mat, geo.tri_obj, geo.mat_kd, geo.mat_ke,
+        geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
+        cam.world_to_ndc(), geo.prev_camera.world_to_ndc(), cam.width, cam.height,
+        out_p, out_n, out_albedo, out_emission, out_z, out_id, out_motion,
+    )  # fmt: skip
+    h, w = cam.height, cam.width
+
+    def img(a: np.ndarray) -> np.ndarray:
+        return a.reshape(h, w, -1).astype(np.float32)
+
+    return {
+        "P": img(out_p),
+        "N": img(out_n),
+        "albedo": img(out_albedo),
+        "emission": img(out_emission),
+        "Z": out_z.reshape(h, w).astype(np.float32),
+        "id": out_id.reshape(h, w).astype(np.float32),
+        "motion": img(out_motion),
+    }
+
+
+def frame_key(seed: int, frame: int, stream: int) -> np.uint64:
+    """The 64-bit key all of a frame's random numbers derive from."""
+    state = np.random.SeedSequence([seed, frame, stream]).generate_state(2, dtype=np.uint64)
+    return np.uint64(state[0])
+
+
+def trace_samples(
+    geo: FrameGeometry,
+    hits: PrimaryHits,
+    spp: int,
+    max_depth: int,
+    key: np.uint64,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean direct and indirect radiance per pixel over ``spp`` samples, ``(HW, 3)`` float64.
+
+    Samples are traced in batches of whole sample passes; the per-pixel sums are formed in
+    sample order, so the result does not depend on the batch size.
+    """
+    hw = hits.prim.shape[0]
+    sum_direct = np.zeros((hw, 3))
+    sum_indirect = np.zeros((hw, 3))
+    samples_per_batch = max(1, min(spp, MAX_PATHS_PER_BATCH // max(hw, 1)))
+    for first in range(0, spp, samples_per_batch):
+        count = min(samples_per_batch, spp - first)
+        direct, indirect = _trace_batch(geo, hits, first, count, max_depth, key)
+        for s in range(count):
+            sum_direct += direct[s]
+            sum_indirect += indirect[s]
+    return sum_direct / spp, sum_indirect / spp
+
+
+def _trace_batch(
+    geo: FrameGeometry,
+    hits: PrimaryHits,
+    first_sample: int,
+    count: int,
+    max_depth: int,
+    key: np.uint64,
+) -> tuple[np.ndarray, np.ndarray]:
+    hw = hits.prim.shape[0]
+    n = hw * count
+    acc_direct = np.zeros((n, 3))
+    acc_indirect = np.zeros((n, 3))
+    # Only rays that hit something start a path; background stays black.
+    hit_pixels = np.flatnonzero(hits.prim >= 0).astype(np.int64)
+    samples = np.repeat(np.arange(count, dtype=np.int64), hit_pixels.size)
+    pixels = np.tile(hit_pixels, count)
+    path_id = samples * hw + pixels
+    path_key = ((samples + first_sample) * hw + pixels).astype(np.uint64)
+    org = hits.origins[pixels]
+    dirs = hits.directions[pixels]
+    prim, bu, bv, tfar = hits.prim[pixels], hits.u[pixels], hits.v[pixels], hits.t[pixels]
+    throughput = np.ones((path_id.size, 3))
+    prev_pdf = np.zeros(path_id.size)
+    tracer = geo.tracer
+    for depth in range(max_depth + 1):
+        m = prim.shape[0]
+        if m == 0:
+            break
+        shadow_org = np.empty((m, 3), np.float32)
+        shadow_dir = np.empty((m, 3), np.float32)
+        shadow_dist = np.empty(m, np.float32)
+        shadow_value = np.empty((m, 3))
+        shadow_on = np.empty(m, np.bool_)
+        next_org = np.empty((m, 3), np.float32)
+        next_dir = np.empty((m, 3), np.float32)
+        next_pdf = np.empty(m)
+        alive = np.empty(m, np.bool_)
+        kernels.shade_kernel(
+            depth, max_depth, RR_DEPTH, key, geo.eps,
+            path_id, path_key, org, dirs, prim, bu, bv, tfar, throughput, prev_pdf,
+            acc_direct, acc_indirect,
+            geo.tri_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv, geo.tri_mat,
+            geo.mat_kd, geo.mat_ke, geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
+            geo.light_tri, geo.light_cdf, geo.tri_light_pdf,
+            shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_on,
+            next_org, next_dir, next_pdf, alive,
+        )  # fmt: skip
+        shadow_idx = np.flatnonzero(shadow_on)
+        if shadow_idx.size:
+            blocked = tracer.occluded(
+                shadow_org[shadow_idx], shadow_dir[shadow_idx], shadow_dist[shadow_idx]
+            )
+            kernels.add_shadow_kernel(
+                depth, path_id[shadow_idx], shadow_value[shadow_idx], ~blocked,
+                acc_direct, acc_indirect,
+            )  # fmt: skip
+        if depth == max_depth:
+            break
+        keep = np.flatnonzero(alive)
+        if keep.size == 0:
+            break
+        path_id = path_id[keep]
+        path_key = path_key[keep]
+        throughput = throughput[keep]
+        prev_pdf = next_pdf[keep]
+        org = next_org[keep]
+        dirs = next_dir[keep]
+        prim, bu, bv, tfar = tracer.intersect(org, dirs)
+    return acc_direct.reshape(count, hw, 3), acc_indirect.reshape(count, hw, 3)
+
+
+@dataclass
+class FrameResult:
+    """Everything written for one frame."""
+
+    layers: dict[str, np.ndarray]  # G-buffer (H, W[, k]) float32
+    direct: np.ndarray  # (H, W, 3) float32
+    indirect: np.ndarray
+    camera: Camera
+    prev_camera: Camera
+
+
+def render_frame(
+    scene: Scene,
+    animation: Animation,
+    frame: int,
+    width: int,
+    height: int,
+    spp: int,
+    max_depth: int,
+    seed: int,
+    *,
+    reference_spp: int = 0,
+    threads: int = 1,
+    stats: TraceStats | None = None,
+) -> tuple[FrameResult, FrameResult | None]:
+    """Render one frame (and its reference when ``reference_spp`` > 0)."""
+    geo = prepare_frame(scene, animation, frame, width, height, threads=threads, stats=stats)
+    try:
+        hits = trace_primary(geo)
+        layers = gbuffer(geo, hits)
+        key = frame_key(seed, frame, STREAM_INPUT)
+        direct, indirect = trace_samples(geo, hits, spp, max_depth, key)
+        result = FrameResult(
+            layers=layers,
+            direct=direct.reshape(height, width, 3).astype(np.float32),
+            indirect=indirect.reshape(height, width, 3).astype(np.float32),
+            camera=geo.camera,
+            prev_camera=geo.prev_camera,
+        )
+        reference = None
+        if reference_spp > 0:
+            ref_key = frame_key(seed, frame, STREAM_REFERENCE)
+            ref_direct, ref_indirect = trace_samples(geo, hits, reference_spp, max_depth, ref_key)
+            reference = FrameResult(
+                layers={},
+                direct=ref_direct.reshape(height, width, 3).astype(np.float32),
+                indirect=ref_indirect.reshape(height, width, 3).astype(np.float32),
+                camera=geo.camera,
+                prev_camera=geo.prev_camera,
+            )
+    finally:
+        geo.tracer.close()
+    return result, reference

@@ -1,0 +1,328 @@
+"""`svgf denoise` end to end on tiny synthetic EXR sequences (in-process)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from test_cli_support import (
+    INPUT_ATTRIBUTES,
+    frame_channels,
+    outputs,
+    read_pixels,
+    run_cli,
+    write_sequence,
+)
+
+from svgf_cli.filters.params import PRESETS
+from svgf_cli.io.exr import write_exr
+
+FRAMES = range(1, 9)
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("seq")
+    write_sequence(folder, FRAMES)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def reference(sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[int, np.ndarray]:
+    """The full sequential run: frame -> RGBA pixels."""
+    out = tmp_path_factory.mktemp("ref")
+    from svgf_cli.cli import main
+
+    with pytest.raises(SystemExit) as exited:
+        main(["denoise", str(sequence / "in.####.exr"), "-o", str(out / "out.####.exr"), "-q"])
+    assert exited.value.code == 0
+    return {f: read_pixels(out / f"out.{f:04d}.exr")[0] for f in FRAMES}
+
+
+def copy_inputs(sequence: Path, dest: Path) -> Path:
+    shutil.copytree(sequence, dest)
+    return dest
+
+
+def test_end_to_end_outputs_and_metadata(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    reference: dict[int, np.ndarray],
+) -> None:
+    out = tmp_path / "den"
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr"], capsys
+    )
+    assert code == 0, err
+    files = outputs(out, "den")
+    assert [p.name for p in files] == [f"den.{f:04d}.exr" for f in FRAMES]
+    pixels, spec = read_pixels(files[3])
+    assert list(spec.channelnames) == ["R", "G", "B", "A"]
+    assert [str(t) for t in spec.channelformats] in (["half"] * 4, [])
+    assert str(spec.format) == "half" or all(str(t) == "half" for t in spec.channelformats)
+    assert np.isfinite(pixels).all() and pixels[..., :3].mean() > 0
+    assert np.array_equal(pixels[..., 3], np.ones_like(pixels[..., 3]))
+    params = json.loads(spec.get_string_attribute("svgf/params"))
+    assert params == json.loads(PRESETS["paper"].to_json())
+    assert spec.get_string_attribute("svgf/preset") == "paper"
+    assert spec.get_int_attribute("svgf/frame") == 4
+    assert spec.get_string_attribute("svgf/input").endswith("in.0004.exr")
+    assert spec.get_string_attribute("svgf/warmup") == "all"
+    for key, value in INPUT_ATTRIBUTES.items():
+        assert spec.get_string_attribute(key) == value
+    # Start-up log: version, threads, preset + params, resolved layers; then one line a frame.
+    assert "svgf 0.1.0" in stdout and "Threads:" in stdout and "Preset: paper" in stdout
+    assert "direct: direct.R, direct.G, direct.B" in stdout
+    assert stdout.count("Progress: ") == len(FRAMES)
+    assert "Progress: 50% (frame 4, 4/8," in stdout
+    # Two runs are bit-identical (the fixture ran the same thing).
+    assert np.array_equal(pixels, reference[4])
+
+
+def test_float_output_and_debug_aovs(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, _, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr", "--frames", "1-2",
+         "--float", "--debug-aovs", "-q"],
+        capsys,
+    )
+    assert code == 0, err
+    _, spec = read_pixels(tmp_path / "o.0002.exr")
+    names = list(spec.channelnames)
+    assert names[:4] == ["R", "G", "B", "A"] and len(names) > 4
+    assert all(str(spec.channelformat(i)) == "float" for i in range(len(names)))
+
+
+def test_output_equal_to_input_is_refused(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    seq = copy_inputs(sequence, tmp_path / "seq")
+    before = (seq / "in.0001.exr").read_bytes()
+    code, _, err = run_cli(["denoise", seq / "in.####.exr", "-o", seq / "in.%04d.exr"], capsys)
+    assert code == 2
+    assert err.startswith("ERROR: ") and "in.0001.exr" in err and "input" in err
+    assert (seq / "in.0001.exr").read_bytes() == before
+    # A directory output that is the input directory maps to the same names: refused too.
+    code, _, _ = run_cli(["denoise", seq / "in.####.exr", "-o", seq], capsys)
+    assert code == 2
+
+
+def test_existing_output_overwrite_and_skip(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    reference: dict[int, np.ndarray],
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    existing = out / "out.0003.exr"
+    existing.write_bytes(b"placeholder")
+    args = ["denoise", sequence / "in.####.exr", "-o", out / "out.####.exr", "-q"]
+    code, _, err = run_cli(args, capsys)
+    assert code == 4
+    assert err == f"ERROR: {existing}: output exists (1 of 8 outputs exist; use --overwrite or " \
+                  "--skip-existing)\n"
+    assert outputs(out) == [existing]  # nothing written
+
+    code, _, err = run_cli([*args, "--skip-existing"], capsys)
+    assert code == 0, err
+    assert existing.read_bytes() == b"placeholder"  # not rewritten
+    for f in (1, 2, 4, 8):  # frames after the skipped one still see the full history
+        assert np.array_equal(read_pixels(out / f"out.{f:04d}.exr")[0], reference[f])
+
+    code, _, err = run_cli([*args, "--overwrite"], capsys)
+    assert code == 0, err
+    assert np.array_equal(read_pixels(existing)[0], reference[3])
+
+    code, stdout, _ = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", out / "out.####.exr", "--skip-existing"],
+        capsys,
+    )
+    assert code == 0 and "Nothing to do" in stdout
+
+
+def test_missing_input_and_missing_frames(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, _, err = run_cli(["denoise", tmp_path / "nope.####.exr", "-o", tmp_path / "o"], capsys)
+    assert code == 3 and err.startswith("ERROR: ") and "nope.####.exr" in err
+
+    seq = copy_inputs(sequence, tmp_path / "seq")
+    (seq / "in.0005.exr").unlink()
+    out = tmp_path / "out"
+    code, _, err = run_cli(["denoise", seq / "in.####.exr", "-o", out / "o.####.exr"], capsys)
+    assert code == 3
+    assert "in.0005.exr: frame 5 is missing on disk" in err
+    assert not out.exists() or outputs(out, "o") == []  # detected before anything is written
+
+    code, _, err = run_cli(
+        ["denoise", seq / "in.####.exr", "-o", out / "o.####.exr", "--frames", "9-10"], capsys
+    )
+    assert code == 3 and "requested frame 9 not found" in err
+
+    code, _, err = run_cli(
+        ["denoise", seq / "in.####.exr", "-o", out / "o.####.exr", "--allow-gaps", "-q"], capsys
+    )
+    assert code == 0, err
+    assert "WARNING: frame(s) 5 missing on disk: history reset at frame 6" in err
+    assert [p.name for p in outputs(out, "o")] == [
+        f"o.{f:04d}.exr" for f in FRAMES if f != 5
+    ]
+
+
+def test_missing_channel_names_file_and_channel(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    channels = frame_channels(1)
+    del channels["N.Y"]
+    write_exr(tmp_path / "in.0001.exr", channels)
+    code, _, err = run_cli(["denoise", tmp_path / "in.0001.exr", "-o", tmp_path / "o.exr"], capsys)
+    assert code == 3
+    line = err.strip()
+    assert "\n" not in line and line.startswith(f"ERROR: {tmp_path / 'in.0001.exr'}")
+    assert "normal" in line and "N.Y" in line
+    assert not (tmp_path / "o.exr").exists()
+
+
+def test_resolution_change_mid_sequence(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    seq = copy_inputs(sequence, tmp_path / "seq")
+    write_exr(seq / "in.0004.exr", frame_channels(4, width=40, height=24))
+    out = tmp_path / "out"
+    code, _, err = run_cli(["denoise", seq / "in.####.exr", "-o", out / "o.####.exr", "-q"], capsys)
+    assert code == 3
+    assert "in.0004.exr" in err and "32x24" in err and "40x24" in err
+    assert [p.name for p in outputs(out, "o")] == ["o.0001.exr", "o.0002.exr", "o.0003.exr"]
+
+
+def test_corrupt_file(sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    seq = copy_inputs(sequence, tmp_path / "seq")
+    data = (seq / "in.0003.exr").read_bytes()
+    (seq / "in.0003.exr").write_bytes(data[: len(data) // 2])
+    out = tmp_path / "out"
+    code, _, err = run_cli(["denoise", seq / "in.####.exr", "-o", out / "o.####.exr", "-q"], capsys)
+    assert code == 3
+    assert err.startswith(f"ERROR: {seq / 'in.0003.exr'}:") and err.count("\n") == 1
+    assert [p.name for p in outputs(out, "o")] == ["o.0001.exr", "o.0002.exr"]
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temp left
+
+
+def test_nan_input_warns_and_output_is_finite(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for f in (1, 2):
+        channels = frame_channels(f)
+        channels["direct.G"][3:6, 4:9] = np.nan
+        channels["indirect.R"][0, 0] = np.inf
+        write_exr(tmp_path / f"in.{f:04d}.exr", channels)
+    code, _, err = run_cli(
+        ["denoise", tmp_path / "in.####.exr", "-o", tmp_path / "o.####.exr", "-q"], capsys
+    )
+    assert code == 0, err
+    assert "WARNING: " in err and "NaN" in err and "in.0001.exr" in err
+    for f in (1, 2):
+        assert np.isfinite(read_pixels(tmp_path / f"o.{f:04d}.exr")[0]).all()
+
+
+def test_frames_selection_and_warmup(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    reference: dict[int, np.ndarray],
+) -> None:
+    out = tmp_path / "all"
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", out / "o.####.exr", "--frames", "5-8x3,6",
+         "--warmup", "all"],
+        capsys,
+    )
+    assert code == 0, err
+    assert [p.name for p in outputs(out, "o")] == ["o.0005.exr", "o.0006.exr", "o.0008.exr"]
+    assert "Warmup: 4/5 (frame 4)" in stdout  # frames 1-4 and 7 are history-only
+    for f in (5, 6, 8):  # --warmup all reproduces the sequential run bit for bit
+        assert np.array_equal(read_pixels(out / f"o.{f:04d}.exr")[0], reference[f])
+
+    cold = tmp_path / "cold"
+    code, _, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", cold / "o.####.exr", "--frames", "8",
+         "--warmup", "0", "-q"],
+        capsys,
+    )
+    assert code == 0, err
+    assert not np.array_equal(read_pixels(cold / "o.0008.exr")[0], reference[8])
+
+
+def test_dry_run_writes_nothing(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o" / "o.####.exr", "--dry-run",
+         "--chunk-size", "3", "--warmup", "2", "-q"],
+        capsys,
+    )
+    assert code == 0, err
+    assert "chunk 0: process 1-3" in stdout and "chunk 1: process 2-6" in stdout
+    assert not (tmp_path / "o").exists()
+
+
+def test_compression_follows_input_and_lossy_data_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_sequence(tmp_path / "seq", [1], compression="piz")
+    code, _, err = run_cli(
+        ["denoise", tmp_path / "seq" / "in.0001.exr", "-o", tmp_path / "o.exr", "-q"], capsys
+    )
+    assert code == 0, err
+    assert read_pixels(tmp_path / "o.exr")[1].get_string_attribute("compression") == "piz"
+    code, _, err = run_cli(
+        ["denoise", tmp_path / "seq" / "in.0001.exr", "-o", tmp_path / "d.exr",
+         "--compression", "dwaa", "--debug-aovs"],
+        capsys,
+    )
+    assert code == 2 and "dwaa" in err and not (tmp_path / "d.exr").exists()
+
+
+def test_params_options_override_the_preset(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.0001.exr", "-o", tmp_path / "o.exr", "--frames", "1",
+         "--preset", "falcor", "--sigma-luminance", "6", "--no-temporal"],
+        capsys,
+    )
+    assert code == 0, err
+    spec = read_pixels(tmp_path / "o.exr")[1]
+    params = json.loads(spec.get_string_attribute("svgf/params"))
+    assert params["alpha"] == PRESETS["falcor"].alpha
+    assert params["sigma_luminance"] == 6.0 and params["temporal"] is False
+    assert "sigma_luminance=6.0" in stdout
+    code, _, err = run_cli(
+        ["denoise", sequence / "in.0001.exr", "-o", tmp_path / "p.exr", "--alpha", "1.5"], capsys
+    )
+    assert code == 2 and "--alpha 1.5" in err
+
+
+def test_json_progress(sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr", "--frames", "3-4",
+         "--warmup", "1", "--progress", "json"],
+        capsys,
+    )
+    assert code == 0, err
+    events = [json.loads(line) for line in stdout.splitlines()]  # stdout is only JSON
+    assert [e["event"] for e in events] == ["warmup", "frame_done", "frame_done", "done"]
+    assert events[1]["frame"] == 3 and events[1]["index"] == 1 and events[1]["total"] == 2
+    assert "svgf 0.1.0" in err  # start-up information moved to stderr
+
+
+def test_explicit_file_list_and_directory_output(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    reference: dict[int, np.ndarray],
+) -> None:
+    files = [sequence / f"in.{f:04d}.exr" for f in (1, 2, 3)]
+    code, _, err = run_cli(["denoise", *files, "-o", f"{tmp_path / 'd'}/", "-q"], capsys)
+    assert code == 0, err
+    assert [p.name for p in sorted((tmp_path / "d").iterdir())] == [f.name for f in files]
+    assert np.array_equal(read_pixels(tmp_path / "d" / "in.0003.exr")[0], reference[3])
+    assert oiio.ImageInput.open(str(files[0])) is not None  # inputs untouched

@@ -1,0 +1,218 @@
+"""The sequential driver, with a stand-in denoiser and reader (no numba, no EXR reads).
+
+These pin the driver's own contract: read-ahead depth, signal handling, errors mid-sequence,
+history files. The real Denoiser is exercised end to end in test_cli_*.py.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import signal
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, UsageError
+from svgf_cli.farm.progress import Progress
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.frame import DenoisedFrame, Frame
+from svgf_cli.runner import (
+    FrameTask,
+    Interrupted,
+    RunConfig,
+    load_history,
+    pending_tasks,
+    run_sequence,
+    stop_on_signals,
+)
+
+W, H = 8, 6
+
+
+def make_frame(value: float, width: int = W, height: int = H) -> Frame:
+    plane = np.full((3, height, width), value, np.float32)
+    return Frame(
+        albedo=np.ones((3, height, width), np.float32),
+        normal=np.zeros((3, height, width), np.float32),
+        depth=np.ones((height, width), np.float32),
+        motion=np.zeros((2, height, width), np.float32),
+        mesh_id=np.zeros((height, width), np.int32),
+        color=plane,
+    )
+
+
+class FakeDenoiser:
+    """Exponential moving average: output depends on every earlier frame."""
+
+    def __init__(self, params: SVGFParams, debug: bool) -> None:
+        self.history: np.ndarray | None = None
+        self.frames_processed = 0
+        self.on_process: Any = None
+
+    def process(self, frame: Frame) -> DenoisedFrame:
+        assert frame.color is not None
+        if self.on_process is not None:
+            self.on_process(self.frames_processed)
+        color = frame.color if self.history is None else 0.8 * self.history + 0.2 * frame.color
+        self.history = color.copy()
+        self.frames_processed += 1
+        return DenoisedFrame(color=color.copy(), layers={})
+
+    def reset(self) -> None:
+        self.history = None
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {"history": self.history.copy()} if self.history is not None else {}
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        self.history = state["history"].copy()
+
+
+class FakeReader:
+    def __init__(self, sizes: dict[int, tuple[int, int]] | None = None) -> None:
+        self.started: list[int] = []
+        self.sizes = sizes or {}
+        self.lock = threading.Lock()
+
+    def __call__(self, path: Path, mapping: Any) -> Any:
+        frame_no = int(path.stem.split(".")[-1])
+        with self.lock:
+            self.started.append(frame_no)
+        if "bad" in path.name:
+            raise InputError("not an OpenEXR file (bad magic number)", str(path))
+        width, height = self.sizes.get(frame_no, (W, H))
+        return SimpleNamespace(
+            frame=make_frame(float(frame_no), width, height),
+            alpha=None,
+            info=SimpleNamespace(attributes={"shot": "x"}, compression="zip"),
+            warnings=[],
+        )
+
+
+CONFIG = RunConfig(params=SVGFParams(), preset="paper", mapping=SimpleNamespace())
+
+
+def quiet() -> Progress:
+    return Progress("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())
+
+
+def tasks_for(tmp_path: Path, frames: range, warmup: int = 0) -> list[FrameTask]:
+    return [
+        FrameTask(f, tmp_path / f"in.{f:04d}.exr",
+                  None if i < warmup else tmp_path / "out" / f"out.{f:04d}.exr")
+        for i, f in enumerate(frames)
+    ]
+
+
+def run(tasks: list[FrameTask], reader: FakeReader | None = None, **kwargs: Any) -> Any:
+    (tasks[0].input.parent / "out").mkdir(exist_ok=True)
+    factory = kwargs.pop("factory", FakeDenoiser)
+    return run_sequence(
+        tasks, CONFIG, kwargs.pop("progress", quiet()), make_denoiser=factory,
+        read=reader or FakeReader(), **kwargs,
+    )
+
+
+def test_reads_run_at_most_one_frame_ahead(tmp_path: Path) -> None:
+    reader = FakeReader()
+    ahead: list[int] = []
+
+    def factory(params: SVGFParams, debug: bool) -> FakeDenoiser:
+        d = FakeDenoiser(params, debug)
+        d.on_process = lambda n: ahead.append(len(reader.started) - n)
+        return d
+
+    stats = run(tasks_for(tmp_path, range(1, 21), warmup=3), reader, factory=factory)
+    assert stats.frames_processed == 20 and stats.frames_written == 17
+    # While frame n is filtered, frames n and n+1 (the prefetch) may have been read: memory
+    # is bounded by a constant number of frames, whatever the sequence length.
+    assert max(ahead) <= 2
+    assert reader.started == list(range(1, 21))
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        f"out.{f:04d}.exr" for f in range(4, 21)
+    ]
+
+
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, EXIT_SIGINT),
+                                              (signal.SIGTERM, EXIT_SIGTERM)])
+def test_signal_finishes_the_frame_in_flight(tmp_path: Path, signum: int, code: int) -> None:
+    def factory(params: SVGFParams, debug: bool) -> FakeDenoiser:
+        d = FakeDenoiser(params, debug)
+        # The signal lands while frame 4 (index 3) is being filtered.
+        d.on_process = lambda n: os.kill(os.getpid(), signum) if n == 3 else None
+        return d
+
+    with stop_on_signals() as stop, pytest.raises(Interrupted) as raised:
+        run(tasks_for(tmp_path, range(1, 11)), factory=factory, stop=stop)
+    assert raised.value.exit_code == code
+    assert "frame 4 was the last one finished" in str(raised.value)
+    written = sorted(p.name for p in (tmp_path / "out").iterdir())
+    # Frame 4 was in flight: it is finished and complete; nothing after it; no temp files.
+    assert written == [f"out.{f:04d}.exr" for f in range(1, 5)]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_bad_frame_stops_with_earlier_frames_written(tmp_path: Path) -> None:
+    tasks = tasks_for(tmp_path, range(1, 7))
+    tasks[3] = FrameTask(4, tmp_path / "bad.0004.exr", tmp_path / "out" / "out.0004.exr")
+    with pytest.raises(InputError, match=r"bad\.0004\.exr: not an OpenEXR file"):
+        run(tasks)
+    written = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert written == ["out.0001.exr", "out.0002.exr", "out.0003.exr"]
+
+
+def test_resolution_change_names_both_sizes(tmp_path: Path) -> None:
+    reader = FakeReader(sizes={3: (10, 6)})
+    with pytest.raises(InputError) as raised:
+        run(tasks_for(tmp_path, range(1, 5)), reader)
+    message = str(raised.value)
+    assert "in.0003.exr" in message and "8x6" in message and "10x6" in message
+    assert not (tmp_path / "out" / "out.0003.exr").exists()
+
+
+def test_history_round_trip_continues_exactly(tmp_path: Path) -> None:
+    full = run(tasks_for(tmp_path, range(1, 9)))
+    assert full.frames_written == 8
+    reference = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    for p in (tmp_path / "out").iterdir():
+        p.unlink()
+    history = tmp_path / "h.npz"
+    run(tasks_for(tmp_path, range(1, 5)), save_history_to=history)
+    saved = load_history(history)
+    assert saved.last_frame == 4 and (saved.width, saved.height) == (W, H)
+    run(tasks_for(tmp_path, range(5, 9)), history=saved)
+    resumed = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    assert resumed == reference
+
+
+def test_history_from_other_params_is_refused(tmp_path: Path) -> None:
+    history = tmp_path / "h.npz"
+    run(tasks_for(tmp_path, range(1, 3)), save_history_to=history)
+    other = RunConfig(params=SVGFParams(alpha=0.05), preset="paper", mapping=None)
+    with pytest.raises(UsageError, match=r"alpha 0\.2 \(saved\) != 0\.05"):
+        run_sequence(tasks_for(tmp_path, range(3, 5)), other, quiet(),
+                     history=load_history(history), make_denoiser=FakeDenoiser,
+                     read=FakeReader())
+
+
+def test_history_file_that_is_not_ours(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="junk.npz: cannot read history file"):
+        load_history(junk)
+    with pytest.raises(InputError, match="history file not found"):
+        load_history(tmp_path / "missing.npz")
+
+
+def test_pending_tasks_skip_existing_outputs(tmp_path: Path) -> None:
+    tasks = tasks_for(tmp_path, range(1, 4))
+    (tmp_path / "out").mkdir()
+    tasks[0].output.write_bytes(b"x")  # type: ignore[union-attr]
+    todo = pending_tasks(tasks, overwrite=False)
+    assert [t.output is None for t in todo] == [True, False, False]
+    assert pending_tasks(tasks, overwrite=True) == tasks

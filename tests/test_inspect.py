@@ -1,0 +1,99 @@
+"""`svgf inspect`: text and JSON reports, overrides, exit codes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from svgf_cli.cli import main
+from svgf_cli.io.exr import write_exr
+
+H, W = 4, 5
+
+
+def _write(path: Path, names: list[str]) -> Path:
+    write_exr(
+        path,
+        {name: np.full((H, W), 0.5, np.float32) for name in names},
+        half={"R": True, "G": True, "B": True},
+        attributes={"worldToCamera": np.eye(4, dtype=np.float32)},
+        compression="piz",
+    )
+    return path
+
+
+SVGF = ["R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"]
+SVGF += ["motion.X", "motion.Y"]
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    captured = capsys.readouterr()
+    return int(exit_info.value.code or 0), captured.out, captured.err
+
+
+def test_text_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _write(tmp_path / "f.0001.exr", SVGF)
+    code, out, _ = run(["inspect", str(path)], capsys)
+    assert code == 0
+    assert f"resolution {W}x{H}, 1 part(s), compression piz" in out
+    assert "R                            half" in out
+    assert "motion.Y                     float" in out
+    assert "normal: N.X, N.Y, N.Z" in out
+    assert "signals: color" in out
+    assert "missing: nothing" in out
+    assert "worldToCamera" in out
+
+
+def test_json_report_with_cycles_override(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    names = [n for n in SVGF if not n.startswith("motion")] + ["Vector.X", "Vector.Y"]
+    path = _write(tmp_path / "c.exr", names)
+    argv = ["inspect", str(path), "--json", "--aov", "motion=Vector.X,Vector.Y"]
+    code, out, _ = run([*argv, "--motion-convention", "cycles"], capsys)
+    assert code == 0
+    report = json.loads(out)["files"][0]
+    assert report["width"] == W and report["height"] == H
+    assert report["roles"]["motion"] == ["Vector.X", "Vector.Y"]
+    assert report["roles"]["id"] is None
+    assert report["motion_convention"] == "cycles"
+    assert report["missing"] == {}
+    channel_types = {c["name"]: c["type"] for c in report["parts"][0]["channels"]}
+    assert channel_types["R"] == "half" and channel_types["Vector.X"] == "float"
+    assert report["attributes"]["worldToCamera"][0] == [1.0, 0.0, 0.0, 0.0]
+
+
+def test_missing_roles_reported_and_check_exits_3(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _write(tmp_path / "beauty.exr", ["R", "G", "B"])
+    code, out, _ = run(["inspect", str(path), "--json"], capsys)
+    assert code == 0
+    missing = json.loads(out)["files"][0]["missing"]
+    assert set(missing) == {"albedo", "normal", "depth", "motion"}
+    assert "N.X,N.Y,N.Z or N.R,N.G,N.B" in missing["normal"]
+    code, out, err = run(["inspect", str(path), "--check"], capsys)
+    assert code == 3
+    assert "MISSING" in out
+    assert err.strip() == f"ERROR: {path}: missing channel(s) for albedo, normal, depth, motion"
+
+
+def test_unreadable_file_exits_3(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bogus = tmp_path / "bogus.exr"
+    bogus.write_text("hello")
+    code, _, err = run(["inspect", str(bogus)], capsys)
+    assert code == 3
+    assert err.startswith(f"ERROR: {bogus}: not an OpenEXR file")
+    code, _, err = run(["inspect", str(tmp_path / "absent.exr")], capsys)
+    assert code == 3 and "file not found" in err
+
+
+def test_bad_override_is_a_usage_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _write(tmp_path / "f.exr", SVGF)
+    code, _, err = run(["inspect", str(path), "--aov", "wobble=a"], capsys)
+    assert code == 2 and "unknown role" in err

@@ -1,0 +1,312 @@
+"""EXR reading and writing: round trips, channel lookup, bad files, input hygiene."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from svgf_cli.errors import InputError, UsageError
+from svgf_cli.io import exr
+from svgf_cli.io.exr import (
+    ExrWriteError,
+    check_compression,
+    read_frame,
+    read_info,
+    read_rgb,
+    write_exr,
+)
+from svgf_cli.io.layers import build_mapping
+
+H, W = 6, 8
+
+
+def gbuffer(seed: int = 0, split: bool = False) -> dict[str, np.ndarray]:
+    """A small, valid svgf-convention frame with distinct values per channel."""
+    rng = np.random.default_rng(seed)
+    channels: dict[str, np.ndarray] = {}
+    layers = ("direct", "indirect", "albedo") if split else ("albedo",)
+    for layer in layers:
+        for c in "RGB":
+            channels[f"{layer}.{c}"] = rng.uniform(0.1, 1.0, (H, W))
+    for c in "RGB":
+        channels[c] = rng.uniform(0.1, 1.0, (H, W))
+    normal = rng.normal(size=(3, H, W))
+    normal /= np.linalg.norm(normal, axis=0)
+    for c, plane in zip("XYZ", normal, strict=True):
+        channels[f"N.{c}"] = plane
+    channels["Z"] = rng.uniform(1.0, 10.0, (H, W))
+    channels["motion.X"] = rng.uniform(-2, 2, (H, W))
+    channels["motion.Y"] = rng.uniform(-2, 2, (H, W))
+    return {k: v.astype(np.float32) for k, v in channels.items()}
+
+
+def planes(channels: dict[str, np.ndarray], *names: str) -> np.ndarray:
+    return np.stack([channels[n] for n in names])
+
+
+def test_round_trip_half_float_and_attributes(tmp_path: Path) -> None:
+    channels = gbuffer()
+    matrix = np.arange(16, dtype=np.float32).reshape(4, 4) / 7
+    attributes = {"worldToCamera": matrix, "owner": "svgf test", "framesPerSecond": 24.0}
+    half = {"R": True, "G": True, "B": True}
+    path = tmp_path / "rt.exr"
+    write_exr(path, channels, attributes=attributes, half=half, compression="piz")
+
+    info = read_info(path)
+    assert (info.width, info.height) == (W, H)
+    assert sorted(info.channels) == sorted(channels)
+    assert info.channel_type("R") == "half" and info.channel_type("Z") == "float"
+    assert info.compression == "piz"
+    assert np.array_equal(info.attributes["worldToCamera"], matrix)
+    assert info.attributes["Copyright"] == "svgf test"  # OIIO's name for EXR "owner"
+    assert not any(k.startswith("oiio:") or k == "compression" for k in info.attributes)
+
+    colour, _ = read_rgb(path)
+    expected = planes(channels, "R", "G", "B")
+    assert colour.shape == (3, H, W) and colour.dtype == np.float32
+    assert np.allclose(colour, expected, rtol=1e-3) and not np.array_equal(colour, expected)
+
+    # Attributes read back can be written again unchanged (pass-through).
+    again = tmp_path / "again.exr"
+    write_exr(again, {"R": colour[0]}, attributes=info.attributes)
+    carried = read_info(again).attributes
+    assert np.array_equal(carried["worldToCamera"], matrix)
+    assert carried["screenWindowCenter"] == info.attributes["screenWindowCenter"]
+
+
+def test_writes_are_deterministic_and_atomic(tmp_path: Path) -> None:
+    channels = gbuffer()
+    write_exr(tmp_path / "a.exr", channels)
+    write_exr(tmp_path / "b.exr", channels)
+    assert (tmp_path / "a.exr").read_bytes() == (tmp_path / "b.exr").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr", "b.exr"]
+
+
+def test_read_frame_by_name_regardless_of_order(tmp_path: Path) -> None:
+    channels = gbuffer(split=True)
+    shuffled = dict(reversed(list(channels.items())))
+    path = tmp_path / "f.exr"
+    write_exr(path, shuffled)
+    result = read_frame(path, build_mapping())
+    frame = result.frame
+    frame.validate()
+    assert result.warnings == []
+    assert frame.split and frame.color is None
+    assert np.array_equal(frame.direct, planes(channels, "direct.R", "direct.G", "direct.B"))
+    assert np.array_equal(
+        frame.indirect, planes(channels, "indirect.R", "indirect.G", "indirect.B")
+    )
+    assert np.array_equal(frame.albedo, planes(channels, "albedo.R", "albedo.G", "albedo.B"))
+    assert np.allclose(frame.normal, planes(channels, "N.X", "N.Y", "N.Z"), atol=1e-6)
+    assert np.array_equal(frame.depth, channels["Z"])
+    assert np.array_equal(frame.motion, planes(channels, "motion.X", "motion.Y"))
+    assert np.array_equal(frame.mesh_id, np.zeros((H, W), np.int32))  # no id: 0 on geometry
+    assert result.alpha is None
+
+
+def test_normal_rgb_fallback_and_cycles_motion(tmp_path: Path) -> None:
+    channels = gbuffer()
+    for a, b in zip("XYZ", "RGB", strict=True):
+        channels[f"N.{b}"] = channels.pop(f"N.{a}")
+    channels["Vector.X"] = channels.pop("motion.X")
+    channels["Vector.Y"] = channels.pop("motion.Y")
+    path = tmp_path / "f.exr"
+    write_exr(path, channels)
+    mapping = build_mapping("svgf", ["motion=Vector.X,Vector.Y"], motion_convention="cycles")
+    frame = read_frame(path, mapping).frame
+    assert np.allclose(frame.normal, planes(channels, "N.R", "N.G", "N.B"), atol=1e-6)
+    assert np.array_equal(frame.motion[0], channels["Vector.X"])
+    assert np.array_equal(frame.motion[1], -channels["Vector.Y"])
+    # An explicit convention wins over the mapping's.
+    forward = read_frame(path, mapping, "forward-pixels").frame
+    assert np.array_equal(forward.motion[0], -channels["Vector.X"])
+
+
+def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
+    channels = gbuffer(split=True)
+    channels["direct.G"][0, :3] = [np.nan, np.inf, -np.inf]
+    channels["indirect.B"][1, :2] = [-0.5, -2.0]
+    channels["albedo.R"][2, 0] = np.nan
+    channels["motion.Y"][3, 3] = np.nan
+    channels["N.X"][0, 0], channels["N.Y"][0, 0], channels["N.Z"][0, 0] = np.nan, 3.0, 4.0
+    channels["N.X"][0, 1], channels["N.Y"][0, 1], channels["N.Z"][0, 1] = 0.0, 0.0, 0.0
+    channels["Z"][5, :4] = [np.nan, -1.0, 0.0, np.inf]
+    channels["Z"][5, 4] = 1e10  # Cycles' background depth
+    channels["id"] = np.full((H, W), 2.6, np.float32)
+    channels["id"][4, 0] = np.nan
+    channels["id"][4, 1] = -1.0
+    path = tmp_path / "dirty.exr"
+    write_exr(path, channels)
+
+    result = read_frame(path, build_mapping())
+    frame = result.frame
+    joined = "\n".join(result.warnings)
+    assert f"{path}: 3 NaN/Inf values in direct scrubbed to 0" in joined
+    assert f"{path}: 2 negative values in indirect clamped to 0" in joined
+    assert f"{path}: 1 NaN/Inf values in albedo scrubbed to 0" in joined
+    assert f"{path}: 1 NaN/Inf values in motion scrubbed to 0" in joined
+    assert f"{path}: 1 NaN/Inf values in normal scrubbed to 0" in joined
+    assert len(result.warnings) == 5
+    for plane in (frame.direct, frame.indirect, frame.albedo, frame.motion, frame.normal):
+        assert np.isfinite(plane).all()
+    assert (frame.direct >= 0).all() and (frame.indirect >= 0).all()
+    assert frame.direct[1, 0, 0] == 0 and frame.indirect[2, 1, 1] == 0
+    assert np.allclose(frame.normal[:, 0, 0], [0.0, 0.6, 0.8])  # NaN -> 0, renormalised
+    assert np.array_equal(frame.normal[:, 0, 1], [0.0, 0.0, 0.0])  # zero stays zero
+    assert np.array_equal(frame.depth[5, :5], np.zeros(5, np.float32))
+    assert frame.depth[5, 5] == channels["Z"][5, 5]
+    assert frame.mesh_id[0, 0] == 3 and frame.mesh_id.dtype == np.int32
+    assert frame.mesh_id[4, 0] == -1 and frame.mesh_id[4, 1] == -1
+
+
+def test_absent_id_is_minus_one_on_background(tmp_path: Path) -> None:
+    channels = gbuffer()
+    channels["Z"][0, :2] = 0.0
+    channels["A"] = np.full((H, W), 0.5, np.float32)
+    path = tmp_path / "bg.exr"
+    write_exr(path, channels)
+    result = read_frame(path, build_mapping())
+    assert list(result.frame.mesh_id[0, :3]) == [-1, -1, 0]
+    assert result.alpha is not None and np.all(result.alpha == 0.5)
+    assert result.frame.color is not None and not result.frame.split
+
+
+def test_multipart_channels_found_in_every_part(tmp_path: Path) -> None:
+    channels = gbuffer()
+    beauty = ["R", "G", "B"]
+    data = [n for n in channels if n not in beauty]
+    path = tmp_path / "multi.exr"
+    _write_multipart(path, [("beauty", beauty, (W, H)), ("data", data, (W, H))], channels)
+    info = read_info(path)
+    assert info.parts == ["beauty", "data"]
+    frame = read_frame(path, build_mapping()).frame
+    assert np.array_equal(frame.color, planes(channels, "R", "G", "B"))
+    assert np.array_equal(frame.depth, channels["Z"])
+
+    bad = tmp_path / "windows.exr"
+    small = {n: v[: H - 2, : W - 2].copy() for n, v in channels.items()}
+    _write_multipart(bad, [("beauty", beauty, (W, H))], channels, extra=("data", data, small))
+    with pytest.raises(InputError, match="different data windows") as err:
+        read_frame(bad, build_mapping())
+    assert str(bad) in str(err.value)
+
+
+def _write_multipart(path, parts, channels, extra=None) -> None:
+    specs, buffers = [], []
+    for name, names, (width, height) in parts:
+        spec = oiio.ImageSpec(width, height, len(names), "float")
+        spec.channelnames = tuple(names)
+        spec.attribute("oiio:subimagename", name)
+        specs.append(spec)
+        buffers.append(np.ascontiguousarray(np.stack([channels[n] for n in names], -1)))
+    if extra is not None:
+        name, names, source = extra
+        height, width = source[names[0]].shape
+        spec = oiio.ImageSpec(width, height, len(names), "float")
+        spec.full_width, spec.full_height = W, H  # same display window, smaller data window
+        spec.channelnames = tuple(names)
+        spec.attribute("oiio:subimagename", name)
+        specs.append(spec)
+        buffers.append(np.ascontiguousarray(np.stack([source[n] for n in names], -1)))
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), specs)
+    for index, (spec, buffer) in enumerate(zip(specs, buffers, strict=True)):
+        if index:
+            assert out.open(str(path), spec, "AppendSubimage")
+        assert out.write_image(buffer)
+    assert out.close()
+
+
+def test_truncated_file_is_an_input_error(tmp_path: Path) -> None:
+    good = tmp_path / "good.exr"
+    write_exr(good, gbuffer(), compression="zip")
+    data = good.read_bytes()
+    mapping = build_mapping()
+    for cut in (len(data) // 2, 120):
+        path = tmp_path / f"cut{cut}.exr"
+        path.write_bytes(data[:cut])
+        with pytest.raises(InputError) as err:
+            read_frame(path, mapping)
+        message = str(err.value)
+        assert message.startswith(f"{path}: ") and "\n" not in message
+        assert err.value.exit_code == 3
+        with pytest.raises(InputError):
+            read_rgb(path)
+
+
+def test_missing_and_non_exr_files(tmp_path: Path) -> None:
+    text = tmp_path / "notes.exr"
+    text.write_text("not an image")
+    with pytest.raises(InputError, match="not an OpenEXR file"):
+        read_info(text)
+    with pytest.raises(InputError, match="file not found"):
+        read_frame(tmp_path / "nope.exr", build_mapping())
+    with pytest.raises(InputError, match="directory"):
+        read_info(tmp_path)
+    path = tmp_path / "no_rgb.exr"
+    write_exr(path, {"Z": np.ones((H, W), np.float32)})
+    with pytest.raises(InputError, match="missing channel"):
+        read_rgb(path)
+    with pytest.raises(InputError, match=r"missing channel\(s\) for albedo"):
+        read_frame(path, build_mapping())
+
+
+def test_compression_rules() -> None:
+    colour = ["R", "G", "B", "A", "diffuse.R", "diffuse.A"]
+    for lossy in ("dwaa", "DWAB:45", "b44", "b44a"):
+        check_compression(lossy, colour)
+        with pytest.raises(UsageError, match="N.Y"):
+            check_compression(lossy, [*colour, "N.X", "N.Y"])
+    with pytest.raises(UsageError, match="motion.X"):
+        check_compression("pxr24", ["R", "motion.X"])
+    check_compression("pxr24", ["R", "motion.X"], float_channels=["R"])
+    for lossless in ("zip", "zips", "piz", "none", "rle", "zip:4"):
+        check_compression(lossless, [*colour, "Z", "N.X"])
+    with pytest.raises(UsageError, match="unknown EXR compression"):
+        check_compression("jpeg", colour)
+
+
+def test_lossy_write_refused_leaves_nothing(tmp_path: Path) -> None:
+    with pytest.raises(UsageError):
+        write_exr(tmp_path / "o.exr", gbuffer(), compression="dwaa")
+    write_exr(tmp_path / "rgb.exr", {c: np.ones((H, W)) for c in "RGB"}, compression="dwaa")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rgb.exr"]
+
+
+def test_failed_write_leaves_no_temp_file(tmp_path: Path, monkeypatch) -> None:
+    real_create = oiio.ImageOutput.create
+
+    class FailingOutput:
+        def __init__(self, name: str) -> None:
+            self.inner = real_create(name)
+
+        def open(self, *args):
+            return self.inner.open(*args)
+
+        def write_image(self, pixels) -> bool:
+            return False  # as OIIO does for a non-contiguous buffer
+
+        def geterror(self) -> str:
+            return "simulated failure"
+
+        def close(self) -> bool:
+            return self.inner.close()
+
+    monkeypatch.setattr(exr.oiio.ImageOutput, "create", staticmethod(FailingOutput))
+    target = tmp_path / "out.exr"
+    target.write_bytes(b"previous")
+    with pytest.raises(ExrWriteError, match="simulated failure"):
+        write_exr(target, {"R": np.ones((H, W))})
+    assert sorted(os.listdir(tmp_path)) == ["out.exr"]
+    assert target.read_bytes() == b"previous"  # the old file is untouched
+
+
+def test_write_into_missing_directory_fails_cleanly(tmp_path: Path) -> None:
+    with pytest.raises(ExrWriteError) as err:
+        write_exr(tmp_path / "missing" / "o.exr", {"R": np.ones((H, W))})
+    assert "o.exr" in str(err.value)
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,166 @@
+"""Role -> channel resolution, presets, overrides and motion conventions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from svgf_cli.errors import InputError, UsageError
+from svgf_cli.io.layers import (
+    AOV_PRESETS,
+    ROLES,
+    build_mapping,
+    parse_aov_override,
+    resolve_layers,
+    to_backward_pixels,
+)
+
+SVGF_CHANNELS = [
+    "R", "G", "B", "A",
+    "albedo.R", "albedo.G", "albedo.B",
+    "N.X", "N.Y", "N.Z",
+    "Z",
+    "motion.X", "motion.Y",
+]  # fmt: skip
+
+
+def test_every_preset_covers_every_role() -> None:
+    for preset, table in AOV_PRESETS.items():
+        assert set(table) == set(ROLES), preset
+        mapping = build_mapping(preset)
+        for role in ROLES:
+            assert role in mapping.describe()
+
+
+def test_resolution_is_by_name_not_order() -> None:
+    mapping = build_mapping()
+    forward = resolve_layers(mapping, SVGF_CHANNELS, "f.exr")
+    backward = resolve_layers(mapping, list(reversed(SVGF_CHANNELS)), "f.exr")
+    for resolved in (forward, backward):
+        assert resolved["normal"] == ("N.X", "N.Y", "N.Z")
+        assert resolved["motion"] == ("motion.X", "motion.Y")
+        assert resolved["color"] == ("R", "G", "B")
+        assert resolved["alpha"] == ("A",)
+        assert resolved["id"] is None
+        assert resolved.signal_roles == ("color",)
+
+
+def test_normal_rgb_fallback_and_split_signals() -> None:
+    names = [
+        n.replace("N.X", "N.R").replace("N.Y", "N.G").replace("N.Z", "N.B") for n in SVGF_CHANNELS
+    ]
+    names += ["direct.R", "direct.G", "direct.B", "indirect.B", "indirect.G", "indirect.R"]
+    resolved = resolve_layers(build_mapping(), names, "f.exr")
+    assert resolved["normal"] == ("N.R", "N.G", "N.B")
+    assert resolved.split
+    assert resolved.signal_roles == ("direct", "indirect")
+    assert resolved["indirect"] == ("indirect.R", "indirect.G", "indirect.B")
+    assert "color" not in resolved.roles_to_read()
+
+
+def test_lone_direct_falls_back_to_color_with_a_note() -> None:
+    resolved = resolve_layers(build_mapping(), [*SVGF_CHANNELS, "direct.R", "direct.G", "direct.B"])
+    assert resolved.signal_roles == ("color",)
+    assert any("without its partner" in note for note in resolved.notes)
+
+
+def test_cycles_view_layer_prefix() -> None:
+    names = [
+        f"ViewLayer.{n}"
+        for n in (
+            "Combined.R", "Combined.G", "Combined.B", "Combined.A",
+            "Denoising Albedo.R", "Denoising Albedo.G", "Denoising Albedo.B",
+            "Normal.X", "Normal.Y", "Normal.Z",
+            "Depth.Z",
+            "Vector.X", "Vector.Y", "Vector.Z", "Vector.W",
+        )
+    ]  # fmt: skip
+    mapping = build_mapping("cycles")
+    assert mapping.motion_convention == "cycles"
+    resolved = resolve_layers(mapping, names, "c.exr")
+    assert resolved["color"] == (
+        "ViewLayer.Combined.R",
+        "ViewLayer.Combined.G",
+        "ViewLayer.Combined.B",
+    )
+    assert resolved["normal"] == ("ViewLayer.Normal.X", "ViewLayer.Normal.Y", "ViewLayer.Normal.Z")
+    assert resolved["depth"] == ("ViewLayer.Depth.Z",)
+    assert resolved["motion"] == ("ViewLayer.Vector.X", "ViewLayer.Vector.Y")
+    assert resolved["alpha"] == ("ViewLayer.Combined.A",)
+
+
+def test_prefix_matching_is_whole_components_and_unambiguous() -> None:
+    base = [n for n in SVGF_CHANNELS if not n.startswith("motion")]
+    # "Xmotion.X" must not match "motion.X": only whole dotted components count.
+    with pytest.raises(InputError, match="motion"):
+        resolve_layers(build_mapping(), [*base, "Xmotion.X", "Xmotion.Y"], "f.exr")
+    # Two view layers both holding motion: ambiguous, reported rather than guessed.
+    two = [*base, "A.motion.X", "A.motion.Y", "B.motion.X", "B.motion.Y"]
+    with pytest.raises(InputError, match="ambiguous"):
+        resolve_layers(build_mapping(), two, "f.exr")
+    # A bare "R" never matches "albedo.R".
+    no_beauty = [n for n in SVGF_CHANNELS if n not in ("R", "G", "B")]
+    resolved = resolve_layers(build_mapping(), no_beauty, "f.exr", strict=False)
+    assert resolved["color"] is None
+    assert "color" in resolved.missing
+
+
+def test_missing_channel_error_names_file_and_lists_channels() -> None:
+    names = [n for n in SVGF_CHANNELS if not n.startswith("N.")]
+    with pytest.raises(InputError) as err:
+        resolve_layers(build_mapping(), names, "shots/f.1001.exr")
+    message = str(err.value)
+    assert "\n" not in message
+    assert message.startswith("shots/f.1001.exr: missing channel(s) for normal")
+    assert "N.X,N.Y,N.Z or N.R,N.G,N.B" in message
+    assert "file has: R, G, B, A, albedo.R" in message
+    assert err.value.exit_code == 3
+
+
+def test_overrides() -> None:
+    assert parse_aov_override("motion=Vector.X,Vector.Y") == ("motion", ("Vector.X", "Vector.Y"))
+    assert parse_aov_override(" Emission = none ") == ("emission", ())
+    mapping = build_mapping("svgf", ["motion=Vector.X,Vector.Y", "normal=Nw"])
+    assert mapping.candidates["motion"] == (("Vector.X", "Vector.Y"),)
+    assert ("Nw.X", "Nw.Y", "Nw.Z") in mapping.candidates["normal"]
+    assert mapping.overridden == ("motion", "normal")
+    assert build_mapping("svgf", {"depth": "Pz"}).candidates["depth"][0] == ("Pz",)
+    names = [n for n in SVGF_CHANNELS if not n.startswith(("N.", "motion"))]
+    names += ["Nw.R", "Nw.G", "Nw.B", "Vector.X", "Vector.Y"]
+    resolved = resolve_layers(mapping, names, "f.exr")
+    assert resolved["normal"] == ("Nw.R", "Nw.G", "Nw.B")
+    assert resolved["motion"] == ("Vector.X", "Vector.Y")
+
+
+@pytest.mark.parametrize("text", ["motion", "speed=a,b", "motion=a,b,c", "normal=a,,b", "=x"])
+def test_bad_overrides_are_usage_errors(text: str) -> None:
+    with pytest.raises(UsageError):
+        parse_aov_override(text)
+
+
+def test_bad_preset_and_convention() -> None:
+    with pytest.raises(UsageError, match="preset"):
+        build_mapping("vray")
+    with pytest.raises(UsageError, match="motion convention"):
+        build_mapping("svgf", motion_convention="sideways")
+    assert build_mapping("cycles", motion_convention="backward-pixels").motion_convention == (
+        "backward-pixels"
+    )
+
+
+def test_motion_conventions() -> None:
+    xy = np.stack([np.full((2, 3), 1.5), np.full((2, 3), -2.0)]).astype(np.float32)
+    backward = to_backward_pixels(xy, "backward-pixels")
+    assert np.array_equal(backward, xy) and backward is not xy
+    # forward: previous = current - v
+    assert np.array_equal(to_backward_pixels(xy, "forward-pixels"), -xy)
+    # Cycles: XY = prev - cur with +Y up; our rows run down, so only Y flips
+    cycles = to_backward_pixels(xy, "cycles")
+    assert np.array_equal(cycles[0], xy[0]) and np.array_equal(cycles[1], -xy[1])
+    for convention in ("backward-pixels", "forward-pixels", "cycles"):
+        out = to_backward_pixels(xy, convention)
+        assert out.dtype == np.float32 and out.flags.c_contiguous
+    with pytest.raises(ValueError):
+        to_backward_pixels(xy, "nope")
+    with pytest.raises(ValueError):
+        to_backward_pixels(xy[0], "cycles")
