@@ -293,6 +293,7 @@ def output_attributes(
             "svgf/frame": int(task.frame),
             "svgf/input": str(task.input),
             "svgf/warmup": config.warmup_label,
+            "svgf/kind": "denoised",  # an input's svgf/kind ("input") would mislabel it
         }
     )
     software = str(input_attributes.get("Software", "")).strip()

@@ -13,7 +13,9 @@ Format (every key optional except each keyframe's ``frame``)::
           {"frame": 1,  "translate": [0, 0, 0]},
           {"frame": 48, "translate": [120, 0, 0], "rotate": [0, 20, 0]}
         ],
-        "tall_block": {"pivot": [368, 0, 351], "keys": [{"frame": 1, "rotate": {"axis": [0, 1, 0], "angle": 0}}]}
+        "tall_block": {"pivot": [368, 0, 351],
+                       "keys": [{"frame": 1, "rotate": {"axis": [0, 1, 0], "angle": 0}},
+                                {"frame": 9, "rotate": {"axis": [0, 1, 0], "angle": 90}}]}
       }
     }
 

@@ -104,12 +104,13 @@ class Camera:
         """Unit directions ``(H*W, 3)`` float64 through every pixel centre, row-major from the
         top-left pixel, and the eye position ``(3,)``."""
         tan_x, tan_y = self.tan_half_fov
-        xs = (np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0
-        ys = 1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0
-        cx, cy = np.meshgrid(xs * tan_x, ys * tan_y)
-        local = np.stack([cx.ravel(), cy.ravel(), np.ones(cx.size)], axis=1)
-        dirs = local @ self.basis()
-        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        right, up, forward = self.basis()
+        xs = ((np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0) * tan_x
+        ys = (1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * tan_y
+        # (H, 1, 3) + (1, W, 3): one row term and one column term per pixel.
+        dirs = (ys[:, None, None] * up + forward)[:, :, :] + xs[None, :, None] * right
+        dirs = dirs.reshape(-1, 3)
+        dirs /= np.sqrt(np.einsum("ij,ij->i", dirs, dirs))[:, None]
         return dirs, np.asarray(self.position, dtype=np.float64)
 
 

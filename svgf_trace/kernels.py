@@ -192,7 +192,9 @@ def gbuffer_kernel(
         out_albedo[i, 2] = b
         for c in range(3):
             out_emission[i, c] = mat_ke[m, c] if front else 0.0
-        out_z[i] = (px - eye[0]) * forward[0] + (py - eye[1]) * forward[1] + (pz - eye[2]) * forward[2]
+        out_z[i] = (
+            (px - eye[0]) * forward[0] + (py - eye[1]) * forward[1] + (pz - eye[2]) * forward[2]
+        )
         out_id[i] = tri_obj[t]
         # The same surface point one frame earlier: barycentrics are preserved by the rigid
         # (affine) object transform, so interpolate the previous frame's vertices.
@@ -273,7 +275,9 @@ def shade_kernel(
         if depth >= max_depth:
             continue
 
-        ar, ag, ab = _albedo(t, b0, b1, b2, tri_uv, tri_mat, mat_kd, tex_off, tex_w, tex_h, tex_data)
+        ar, ag, ab = _albedo(
+            t, b0, b1, b2, tri_uv, tri_mat, mat_kd, tex_off, tex_w, tex_h, tex_data
+        )
         # Spawned rays start eps off the surface along the normal, from a point nudged
         # towards the triangle's centroid: embreex fixes tnear = 0, and at a concave edge a
         # point on the edge itself would start its rays on the neighbouring face's plane
@@ -388,3 +392,55 @@ def add_shadow_kernel(depth, path_id, shadow_value, visible, acc_direct, acc_ind
             target[pid, 0] += shadow_value[k, 0]
             target[pid, 1] += shadow_value[k, 1]
             target[pid, 2] += shadow_value[k, 2]
+
+
+@njit(cache=True)
+def compact_paths(alive, path_id, path_key, throughput, next_pdf, next_org, next_dir):
+    """The surviving paths' state, gathered into fresh contiguous arrays (one pass)."""
+    count = 0
+    for i in range(alive.shape[0]):
+        if alive[i]:
+            count += 1
+    out_id = np.empty(count, path_id.dtype)
+    out_key = np.empty(count, path_key.dtype)
+    out_tp = np.empty((count, 3), throughput.dtype)
+    out_pdf = np.empty(count, next_pdf.dtype)
+    out_org = np.empty((count, 3), next_org.dtype)
+    out_dir = np.empty((count, 3), next_dir.dtype)
+    k = 0
+    for i in range(alive.shape[0]):
+        if alive[i]:
+            out_id[k] = path_id[i]
+            out_key[k] = path_key[i]
+            out_pdf[k] = next_pdf[i]
+            for c in range(3):
+                out_tp[k, c] = throughput[i, c]
+                out_org[k, c] = next_org[i, c]
+                out_dir[k, c] = next_dir[i, c]
+            k += 1
+    return out_id, out_key, out_tp, out_pdf, out_org, out_dir
+
+
+@njit(cache=True)
+def compact_shadow_rays(shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value):
+    """The shadow rays that were generated, gathered into contiguous arrays."""
+    count = 0
+    for i in range(shadow_on.shape[0]):
+        if shadow_on[i]:
+            count += 1
+    out_id = np.empty(count, path_id.dtype)
+    out_org = np.empty((count, 3), shadow_org.dtype)
+    out_dir = np.empty((count, 3), shadow_dir.dtype)
+    out_dist = np.empty(count, shadow_dist.dtype)
+    out_value = np.empty((count, 3), shadow_value.dtype)
+    k = 0
+    for i in range(shadow_on.shape[0]):
+        if shadow_on[i]:
+            out_id[k] = path_id[i]
+            out_dist[k] = shadow_dist[i]
+            for c in range(3):
+                out_org[k, c] = shadow_org[i, c]
+                out_dir[k, c] = shadow_dir[i, c]
+                out_value[k, c] = shadow_value[i, c]
+            k += 1
+    return out_id, out_org, out_dir, out_dist, out_value

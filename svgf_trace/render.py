@@ -99,7 +99,9 @@ class EmbreeTracer:
             np.concatenate([r[k] for r in results]) for k in ("primID", "u", "v", "tfar")
         )
 
-    def occluded(self, origins: np.ndarray, directions: np.ndarray, dists: np.ndarray) -> np.ndarray:
+    def occluded(
+        self, origins: np.ndarray, directions: np.ndarray, dists: np.ndarray
+    ) -> np.ndarray:
         """True where something lies between the origin and ``dists`` along the ray."""
         n = origins.shape[0]
         if n == 0:
@@ -171,7 +173,9 @@ def world_vertices(scene: Scene, animation: Animation, frame: float) -> tuple[np
     return out, matrices
 
 
-def frame_camera(scene: Scene, animation: Animation, frame: float, width: int, height: int) -> Camera:
+def frame_camera(
+    scene: Scene, animation: Animation, frame: float, width: int, height: int
+) -> Camera:
     if animation.has_camera:
         return animation.camera(frame, width, height)
     lo, hi = scene.bounds()
@@ -292,15 +296,16 @@ def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
     """The noise-free primary-hit layers, each ``(H, W)`` or ``(H, W, k)`` float32."""
     cam = geo.camera
     n = hits.prim.shape[0]
-    out_p = np.empty((n, 3))
-    out_n = np.empty((n, 3))
-    out_albedo = np.empty((n, 3))
-    out_emission = np.empty((n, 3))
-    out_z = np.empty(n)
-    out_id = np.empty(n)
-    out_motion = np.empty((n, 2))
+    f32 = np.float32
+    out_p = np.empty((n, 3), f32)
+    out_n = np.empty((n, 3), f32)
+    out_albedo = np.empty((n, 3), f32)
+    out_emission = np.empty((n, 3), f32)
+    out_z = np.empty(n, f32)
+    out_id = np.empty(n, f32)
+    out_motion = np.empty((n, 2), f32)
     kernels.gbuffer_kernel(
-        hits.prim, hits.u, hits.v, hits.directions.astype(np.float64),
+        hits.prim, hits.u, hits.v, hits.directions,
         np.asarray(cam.position, float), cam.forward,
         geo.tri_v, geo.tri_prev_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv,
         geo.tri_mat, geo.tri_obj, geo.mat_kd, geo.mat_ke,
@@ -311,15 +316,15 @@ def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
     h, w = cam.height, cam.width
 
     def img(a: np.ndarray) -> np.ndarray:
-        return a.reshape(h, w, -1).astype(np.float32)
+        return a.reshape(h, w, -1)
 
     return {
         "P": img(out_p),
         "N": img(out_n),
         "albedo": img(out_albedo),
         "emission": img(out_emission),
-        "Z": out_z.reshape(h, w).astype(np.float32),
-        "id": out_id.reshape(h, w).astype(np.float32),
+        "Z": out_z.reshape(h, w),
+        "id": out_id.reshape(h, w),
         "motion": img(out_motion),
     }
 
@@ -348,14 +353,14 @@ def trace_samples(
     samples_per_batch = max(1, min(spp, MAX_PATHS_PER_BATCH // max(hw, 1)))
     for first in range(0, spp, samples_per_batch):
         count = min(samples_per_batch, spp - first)
-        direct, indirect = _trace_batch(geo, hits, first, count, max_depth, key)
+        direct, indirect = trace_batch(geo, hits, first, count, max_depth, key)
         for s in range(count):
             sum_direct += direct[s]
             sum_indirect += indirect[s]
     return sum_direct / spp, sum_indirect / spp
 
 
-def _trace_batch(
+def trace_batch(
     geo: FrameGeometry,
     hits: PrimaryHits,
     first_sample: int,
@@ -402,26 +407,21 @@ def _trace_batch(
             shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_on,
             next_org, next_dir, next_pdf, alive,
         )  # fmt: skip
-        shadow_idx = np.flatnonzero(shadow_on)
-        if shadow_idx.size:
-            blocked = tracer.occluded(
-                shadow_org[shadow_idx], shadow_dir[shadow_idx], shadow_dist[shadow_idx]
-            )
+        s_id, s_org, s_dir, s_dist, s_value = kernels.compact_shadow_rays(
+            shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value
+        )
+        if s_id.size:
+            blocked = tracer.occluded(s_org, s_dir, s_dist)
             kernels.add_shadow_kernel(
-                depth, path_id[shadow_idx], shadow_value[shadow_idx], ~blocked,
-                acc_direct, acc_indirect,
-            )  # fmt: skip
+                depth, s_id, s_value, ~blocked, acc_direct, acc_indirect
+            )
         if depth == max_depth:
             break
-        keep = np.flatnonzero(alive)
-        if keep.size == 0:
+        path_id, path_key, throughput, prev_pdf, org, dirs = kernels.compact_paths(
+            alive, path_id, path_key, throughput, next_pdf, next_org, next_dir
+        )
+        if path_id.size == 0:
             break
-        path_id = path_id[keep]
-        path_key = path_key[keep]
-        throughput = throughput[keep]
-        prev_pdf = next_pdf[keep]
-        org = next_org[keep]
-        dirs = next_dir[keep]
         prim, bu, bv, tfar = tracer.intersect(org, dirs)
     return acc_direct.reshape(count, hw, 3), acc_indirect.reshape(count, hw, 3)
 

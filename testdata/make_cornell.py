@@ -205,8 +205,8 @@ def animation() -> dict:
         "camera": [
             {"frame": 1, "position": camera_position.tolist(), "look_at": look_at.tolist(),
              "up": [0, 1, 0], "fov_y": 39.3},
-            {"frame": 48, "position": (camera_position + [60.0, 20.0, -60.0]).tolist(),
-             "look_at": look_at.tolist()},
+            {"frame": 48, "position": (camera_position + [160.0, 40.0, -120.0]).tolist(),
+             "look_at": (look_at + [60.0, 0.0, 0.0]).tolist()},
         ],
         "objects": {
             "short_block": [

@@ -326,3 +326,29 @@ def test_explicit_file_list_and_directory_output(
     assert [p.name for p in sorted((tmp_path / "d").iterdir())] == [f.name for f in files]
     assert np.array_equal(read_pixels(tmp_path / "d" / "in.0003.exr")[0], reference[3])
     assert oiio.ImageInput.open(str(files[0])) is not None  # inputs untouched
+
+
+BUNDLED = Path(__file__).resolve().parents[1] / "testdata" / "seq"
+
+
+@pytest.mark.skipif(not (BUNDLED / "in.0010.exr").exists(), reason="bundled sequence absent")
+def test_bundled_sequence_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, stdout, err = run_cli(
+        ["denoise", BUNDLED / "in.####.exr", "-o", tmp_path / "den.####.exr"], capsys
+    )
+    assert code == 0, err
+    assert "emission: emission.R, emission.G, emission.B" in stdout
+    denoised, spec = read_pixels(tmp_path / "den.0010.exr")
+    noisy, in_spec = read_pixels(BUNDLED / "in.0010.exr")
+    ref, ref_spec = read_pixels(BUNDLED / "ref.0010.exr")
+    assert (spec.width, spec.height) == (128, 72)
+    assert spec.getattribute("worldToCamera") == in_spec.getattribute("worldToCamera")
+    assert spec.get_string_attribute("svgf/kind") == "denoised"
+    assert spec.get_int_attribute("svgf/frame") == 10
+
+    def rgb(pixels: np.ndarray, s: oiio.ImageSpec) -> np.ndarray:
+        return pixels[..., [list(s.channelnames).index(c) for c in "RGB"]]
+
+    err_denoised = np.mean((rgb(denoised, spec) - rgb(ref, ref_spec)) ** 2)
+    err_noisy = np.mean((rgb(noisy, in_spec) - rgb(ref, ref_spec)) ** 2)
+    assert err_denoised < 0.5 * err_noisy  # the filter removes most of the 1-spp noise

@@ -7,6 +7,12 @@ from pathlib import Path
 import pytest
 from test_cli_support import outputs, run_cli, write_sequence
 
+from svgf_cli.farm.dask_backend import run_chunk_task
+from svgf_cli.farm.job import build_job
+from svgf_cli.filters.params import PRESETS
+from svgf_cli.io.layers import build_mapping
+from svgf_cli.runner import FrameTask, RunConfig
+
 pytest.importorskip("distributed")  # the optional `farm` extra (part of `dev`)
 
 
@@ -27,15 +33,33 @@ def test_two_workers_equal_local_chunked_run(
     assert len(local) == 8
     assert remote == local
 
-    # A retried/re-run job is idempotent: with --skip-existing nothing is rewritten.
+    # A retried task is idempotent: it keeps the outputs that exist and recomputes only the
+    # missing one, with the same warm-up, so the result is the same bytes.
     stamp = {p.name: p.stat().st_mtime_ns for p in outputs(tmp_path / "dask", "o")}
     (tmp_path / "dask" / "o.0005.exr").unlink()
-    code, _, err = run_cli(
-        [*common, "-o", tmp_path / "dask" / "o.####.exr", "--workers", "2", "--skip-existing",
-         "-q"],
-        capsys,
+    job = build_job(
+        [str(tmp_path / "seq" / "in.####.exr")],
+        str(tmp_path / "dask" / "o.####.exr"),
+        warmup=2,
+        chunk_size=3,
+        skip_existing=True,
     )
-    assert code == 0, err
+    assert [t.frame for t in job.chunk_tasks[0]] == [3, 4, 5]  # re-planned around the hole
+    original = build_job(
+        [str(tmp_path / "seq" / "in.####.exr")],
+        str(tmp_path / "x" / "o.####.exr"),
+        warmup=2,
+        chunk_size=3,
+    )
+    retry = [
+        FrameTask(t.frame, t.input, tmp_path / "dask" / t.output.name if t.output else None)
+        for t in original.chunk_tasks[1]
+    ]
+    config = RunConfig(
+        params=PRESETS["paper"], preset="paper", mapping=build_mapping(), warmup_label="2"
+    )
+    summary = run_chunk_task(retry, config, overwrite=False)
+    assert summary["written"] == [5]
     again = {p.name: p.read_bytes() for p in outputs(tmp_path / "dask", "o")}
     assert again == local
     for p in outputs(tmp_path / "dask", "o"):

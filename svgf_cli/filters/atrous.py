@@ -34,7 +34,7 @@ _B3 = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0], dtype=
 _G1 = np.array([0.25, 0.5, 0.25], dtype=np.float32)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def luminance_stop_guides(
     illumination: np.ndarray,
     variance: np.ndarray,
@@ -74,7 +74,7 @@ def luminance_stop_guides(
                                                                   + _VARIANCE_EPSILON))
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def atrous_iteration(
     illumination: np.ndarray,
     variance: np.ndarray,

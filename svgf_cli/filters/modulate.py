@@ -21,7 +21,7 @@ _ONE = F32(1.0)
 _ZERO = F32(0.0)
 
 
-@njit(inline="always", fastmath=True, cache=True)
+@njit(inline="always", fastmath=True, cache=True, error_model="numpy")
 def _effective_albedo(
     ar: np.float32, ag: np.float32, ab: np.float32, eps: np.float32
 ) -> tuple[np.float32, np.float32, np.float32]:
@@ -30,7 +30,7 @@ def _effective_albedo(
     return max(ar, eps), max(ag, eps), max(ab, eps)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def demodulate(
     signal: np.ndarray,
     emission: np.ndarray,
@@ -55,7 +55,7 @@ def demodulate(
             out[2, y, x] = (signal[2, y, x] - eb) / ab
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def remodulate(
     illumination: np.ndarray,
     emission: np.ndarray,
@@ -79,7 +79,7 @@ def remodulate(
             out[2, y, x] = ab * illumination[2, y, x] + eb
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.ndarray) -> None:
     """Background pixels (depth <= 0) are not filtered: copy their input radiance back."""
     height, width = depth.shape
@@ -91,7 +91,7 @@ def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.nda
                 radiance[2, y, x] = original[2, y, x]
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
     """Rec.709 luminance of a (3, H, W) image into an (H, W) plane."""
     height, width = rgb.shape[1], rgb.shape[2]

@@ -35,7 +35,7 @@ _NORMAL_SLACK = F32(0.01)
 _MIN_BILINEAR_WEIGHT = F32(0.01)
 
 
-@njit(inline="always", fastmath=True, cache=True, boundscheck=False)
+@njit(inline="always", fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def _tap_consistent(
     tx: int,
     ty: int,
@@ -66,7 +66,7 @@ def _tap_consistent(
     return dx * dx + dy * dy + dz * dz <= max_normal_diff_sq
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def reproject(
     motion: np.ndarray,
     depth: np.ndarray,
@@ -217,7 +217,7 @@ def reproject(
                 out_moments[s, 1, y, x] *= inv
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False)
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def accumulate(
     illumination: np.ndarray,
     history_illumination: np.ndarray,

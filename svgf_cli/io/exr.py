@@ -125,7 +125,7 @@ def _set_attribute(spec: oiio.ImageSpec, key: str, value: Any) -> None:
 # ---------------------------------------------------------------------------------------------
 # Compression rules
 
-LOSSLESS_COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "htj2k")
+LOSSLESS_COMPRESSIONS = ("none", "rle", "zips", "zip", "piz")
 # Lossy for every channel: B44 quantises half data; DWA's DCT hits every channel whose name
 # ends in R, G, B, Y, RY or BY (so N.Y and motion.Y), which is why it is refused wholesale.
 LOSSY_COMPRESSIONS = ("b44", "b44a", "dwaa", "dwab")

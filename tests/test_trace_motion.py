@@ -1,0 +1,123 @@
+"""svgf trace: motion vectors and camera matrices agree with an independent reprojection."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from svgf_cli.cli import main
+from svgf_trace.animation import load_animation
+from svgf_trace.scene import load_obj
+
+TESTDATA = Path(__file__).resolve().parent.parent / "testdata"
+WIDTH, HEIGHT = 64, 36
+
+
+def read_exr(path: Path) -> tuple[dict[str, np.ndarray], oiio.ImageSpec]:
+    image = oiio.ImageInput.open(str(path))
+    assert image is not None, oiio.geterror()
+    spec = image.spec()
+    pixels = image.read_image(0, 0, 0, spec.nchannels, "float")
+    image.close()
+    return {name: pixels[:, :, k] for k, name in enumerate(spec.channelnames)}, spec
+
+
+def project(camera_key_position, look_at, up, fov_y, points):  # noqa: ANN001, ANN201
+    """Pinhole projection written out independently of svgf_trace.camera."""
+    forward = np.asarray(look_at, float) - np.asarray(camera_key_position, float)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    rel = points - camera_key_position
+    x, y, z = rel @ right, rel @ true_up, rel @ forward
+    tan_y = math.tan(math.radians(fov_y) / 2)
+    tan_x = tan_y * WIDTH / HEIGHT
+    px = (x / (z * tan_x) + 1) / 2 * WIDTH
+    py = (1 - y / (z * tan_y)) / 2 * HEIGHT
+    return np.stack([px, py], axis=-1)
+
+
+@pytest.fixture(scope="module")
+def animated_frames(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("motion")
+    with pytest.raises(SystemExit) as info:
+        main([
+            "trace", str(TESTDATA / "cornell.obj"), "-o", str(out / "m.####.exr"),
+            "--frames", "1,6", "--resolution", f"{WIDTH}x{HEIGHT}", "--spp", "1",
+            "--max-depth", "0", "--animation", str(TESTDATA / "anim.json"), "-q",
+        ])  # fmt: skip
+    assert info.value.code == 0
+    return out
+
+
+def test_motion_matches_reprojection_of_world_positions(animated_frames: Path) -> None:
+    layers, _ = read_exr(animated_frames / "m.0006.exr")
+    scene = load_obj(TESTDATA / "cornell.obj")
+    anim = load_animation(TESTDATA / "anim.json", [o.name for o in scene.objects])
+    ids = layers["id"].astype(int)
+    hit = ids >= 0
+    assert hit.mean() > 0.5
+    points = np.stack([layers["P.X"], layers["P.Y"], layers["P.Z"]], axis=-1).astype(np.float64)
+    prev_points = points.copy()
+    for obj in scene.objects:
+        pts = scene.positions[obj.start : obj.stop].reshape(-1, 3)
+        pivot = (pts.min(0) + pts.max(0)) / 2
+        now = anim.object_matrix(obj.name, 6, pivot)
+        before = anim.object_matrix(obj.name, 5, pivot)
+        to_prev = before @ np.linalg.inv(now)
+        mask = ids == obj.index
+        prev_points[mask] = points[mask] @ to_prev[:3, :3].T + to_prev[:3, 3]
+    cam5 = anim.camera(5, WIDTH, HEIGHT)
+    prev_pixels = project(cam5.position, cam5.look_at, cam5.up, cam5.fov_y, prev_points)
+    ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH]
+    expected = prev_pixels - np.stack([xs + 0.5, ys + 0.5], axis=-1)
+    motion = np.stack([layers["motion.X"], layers["motion.Y"]], axis=-1)
+    error = np.abs(motion - expected)[hit]
+    assert error.max() < 0.01, error.max()
+    # Both kinds of motion are really present: the camera moves every static surface, and
+    # the short block moves differently from the tall one next to it.
+    magnitude = np.linalg.norm(motion, axis=-1)
+    short = scene.object_by_name("short_block").index  # type: ignore[union-attr]
+    tall = scene.object_by_name("tall_block").index  # type: ignore[union-attr]
+    assert np.median(magnitude[ids == tall]) > 0.02
+    assert np.median(magnitude[ids == short]) > 3 * np.median(magnitude[ids == tall])
+    # Background: no motion, -1 id, infinite depth.
+    assert np.all(motion[~hit] == 0) and np.all(np.isinf(layers["Z"][~hit]))
+
+
+def test_header_matrices_project_positions_to_pixel_centres(animated_frames: Path) -> None:
+    layers, spec = read_exr(animated_frames / "m.0006.exr")
+    hit = layers["id"] >= 0
+    points = np.stack([layers["P.X"], layers["P.Y"], layers["P.Z"]], axis=-1)[hit]
+    homogeneous = np.concatenate([points, np.ones((points.shape[0], 1))], axis=1)
+    # OpenEXR matrices are Imath row-vector matrices: p_row @ M.
+    to_ndc = np.array(spec.getattribute("worldToNDC"), dtype=np.float64).reshape(4, 4)
+    ndc = homogeneous @ to_ndc
+    pixels = np.stack([ndc[:, 0] / ndc[:, 3] * WIDTH, ndc[:, 1] / ndc[:, 3] * HEIGHT], axis=1)
+    ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH]
+    centres = np.stack([xs + 0.5, ys + 0.5], axis=-1)[hit]
+    assert np.abs(pixels - centres).max() < 1e-3
+    # worldToCamera: +z is the view axis and its z is the Z layer (linear view depth).
+    to_camera = np.array(spec.getattribute("worldToCamera"), dtype=np.float64).reshape(4, 4)
+    camera_space = homogeneous @ to_camera
+    np.testing.assert_allclose(camera_space[:, 2], layers["Z"][hit], rtol=1e-5)
+    assert spec.getattribute("svgf/motion_convention") == "backward-pixels"
+
+
+def test_first_frame_and_static_scenes_have_zero_motion(
+    animated_frames: Path, tmp_path: Path
+) -> None:
+    layers, _ = read_exr(animated_frames / "m.0001.exr")
+    assert np.all(layers["motion.X"] == 0) and np.all(layers["motion.Y"] == 0)
+    with pytest.raises(SystemExit) as info:
+        main(["trace", str(TESTDATA / "cornell.obj"), "-o", str(tmp_path / "s.####.exr"),
+              "--frames", "3", "--resolution", "16x9", "--max-depth", "0", "-q"])  # fmt: skip
+    assert info.value.code == 0
+    static, _ = read_exr(tmp_path / "s.0003.exr")
+    assert np.all(static["motion.X"] == 0) and np.all(static["motion.Y"] == 0)
+    assert (static["id"] >= 0).any()
