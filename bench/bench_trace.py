@@ -18,8 +18,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numba
-
 from svgf_cli.commands.trace import parse_resolution, resolve_threads
 from svgf_cli.io.exr import write_exr
 from svgf_trace.animation import load_animation
@@ -42,7 +40,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     width, height = parse_resolution(args.resolution)
     threads = resolve_threads(args.threads)
-    numba.set_num_threads(threads)
 
     scene = load_obj(args.scene)
     anim = load_animation(TESTDATA / "anim.json", [o.name for o in scene.objects])

@@ -2,7 +2,8 @@
 
 Modules: ``scene`` (OBJ + MTL loading), ``animation`` (camera and object keyframes),
 ``camera`` (pinhole camera, matrices, projection), ``kernels`` (numba shading kernels),
-``render`` (the wavefront integrator and the per-frame layers).
+``render`` (the wavefront integrator and the per-frame layers), ``output`` (EXR channels
+and header attributes in `svgf denoise`'s input convention).
 """
 
 from __future__ import annotations

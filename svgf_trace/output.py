@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from svgf_cli import __version__
 from svgf_trace.render import FrameResult
 
 MOTION_CONVENTION = "backward-pixels"
@@ -80,7 +81,7 @@ def frame_attributes(
             "svgf/kind": kind,
             "svgf/motion_convention": MOTION_CONVENTION,
             "svgf/camera/fov_y": float(result.camera.fov_y),
-            "Software": "svgf trace",
+            "Software": f"svgf {__version__} trace",
         }
     )
     return attributes

@@ -14,8 +14,10 @@ each path's numbers come from hashing (frame key, sample index, pixel, dimension
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from embreex import rtcore_scene
@@ -69,6 +71,13 @@ class EmbreeTracer:
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+
+    def map_rows(self, n: int, work: Callable[[slice], object]) -> list:
+        """Run ``work`` over row ranges covering ``range(n)``, on the pool when worthwhile."""
+        chunks = self._chunks(n)
+        if self._pool is None or len(chunks) == 1:
+            return [work(c) for c in chunks]
+        return list(self._pool.map(work, chunks))
 
     def _chunks(self, n: int) -> list[slice]:
         parts = min(self.threads, max(1, n // MIN_RAYS_PER_THREAD))
@@ -304,15 +313,22 @@ def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
     out_z = np.empty(n, f32)
     out_id = np.empty(n, f32)
     out_motion = np.empty((n, 2), f32)
-    kernels.gbuffer_kernel(
-        hits.prim, hits.u, hits.v, hits.directions,
-        np.asarray(cam.position, float), cam.forward,
-        geo.tri_v, geo.tri_prev_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv,
-        geo.tri_mat, geo.tri_obj, geo.mat_kd, geo.mat_ke,
-        geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
-        cam.world_to_ndc(), geo.prev_camera.world_to_ndc(), cam.width, cam.height,
-        out_p, out_n, out_albedo, out_emission, out_z, out_id, out_motion,
-    )  # fmt: skip
+    eye = np.asarray(cam.position, float)
+    forward = cam.forward
+    ndc_now = cam.world_to_ndc()
+    ndc_prev = geo.prev_camera.world_to_ndc()
+
+    def work(r: slice) -> None:
+        kernels.gbuffer_kernel(
+            hits.prim[r], hits.u[r], hits.v[r], hits.directions[r], eye, forward,
+            geo.tri_v, geo.tri_prev_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv,
+            geo.tri_mat, geo.tri_obj, geo.mat_kd, geo.mat_ke,
+            geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
+            ndc_now, ndc_prev, cam.width, cam.height,
+            out_p[r], out_n[r], out_albedo[r], out_emission[r], out_z[r], out_id[r], out_motion[r],
+        )  # fmt: skip
+
+    geo.tracer.map_rows(n, work)
     h, w = cam.height, cam.width
 
     def img(a: np.ndarray) -> np.ndarray:
@@ -360,6 +376,28 @@ def trace_samples(
     return sum_direct / spp, sum_indirect / spp
 
 
+def _shade_rows(
+    geo: FrameGeometry,
+    depth: int,
+    max_depth: int,
+    key: np.uint64,
+    rows: tuple[np.ndarray, ...],
+    outs: tuple[np.ndarray, ...],
+    acc_direct: np.ndarray,
+    acc_indirect: np.ndarray,
+    r: slice,
+) -> None:
+    """shade_kernel over rows ``r`` of the path state (``rows``) and outputs (``outs``)."""
+    kernels.shade_kernel(
+        depth, max_depth, RR_DEPTH, key, geo.eps,
+        *(a[r] for a in rows), acc_direct, acc_indirect,
+        geo.tri_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv, geo.tri_mat,
+        geo.mat_kd, geo.mat_ke, geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
+        geo.light_tri, geo.light_cdf, geo.tri_light_pdf,
+        *(a[r] for a in outs),
+    )  # fmt: skip
+
+
 def trace_batch(
     geo: FrameGeometry,
     hits: PrimaryHits,
@@ -397,16 +435,12 @@ def trace_batch(
         next_dir = np.empty((m, 3), np.float32)
         next_pdf = np.empty(m)
         alive = np.empty(m, np.bool_)
-        kernels.shade_kernel(
-            depth, max_depth, RR_DEPTH, key, geo.eps,
-            path_id, path_key, org, dirs, prim, bu, bv, tfar, throughput, prev_pdf,
-            acc_direct, acc_indirect,
-            geo.tri_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv, geo.tri_mat,
-            geo.mat_kd, geo.mat_ke, geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
-            geo.light_tri, geo.light_cdf, geo.tri_light_pdf,
-            shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_on,
-            next_org, next_dir, next_pdf, alive,
-        )  # fmt: skip
+        rows = (path_id, path_key, org, dirs, prim, bu, bv, tfar, throughput, prev_pdf)
+        outs = (shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_on,
+                next_org, next_dir, next_pdf, alive)  # fmt: skip
+        accumulators = (acc_direct, acc_indirect)
+        tracer.map_rows(m, partial(_shade_rows, geo, depth, max_depth, key, rows, outs,
+                                   *accumulators))  # fmt: skip
         s_id, s_org, s_dir, s_dist, s_value = kernels.compact_shadow_rays(
             shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value
         )

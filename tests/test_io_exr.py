@@ -310,3 +310,24 @@ def test_write_into_missing_directory_fails_cleanly(tmp_path: Path) -> None:
         write_exr(tmp_path / "missing" / "o.exr", {"R": np.ones((H, W))})
     assert "o.exr" in str(err.value)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("tiled", [False, True])
+def test_offset_data_window_tiled_and_strips(tmp_path: Path, tiled: bool, monkeypatch) -> None:
+    monkeypatch.setattr(exr, "STRIP_ROWS", 4)  # several strips, the last one partial
+    channels = gbuffer(seed=3)
+    names = list(channels)
+    spec = oiio.ImageSpec(W, H, len(names), "float")
+    spec.channelnames = tuple(names)
+    spec.x, spec.y, spec.full_width, spec.full_height = 3, 5, W + 10, H + 10
+    if tiled:
+        spec.tile_width = spec.tile_height = 16
+    path = tmp_path / "window.exr"
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec)
+    assert out.write_image(np.ascontiguousarray(np.stack([channels[n] for n in names], -1)))
+    assert out.close()
+    frame = read_frame(path, build_mapping()).frame
+    assert np.array_equal(frame.color, planes(channels, "R", "G", "B"))
+    assert np.array_equal(frame.depth, channels["Z"])
+    assert np.array_equal(frame.motion, planes(channels, "motion.X", "motion.Y"))

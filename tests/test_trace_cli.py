@@ -101,8 +101,10 @@ def test_combined_is_direct_plus_indirect(
 
 
 def test_same_seed_gives_identical_files_whatever_the_range_or_threads(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    # Small chunks so the two-thread run really splits every batch across threads.
+    monkeypatch.setattr(render, "MIN_RAYS_PER_THREAD", 7)
     assert run(small(str(tmp_path / "a.####.exr"), "--frames", "1-3", "--threads", "2"),
                capsys)[0] == 0  # fmt: skip
     assert run(small(str(tmp_path / "b.####.exr"), "--frames", "2", "--threads", "1"),

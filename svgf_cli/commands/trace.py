@@ -37,12 +37,8 @@ def _output_paths(pattern_text: str, frames: list[int], option: str) -> list[Pat
 
 
 def resolve_threads(threads: int) -> int:
-    """0 means every core; never more than numba was configured for."""
-    import numba
-
-    available = int(numba.config.NUMBA_NUM_THREADS)
-    wanted = os.cpu_count() or 1 if threads <= 0 else threads
-    return max(1, min(wanted, available))
+    """Worker threads for Embree queries and shading kernels; 0 means every core."""
+    return max(1, (os.cpu_count() or 1) if threads <= 0 else threads)
 
 
 @click.command(name="trace")
@@ -53,7 +49,8 @@ def resolve_threads(threads: int) -> int:
 )  # fmt: skip
 @click.option("-f", "--frames", default="1", show_default=True, metavar="SPEC",
               help="Frames to render: 1-48, 1,5,7-9, 1-10x2.")
-@click.option("--resolution", default="640x360", show_default=True, metavar="WxH")
+@click.option("--resolution", default="640x360", show_default=True, metavar="WxH",
+              help="Image size in pixels.")
 @click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
 @click.option("--max-depth", type=int, default=5, show_default=True,
               help="Maximum bounces (1 = direct lighting only; pbrt's convention).")
@@ -63,7 +60,8 @@ def resolve_threads(threads: int) -> int:
               help="Camera/object keyframes (JSON); default: a static camera framing the scene.")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Also write converged reference frames (R,G,B + direct/indirect, float).")
-@click.option("--reference-spp", type=int, default=512, show_default=True)
+@click.option("--reference-spp", type=int, default=512, show_default=True,
+              help="Samples per pixel of the references (traced in memory-bounded batches).")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @click.option("--float", "float_radiance", is_flag=True,
               help="Write radiance layers as float instead of half.")
@@ -114,8 +112,6 @@ def command(
                 raise OutputExistsError("output exists (use --overwrite to replace it)", str(path))
 
     # Heavy imports only once the arguments are known to be good.
-    import numba
-
     from svgf_cli.io.exr import write_exr
     from svgf_trace.animation import Animation, load_animation
     from svgf_trace.output import frame_attributes, input_channels, reference_channels
@@ -127,7 +123,6 @@ def command(
         load_animation(animation, [o.name for o in loaded.objects]) if animation else Animation()
     )
     n_threads = resolve_threads(threads)
-    numba.set_num_threads(n_threads)
     for path in out_paths + ref_paths:
         path.parent.mkdir(parents=True, exist_ok=True)
 

@@ -79,6 +79,7 @@ def run_chunks_dask(
 ) -> RunStats:
     """Submit one task per chunk and report frames as chunks finish."""
     distributed = _import_distributed()
+    started = time.perf_counter()
     cluster = None
     if scheduler is None:
         # Processes, one thread each: numba kernels and the GIL do not share well, and a
@@ -94,10 +95,13 @@ def run_chunks_dask(
     else:
         address = scheduler
     stats = RunStats()
-    started = time.perf_counter()
     try:
         with distributed.Client(address, timeout="30s") as client:
-            progress.info(f"Dask: {len(chunk_tasks)} chunk task(s) on {client.scheduler.address}")
+            progress.info(
+                f"Dask: {len(chunk_tasks)} chunk task(s) on {client.scheduler.address} "
+                f"(cluster ready in {time.perf_counter() - started:.1f} s)"
+            )
+            started = time.perf_counter()  # the summary times the work, not the start-up
             futures = {
                 client.submit(
                     run_chunk_task,

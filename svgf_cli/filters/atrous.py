@@ -29,6 +29,8 @@ F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _VARIANCE_EPSILON = F32(1e-10)
+# Pixels per row chunk: all per-tap row buffers of a chunk fit in L1.
+CHUNK = 256
 _B3 = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0], dtype=np.float32)
 # g3x3 weights are the outer product of (1/4, 1/2, 1/4): 1/16 corner, 1/8 edge, 1/4 centre.
 _G1 = np.array([0.25, 0.5, 0.25], dtype=np.float32)
@@ -95,85 +97,113 @@ def atrous_iteration(
 
     ``guide_*`` come from :func:`luminance_stop_guides` for the same input. Background
     pixels (zero normal) receive no weight from surfaces and pass through unchanged.
+    Rows are processed in chunks of ``CHUNK`` pixels so that all row buffers stay in L1;
+    each inner loop touches few arrays (LLVM gives up vectorizing a loop that would need
+    many runtime alias checks).
     """
+    for y in prange(depth.shape[0]):
+        _atrous_row(
+            y, illumination, variance, guide_luminance, guide_inverse_scale, depth, ddx, ddy,
+            normal, step, sigma_depth, squarings, sigma_normal, out_illumination, out_variance,
+        )
+
+
+@njit(fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+def _atrous_row(
+    y: int,
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
+    depth: np.ndarray,
+    ddx: np.ndarray,
+    ddy: np.ndarray,
+    normal: np.ndarray,
+    step: int,
+    sigma_depth: np.float32,
+    squarings: int,
+    sigma_normal: np.float32,
+    out_illumination: np.ndarray,
+    out_variance: np.ndarray,
+) -> None:
+    """Row ``y`` of :func:`atrous_iteration` (a plain function so LLVM sees simple loops)."""
     num_signals = illumination.shape[0]
     height, width = depth.shape
     centre = _B3[2] * _B3[2]
-    for y in prange(height):
+    if True:
         # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
-        acc = np.empty((num_signals, 5, width), dtype=np.float32)
-        depth_exponent = np.empty(width, dtype=np.float32)
-        normal_weight = np.empty(width, dtype=np.float32)
-        for s in range(num_signals):
-            sum_w = acc[s, 0]
-            sum_r = acc[s, 1]
-            sum_g = acc[s, 2]
-            sum_b = acc[s, 3]
-            sum_v = acc[s, 4]
-            r = illumination[s, 0, y]
-            g = illumination[s, 1, y]
-            b = illumination[s, 2, y]
-            v = variance[s, y]
-            for x in range(width):
-                sum_w[x] = centre
-                sum_r[x] = centre * r[x]
-                sum_g[x] = centre * g[x]
-                sum_b[x] = centre * b[x]
-                sum_v[x] = centre * centre * v[x]
-        for oy in range(-2, 3):
-            yy = y + oy * step
-            if yy < 0 or yy >= height:
-                continue
-            for ox in range(-2, 3):
-                if ox == 0 and oy == 0:
+        acc = np.empty((num_signals, 5, CHUNK), dtype=np.float32)
+        depth_exponent = np.empty(CHUNK, dtype=np.float32)
+        normal_weight = np.empty(CHUNK, dtype=np.float32)
+        tap_weight = np.empty(CHUNK, dtype=np.float32)
+        for chunk_start in range(0, width, CHUNK):
+            chunk_end = min(width, chunk_start + CHUNK)
+            n = chunk_end - chunk_start
+            for s in range(num_signals):
+                for c in range(3):
+                    sums = acc[s, 1 + c]
+                    values = illumination[s, c, y, chunk_start:chunk_end]
+                    for i in range(n):
+                        sums[i] = centre * values[i]
+                sums = acc[s, 0]
+                for i in range(n):
+                    sums[i] = centre
+                sums = acc[s, 4]
+                values = variance[s, y, chunk_start:chunk_end]
+                for i in range(n):
+                    sums[i] = (centre * centre) * values[i]
+            for oy in range(-2, 3):
+                yy = y + oy * step
+                if yy < 0 or yy >= height:
                     continue
-                d = ox * step
-                x0 = max(0, -d)
-                x1 = min(width, width - d)
-                count = x1 - x0
-                if count <= 0:
-                    continue
-                kernel = _B3[ox + 2] * _B3[oy + 2]
-                tap_geometry(
-                    depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
-                    normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
-                    depth[yy, x0 + d:x1 + d],
-                    normal[0, yy, x0 + d:x1 + d], normal[1, yy, x0 + d:x1 + d],
-                    normal[2, yy, x0 + d:x1 + d],
-                    F32(d), F32(oy * step), sigma_depth, squarings, sigma_normal,
-                    depth_exponent, normal_weight, count,
-                )
-                for s in range(num_signals):
-                    l_p = guide_luminance[s, y, x0:x1]
-                    inv_p = guide_inverse_scale[s, y, x0:x1]
-                    l_q = guide_luminance[s, yy, x0 + d:x1 + d]
-                    r_q = illumination[s, 0, yy, x0 + d:x1 + d]
-                    g_q = illumination[s, 1, yy, x0 + d:x1 + d]
-                    b_q = illumination[s, 2, yy, x0 + d:x1 + d]
-                    v_q = variance[s, yy, x0 + d:x1 + d]
-                    sum_w = acc[s, 0, x0:x1]
-                    sum_r = acc[s, 1, x0:x1]
-                    sum_g = acc[s, 2, x0:x1]
-                    sum_b = acc[s, 3, x0:x1]
-                    sum_v = acc[s, 4, x0:x1]
-                    for i in range(count):
-                        w = (kernel * normal_weight[i]) * fast_exp(
-                            -(depth_exponent[i] + abs(l_p[i] - l_q[i]) * inv_p[i])
-                        )
-                        sum_w[i] += w
-                        sum_r[i] += w * r_q[i]
-                        sum_g[i] += w * g_q[i]
-                        sum_b[i] += w * b_q[i]
-                        sum_v[i] += (w * w) * v_q[i]
-        for s in range(num_signals):
-            sum_w = acc[s, 0]
-            o_r = out_illumination[s, 0, y]
-            o_g = out_illumination[s, 1, y]
-            o_b = out_illumination[s, 2, y]
-            o_v = out_variance[s, y]
-            for x in range(width):
-                inv = _ONE / sum_w[x]
-                o_r[x] = acc[s, 1, x] * inv
-                o_g[x] = acc[s, 2, x] * inv
-                o_b[x] = acc[s, 3, x] * inv
-                o_v[x] = acc[s, 4, x] * (inv * inv)
+                for ox in range(-2, 3):
+                    if ox == 0 and oy == 0:
+                        continue
+                    d = ox * step
+                    x0 = max(chunk_start, -d)
+                    x1 = min(chunk_end, width - d)
+                    count = x1 - x0
+                    if count <= 0:
+                        continue
+                    a0 = x0 - chunk_start
+                    tap_geometry(
+                        depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
+                        normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
+                        depth[yy, x0 + d:x1 + d],
+                        normal[0, yy, x0 + d:x1 + d], normal[1, yy, x0 + d:x1 + d],
+                        normal[2, yy, x0 + d:x1 + d],
+                        F32(d), F32(oy * step), sigma_depth, squarings, sigma_normal,
+                        _B3[ox + 2] * _B3[oy + 2], depth_exponent, normal_weight, count,
+                    )
+                    for s in range(num_signals):
+                        l_p = guide_luminance[s, y, x0:x1]
+                        inv_p = guide_inverse_scale[s, y, x0:x1]
+                        l_q = guide_luminance[s, yy, x0 + d:x1 + d]
+                        sum_w = acc[s, 0, a0:a0 + count]
+                        for i in range(count):
+                            w = normal_weight[i] * fast_exp(
+                                -(depth_exponent[i] + abs(l_p[i] - l_q[i]) * inv_p[i])
+                            )
+                            tap_weight[i] = w
+                            sum_w[i] += w
+                        for c in range(3):
+                            values = illumination[s, c, yy, x0 + d:x1 + d]
+                            sums = acc[s, 1 + c, a0:a0 + count]
+                            for i in range(count):
+                                sums[i] += tap_weight[i] * values[i]
+                        values = variance[s, yy, x0 + d:x1 + d]
+                        sums = acc[s, 4, a0:a0 + count]
+                        for i in range(count):
+                            sums[i] += (tap_weight[i] * tap_weight[i]) * values[i]
+            for s in range(num_signals):
+                sum_w = acc[s, 0]
+                o_r = out_illumination[s, 0, y, chunk_start:chunk_end]
+                o_g = out_illumination[s, 1, y, chunk_start:chunk_end]
+                o_b = out_illumination[s, 2, y, chunk_start:chunk_end]
+                o_v = out_variance[s, y, chunk_start:chunk_end]
+                for i in range(n):
+                    inv = _ONE / sum_w[i]
+                    o_r[i] = acc[s, 1, i] * inv
+                    o_g[i] = acc[s, 2, i] * inv
+                    o_b[i] = acc[s, 3, i] * inv
+                    o_v[i] = acc[s, 4, i] * (inv * inv)

@@ -12,6 +12,7 @@ so every inner loop is branch-free and vectorizes.
 * normal: ``max(0, n(p).n(q)) ** sigma_n``; for a power-of-two ``sigma_n`` (128 = 7
   squarings) the power is repeated squaring over the row buffer, which vectorizes.
   Background normals are zero, so background never exchanges weight with a surface.
+  The paper's sigma_n = 128 (7 squarings) has its own fully unrolled loop.
 """
 
 from __future__ import annotations
@@ -52,17 +53,31 @@ def tap_geometry(
     sigma_depth: np.float32,
     squarings: int,
     sigma_normal: np.float32,
+    kernel: np.float32,
     depth_exponent: np.ndarray,
     normal_weight: np.ndarray,
     count: int,
 ) -> None:
-    """Fill ``depth_exponent[:count]`` (the w_z exponent) and ``normal_weight[:count]``."""
+    """Fill ``depth_exponent[:count]`` (the w_z exponent) and ``normal_weight[:count]``
+    (``kernel * w_n``). Separate loops over few arrays each, so every one vectorizes."""
     for i in range(count):
         z = z_p[i]
         projected = abs(gx_p[i] * offset_x + gy_p[i] * offset_y)
         depth_exponent[i] = abs(z - z_q[i]) / (sigma_depth * projected + DEPTH_EPSILON * z + _TINY)
-        cos = nx_p[i] * nx_q[i] + ny_p[i] * ny_q[i] + nz_p[i] * nz_q[i]
-        normal_weight[i] = max(cos, _ZERO)
+    if squarings == 7:
+        for i in range(count):
+            c = max(nx_p[i] * nx_q[i] + ny_p[i] * ny_q[i] + nz_p[i] * nz_q[i], _ZERO)
+            c *= c
+            c *= c
+            c *= c
+            c *= c
+            c *= c
+            c *= c
+            c *= c
+            normal_weight[i] = kernel * c
+        return
+    for i in range(count):
+        normal_weight[i] = max(nx_p[i] * nx_q[i] + ny_p[i] * ny_q[i] + nz_p[i] * nz_q[i], _ZERO)
     if squarings >= 0:
         for _ in range(squarings):
             for i in range(count):
@@ -71,3 +86,5 @@ def tap_geometry(
         for i in range(count):
             c = normal_weight[i]
             normal_weight[i] = c**sigma_normal if c > _ZERO else _ZERO
+    for i in range(count):
+        normal_weight[i] *= kernel

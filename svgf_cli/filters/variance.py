@@ -109,7 +109,7 @@ def spatial_variance(
                     depth[yy, x0 + ox:x1 + ox],
                     normal[0, yy, x0 + ox:x1 + ox], normal[1, yy, x0 + ox:x1 + ox],
                     normal[2, yy, x0 + ox:x1 + ox],
-                    F32(ox), F32(oy), sigma_depth, squarings, sigma_normal,
+                    F32(ox), F32(oy), sigma_depth, squarings, sigma_normal, _ONE,
                     depth_exponent, normal_weight, count,
                 )
                 if ox == 0 and oy == 0:
