@@ -193,19 +193,22 @@ def translating_sequence(
     seed: int = 0,
     split: bool = True,
     albedo: ArrayLike = 0.5,
+    frequency: float = 1.0,
 ) -> list[Frame]:
     """A textured illumination scrolling right/down by ``velocity`` pixels per frame.
 
     The illumination at pixel (x, y) of frame i is an analytic function of
     ``(x - i*vx, y - i*vy)``, so it is exact at sub-pixel shifts; the backward motion is
-    ``(-vx, -vy)`` everywhere. Depth 5, normal +z, one mesh.
+    ``(-vx, -vy)`` everywhere. Depth 5, normal +z, one mesh. ``frequency`` scales the
+    pattern's spatial frequencies (about 0.2-0.35 rad/pixel at 1; lower is smoother, which
+    bilinear resampling reproduces more exactly).
     """
     vx, vy = velocity
     frames = []
     y, x = np.mgrid[0:height, 0:width].astype(np.float64)
     for i in range(num_frames):
-        u = x - i * vx
-        v = y - i * vy
+        u = (x - i * vx) * frequency
+        v = (y - i * vy) * frequency
         pattern = np.stack([
             1.0 + 0.5 * np.sin(0.35 * u) * np.cos(0.21 * v),
             1.0 + 0.4 * np.cos(0.27 * u + 0.5),

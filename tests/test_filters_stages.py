@@ -1,0 +1,240 @@
+"""Each SVGF stage alone: demodulation, gradients, reprojection, variance, clamps, fast exp."""
+
+from __future__ import annotations
+
+import numpy as np
+from synthetic import make_frame, texture, translating_sequence
+
+from svgf_cli.filters.clamp import firefly_clamp, history_clamp
+from svgf_cli.filters.edges import normal_squarings
+from svgf_cli.filters.fastmath import fast_exp
+from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
+from svgf_cli.filters.modulate import demodulate, remodulate
+from svgf_cli.filters.reproject import accumulate, reproject
+from svgf_cli.filters.variance import spatial_variance, temporal_variance
+
+F32 = np.float32
+
+
+def test_fast_exp_matches_exp_over_the_weight_range() -> None:
+    x = -np.linspace(0.0, 80.0, 20001).astype(F32)
+    got = np.array([fast_exp(v) for v in x[::50]], dtype=np.float64)
+    want = np.exp(x[::50].astype(np.float64))
+    assert np.max(np.abs(got / want - 1.0)) < 1e-5
+    assert fast_exp(F32(0.0)) == F32(1.0)
+    assert 0.0 < fast_exp(F32(-1e6)) < 1e-37
+
+
+def test_normal_squarings_only_for_powers_of_two() -> None:
+    assert normal_squarings(128.0) == 7
+    assert normal_squarings(1.0) == 0
+    assert normal_squarings(100.0) == -1
+    assert normal_squarings(0.5) == -1
+
+
+def test_demodulate_remodulate_round_trip_with_emission_and_black_albedo() -> None:
+    rng = np.random.default_rng(3)
+    h, w = 6, 7
+    signal = rng.uniform(0.0, 4.0, (3, h, w)).astype(F32)
+    emission = rng.uniform(0.0, 0.5, (3, h, w)).astype(F32)
+    albedo = rng.uniform(0.1, 0.9, (3, h, w)).astype(F32)
+    albedo[:, 0, 0] = 0.0  # black: not demodulated
+    albedo[1, 1, 1] = 0.0  # one channel black: floored at eps
+    eps = F32(1e-3)
+    illumination = np.empty_like(signal)
+    demodulate(signal, emission, True, albedo, eps, illumination)
+    expected = (signal - emission) / np.maximum(albedo, eps)
+    expected[:, 0, 0] = signal[:, 0, 0] - emission[:, 0, 0]
+    np.testing.assert_allclose(illumination, expected, rtol=1e-6)
+    back = np.empty_like(signal)
+    remodulate(illumination, emission, True, albedo, eps, back)
+    np.testing.assert_allclose(back, signal, rtol=1e-5, atol=1e-6)
+
+
+def test_depth_gradient_takes_smaller_side_and_ignores_background() -> None:
+    depth = np.tile(np.array([1.0, 2.0, 3.0, 10.0, 11.0, 0.0], dtype=F32), (3, 1))
+    ddx, ddy, slope = (np.empty_like(depth) for _ in range(3))
+    depth_gradients(depth, ddx, ddy, slope)
+    # Pixel 2 sits next to a silhouette (3 -> 10): the smaller one-sided slope (1) wins.
+    assert ddx[1, 2] == 1.0
+    # Pixel 4 is next to background on its right: only the left difference counts.
+    assert ddx[1, 4] == 1.0
+    assert ddx[1, 5] == 0.0 and slope[1, 5] == 0.0
+    assert np.all(ddy == 0.0)
+
+
+def test_normal_gradient_zero_on_plane_and_positive_on_curve() -> None:
+    h, w = 5, 8
+    normal = np.zeros((3, h, w), dtype=F32)
+    normal[2] = 1.0
+    x = np.arange(w, dtype=F32)
+    normal[0, 2:, :] = 0.1 * x  # curved lower part
+    depth = np.full((h, w), 3.0, dtype=F32)
+    unit = np.empty_like(normal)
+    unit_normals(normal, depth, unit)
+    out = np.empty_like(depth)
+    normal_gradient(unit, depth, out)
+    assert np.all(out[0] == 0.0)
+    assert np.all(out[3, 1:-1] > 0.05)
+
+
+def _reproject_pair(prev, cur, prev_illumination):
+    """Run the reprojection kernel from ``prev`` to ``cur`` (Frames) for one signal."""
+    h, w = cur.height, cur.width
+    geometry = {}
+    for name, frame in (("prev", prev), ("cur", cur)):
+        unit = np.empty_like(frame.normal)
+        unit_normals(frame.normal, frame.depth, unit)
+        ddx, ddy, slope, width = (np.empty_like(frame.depth) for _ in range(4))
+        depth_gradients(frame.depth, ddx, ddy, slope)
+        normal_gradient(unit, frame.depth, width)
+        geometry[name] = (unit, slope, width)
+    out_illumination = np.empty((1, 3, h, w), dtype=F32)
+    out_moments = np.empty((1, 2, h, w), dtype=F32)
+    out_length = np.empty((h, w), dtype=F32)
+    prev_moments = np.ones((1, 2, h, w), dtype=F32)
+    prev_length = np.full((h, w), 7.0, dtype=F32)
+    reproject(
+        cur.motion, cur.depth, geometry["cur"][0], cur.mesh_id, geometry["cur"][1],
+        geometry["cur"][2], prev.depth, geometry["prev"][0], prev.mesh_id,
+        prev_illumination[None], prev_moments, prev_length, F32(10.0), F32(0.002), F32(16.0),
+        out_illumination, out_moments, out_length,
+    )
+    return out_illumination[0], out_length
+
+
+def _clean_illumination(frame):
+    assert frame.color is not None
+    return frame.color / frame.albedo
+
+
+def test_translation_with_exact_motion_reprojects_below_1e3() -> None:
+    for velocity, frequency in (((2.0, 1.0), 1.0), ((1.5, 0.25), 0.12)):
+        frames = translating_sequence(2, 40, 24, velocity=velocity, split=False,
+                                      frequency=frequency)
+        prev, cur = frames
+        resampled, length = _reproject_pair(prev, cur, _clean_illumination(prev))
+        inside = np.zeros_like(length, dtype=bool)
+        inside[3:-3, 3:-3] = True  # previous position inside the previous image
+        assert np.all(length[inside] == 7.0)
+        error = np.abs(resampled - _clean_illumination(cur))[:, inside]
+        assert error.max() < 1e-3, (velocity, error.max())
+
+
+def test_reprojection_rejects_mesh_depth_and_normal_changes() -> None:
+    h, w = 10, 12
+    prev = make_frame(w, h, split=False)
+    for change in ("mesh", "depth", "normal"):
+        mesh = np.ones((h, w), dtype=np.int32)
+        depth = np.full((h, w), 5.0, dtype=F32)
+        normal = np.zeros((3, h, w), dtype=F32)
+        normal[2] = 1.0
+        if change == "mesh":
+            mesh[:, 6:] = 2
+        elif change == "depth":
+            depth[:, 6:] = 6.0
+        else:
+            normal[:, :, 6:] = np.array([0.0, 0.8, 0.6], dtype=F32)[:, None, None]
+        cur = make_frame(w, h, split=False, mesh_id=mesh, depth=depth, normal=normal)
+        _, length = _reproject_pair(prev, cur, _clean_illumination(prev))
+        assert np.all(length[:, :6] == 7.0), change
+        assert np.all(length[:, 6:] == 0.0), change
+
+
+def test_motion_outside_the_frame_is_a_disocclusion() -> None:
+    h, w = 8, 9
+    prev = make_frame(w, h, split=False)
+    motion = np.zeros((2, h, w), dtype=F32)
+    motion[0, :, :3] = -50.0  # far outside on the left
+    motion[1, :, 3:6] = 1e30  # absurd
+    motion[0, :, 6:] = np.nan
+    cur = make_frame(w, h, split=False, motion=motion)
+    resampled, length = _reproject_pair(prev, cur, _clean_illumination(prev))
+    assert np.all(length == 0.0)
+    assert np.all(np.isfinite(resampled))
+
+
+def test_accumulate_alpha_follows_history_length() -> None:
+    h, w = 2, 3
+    current = np.full((1, 3, h, w), 2.0, dtype=F32)
+    history = np.full((1, 3, h, w), 1.0, dtype=F32)
+    moments = np.ones((1, 2, h, w), dtype=F32)
+    previous_length = np.array([[0.0, 1.0, 3.0], [10.0, 40.0, 0.0]], dtype=F32)
+    depth = np.ones((h, w), dtype=F32)
+    depth[1, 2] = 0.0
+    out = np.empty_like(current)
+    out_moments = np.empty_like(moments)
+    length = np.empty_like(depth)
+    accumulate(current, history, moments, previous_length, depth, F32(0.2), F32(0.2),
+               F32(32.0), out, out_moments, length)
+    np.testing.assert_array_equal(length, [[1.0, 2.0, 4.0], [11.0, 32.0, 0.0]])
+    # alpha = max(0.2, 1/h): 1, 1/2, 1/4, 0.2, 0.2.
+    expected = 1.0 + np.array([[1.0, 0.5, 0.25], [0.2, 0.2, 1.0]])
+    np.testing.assert_allclose(out[0, 0], expected, rtol=1e-6)
+
+
+def test_spatial_variance_matches_true_noise_variance() -> None:
+    h, w, noise = 48, 64, 0.3
+    frame = make_frame(w, h, split=False, noise=noise, seed=11, albedo=1.0, illumination=2.0)
+    assert frame.color is not None
+    illumination = frame.color[None].copy()
+    luminance = (0.2126 * illumination[0, 0] + 0.7152 * illumination[0, 1]
+                 + 0.0722 * illumination[0, 2]).astype(F32)
+    moments = np.stack([luminance, luminance * luminance])[None].astype(F32)
+    history_length = np.ones((h, w), dtype=F32)
+    ddx = np.zeros((h, w), dtype=F32)
+    variance = np.full((1, h, w), -1.0, dtype=F32)
+    spatial_variance(illumination, moments, history_length, frame.depth, ddx, ddx, frame.normal,
+                     F32(4.0), 3, F32(1.0), F32(10.0), 7, F32(128.0), False, variance,
+                     illumination)
+    interior = variance[0, 3:-3, 3:-3]
+    assert abs(interior.mean() / noise**2 - 1.0) < 0.1
+    # Corners see only 16 neighbours: the reliability-weights correction keeps them unbiased.
+    corners = np.concatenate([variance[0, :2, :2].ravel(), variance[0, -2:, -2:].ravel()])
+    assert np.all(corners > 0.0)
+    temporal = np.empty_like(variance)
+    temporal_variance(moments, temporal)
+    assert np.all(temporal < 1e-6)  # one sample: no temporal information yet
+
+
+def test_firefly_clamp_scales_outliers_only() -> None:
+    h, w = 7, 7
+    rng = np.random.default_rng(5)
+    grey = rng.uniform(0.9, 1.1, (h, w)).astype(F32)
+    illumination = np.repeat(grey[None, None], 3, axis=1)
+    illumination[0, :, 3, 3] = np.array([100.0, 50.0, 25.0], dtype=F32)
+    illumination[0, :, 0, 0] = 1.12  # bright but plausible: within mean + 3 sigma
+    depth = np.ones((h, w), dtype=F32)
+    out = np.empty_like(illumination)
+    firefly_clamp(illumination, depth, F32(3.0), out)
+    assert out[0, 1, 3, 3] < 1.3
+    # Scaled, not clipped per channel: the hue survives.
+    np.testing.assert_allclose(out[0, :, 3, 3] / out[0, 1, 3, 3], [2.0, 1.0, 0.5], rtol=1e-5)
+    mask = np.ones((h, w), dtype=bool)
+    mask[3, 3] = False
+    np.testing.assert_array_equal(out[0][:, mask], illumination[0][:, mask])
+
+
+def test_history_clamp_pulls_stale_history_into_neighbourhood_range() -> None:
+    h, w = 6, 6
+    current = texture(w, h, seed=2)[None] + F32(1.0)
+    history = np.full_like(current, 10.0)
+    history[..., 2, 2] = current[..., 2, 2]  # plausible history: kept
+    length = np.full((h, w), 5.0, dtype=F32)
+    length[5, 5] = 0.0  # no history: untouched
+    depth = np.ones((h, w), dtype=F32)
+    k = 1.0
+    window = current[0, :, 1:4, 1:4].reshape(3, -1)
+    centre_high = window.mean(axis=1) + k * window.std(axis=1)
+    history_clamp(history, length, current, depth, F32(k))
+    np.testing.assert_allclose(history[0, :, 2, 2], current[0, :, 2, 2], rtol=1e-6)
+    np.testing.assert_allclose(history[0, :, 1, 2], np.minimum(10.0, _window_high(current, 1, 2,
+                                                                                   k)), rtol=1e-5)
+    assert np.all(history[0, :, 2, 3] < 10.0)
+    assert np.all(centre_high > current[0, :, 2, 2] - 1e-6)
+    assert np.all(history[..., 5, 5] == 10.0)
+
+
+def _window_high(current: np.ndarray, y: int, x: int, k: float) -> np.ndarray:
+    window = current[0, :, y - 1:y + 2, x - 1:x + 2].reshape(3, -1).astype(np.float64)
+    return window.mean(axis=1) + k * window.std(axis=1)
