@@ -466,6 +466,8 @@ def run_sequence(
                     f"{frame_size[0]}x{frame_size[1]}",
                     str(task.input),
                 )
+            if pending is not None and pending[1].done():
+                finish_pending()  # report a finished write now rather than a frame later
             if task.reset_history:
                 denoiser.reset()
             t0 = time.perf_counter()
@@ -473,7 +475,8 @@ def run_sequence(
                 denoised = denoiser.process(frame)
             except ValueError as exc:
                 raise InputError(str(exc), str(task.input)) from None
-            stats.compute_seconds += time.perf_counter() - t0
+            compute_seconds = time.perf_counter() - t0
+            stats.compute_seconds += compute_seconds
             stats.frames_processed += 1
             stats.last_frame = task.frame
             fixed = _scrub_output(denoised.color)
@@ -485,6 +488,8 @@ def run_sequence(
                 progress.warmup(task.frame, warmup_seen, warmup_total)
                 frame_started = time.perf_counter()
             else:
+                # The writer thread reads these planes while the next frame is filtered: safe
+                # because DenoisedFrame arrays are fresh per frame, not the denoiser's buffers.
                 channels = build_output_channels(denoised, result.alpha, config.debug_aovs)
                 attributes = output_attributes(result.info.attributes, config, task)
                 compression = choose_compression(config, result.info.compression, channels)
@@ -497,8 +502,7 @@ def run_sequence(
                 )
                 frame_started = time.perf_counter()
             progress.detail(
-                f"frame {task.frame}: read {read_seconds:.3f} s, "
-                f"compute {time.perf_counter() - t0:.3f} s"
+                f"frame {task.frame}: read {read_seconds:.3f} s, compute {compute_seconds:.3f} s"
             )
             if stop:
                 finish_pending()

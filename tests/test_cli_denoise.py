@@ -49,7 +49,9 @@ def copy_inputs(sequence: Path, dest: Path) -> Path:
 
 
 def test_end_to_end_outputs_and_metadata(
-    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    sequence: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
     reference: dict[int, np.ndarray],
 ) -> None:
     out = tmp_path / "den"
@@ -86,8 +88,17 @@ def test_float_output_and_debug_aovs(
     sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code, _, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr", "--frames", "1-2",
-         "--float", "--debug-aovs", "-q"],
+        [
+            "denoise",
+            sequence / "in.####.exr",
+            "-o",
+            tmp_path / "o.####.exr",
+            "--frames",
+            "1-2",
+            "--float",
+            "--debug-aovs",
+            "-q",
+        ],
         capsys,
     )
     assert code == 0, err
@@ -112,7 +123,9 @@ def test_output_equal_to_input_is_refused(
 
 
 def test_existing_output_overwrite_and_skip(
-    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    sequence: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
     reference: dict[int, np.ndarray],
 ) -> None:
     out = tmp_path / "out"
@@ -122,8 +135,10 @@ def test_existing_output_overwrite_and_skip(
     args = ["denoise", sequence / "in.####.exr", "-o", out / "out.####.exr", "-q"]
     code, _, err = run_cli(args, capsys)
     assert code == 4
-    assert err == f"ERROR: {existing}: output exists (1 of 8 outputs exist; use --overwrite or " \
-                  "--skip-existing)\n"
+    assert (
+        err == f"ERROR: {existing}: output exists (1 of 8 outputs exist; use --overwrite or "
+        "--skip-existing)\n"
+    )
     assert outputs(out) == [existing]  # nothing written
 
     code, _, err = run_cli([*args, "--skip-existing"], capsys)
@@ -167,9 +182,7 @@ def test_missing_input_and_missing_frames(
     )
     assert code == 0, err
     assert "WARNING: frame(s) 5 missing on disk: history reset at frame 6" in err
-    assert [p.name for p in outputs(out, "o")] == [
-        f"o.{f:04d}.exr" for f in FRAMES if f != 5
-    ]
+    assert [p.name for p in outputs(out, "o")] == [f"o.{f:04d}.exr" for f in FRAMES if f != 5]
 
 
 def test_missing_channel_names_file_and_channel(
@@ -228,13 +241,23 @@ def test_nan_input_warns_and_output_is_finite(
 
 
 def test_frames_selection_and_warmup(
-    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    sequence: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
     reference: dict[int, np.ndarray],
 ) -> None:
     out = tmp_path / "all"
     code, stdout, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", out / "o.####.exr", "--frames", "5-8x3,6",
-         "--warmup", "all"],
+        [
+            "denoise",
+            sequence / "in.####.exr",
+            "-o",
+            out / "o.####.exr",
+            "--frames",
+            "5-8x3,6",
+            "--warmup",
+            "all",
+        ],
         capsys,
     )
     assert code == 0, err
@@ -245,8 +268,17 @@ def test_frames_selection_and_warmup(
 
     cold = tmp_path / "cold"
     code, _, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", cold / "o.####.exr", "--frames", "8",
-         "--warmup", "0", "-q"],
+        [
+            "denoise",
+            sequence / "in.####.exr",
+            "-o",
+            cold / "o.####.exr",
+            "--frames",
+            "8",
+            "--warmup",
+            "0",
+            "-q",
+        ],
         capsys,
     )
     assert code == 0, err
@@ -257,8 +289,18 @@ def test_dry_run_writes_nothing(
     sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code, stdout, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o" / "o.####.exr", "--dry-run",
-         "--chunk-size", "3", "--warmup", "2", "-q"],
+        [
+            "denoise",
+            sequence / "in.####.exr",
+            "-o",
+            tmp_path / "o" / "o.####.exr",
+            "--dry-run",
+            "--chunk-size",
+            "3",
+            "--warmup",
+            "2",
+            "-q",
+        ],
         capsys,
     )
     assert code == 0, err
@@ -276,8 +318,15 @@ def test_compression_follows_input_and_lossy_data_is_refused(
     assert code == 0, err
     assert read_pixels(tmp_path / "o.exr")[1].get_string_attribute("compression") == "piz"
     code, _, err = run_cli(
-        ["denoise", tmp_path / "seq" / "in.0001.exr", "-o", tmp_path / "d.exr",
-         "--compression", "dwaa", "--debug-aovs"],
+        [
+            "denoise",
+            tmp_path / "seq" / "in.0001.exr",
+            "-o",
+            tmp_path / "d.exr",
+            "--compression",
+            "dwaa",
+            "--debug-aovs",
+        ],
         capsys,
     )
     assert code == 2 and "dwaa" in err and not (tmp_path / "d.exr").exists()
@@ -287,8 +336,19 @@ def test_params_options_override_the_preset(
     sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code, stdout, err = run_cli(
-        ["denoise", sequence / "in.0001.exr", "-o", tmp_path / "o.exr", "--frames", "1",
-         "--preset", "falcor", "--sigma-luminance", "6", "--no-temporal"],
+        [
+            "denoise",
+            sequence / "in.0001.exr",
+            "-o",
+            tmp_path / "o.exr",
+            "--frames",
+            "1",
+            "--preset",
+            "falcor",
+            "--sigma-luminance",
+            "6",
+            "--no-temporal",
+        ],
         capsys,
     )
     assert code == 0, err
@@ -305,8 +365,18 @@ def test_params_options_override_the_preset(
 
 def test_json_progress(sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, stdout, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr", "--frames", "3-4",
-         "--warmup", "1", "--progress", "json"],
+        [
+            "denoise",
+            sequence / "in.####.exr",
+            "-o",
+            tmp_path / "o.####.exr",
+            "--frames",
+            "3-4",
+            "--warmup",
+            "1",
+            "--progress",
+            "json",
+        ],
         capsys,
     )
     assert code == 0, err
@@ -317,7 +387,9 @@ def test_json_progress(sequence: Path, tmp_path: Path, capsys: pytest.CaptureFix
 
 
 def test_explicit_file_list_and_directory_output(
-    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    sequence: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
     reference: dict[int, np.ndarray],
 ) -> None:
     files = [sequence / f"in.{f:04d}.exr" for f in (1, 2, 3)]

@@ -60,24 +60,52 @@ def test_plan_json(capsys: pytest.CaptureFixture[str]) -> None:
     )
     assert code == 0, err
     plan = json.loads(out)
-    assert plan[0] == {"chunk": 0, "read": [1001, 1025], "write": [1001, 1025],
-                       "frames": "1001-1025"}
-    assert plan[3] == {"chunk": 3, "read": [1060, 1100], "write": [1076, 1100],
-                       "frames": "1076-1100"}
+    assert plan[0] == {
+        "chunk": 0,
+        "read": [1001, 1025],
+        "write": [1001, 1025],
+        "frames": "1001-1025",
+    }
+    assert plan[3] == {
+        "chunk": 3,
+        "read": [1060, 1100],
+        "write": [1076, 1100],
+        "frames": "1076-1100",
+    }
 
 
 def test_plan_commands(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run_cli(
-        ["plan", "--frames", "1-10", "--chunk-size", "4", "--warmup", "3", "--format",
-         "commands", "--", "shots/in.####.exr", "-o", "den dir/out.####.exr", "--float"],
+        [
+            "plan",
+            "--frames",
+            "1-10",
+            "--chunk-size",
+            "4",
+            "--warmup",
+            "3",
+            "--format",
+            "commands",
+            "--",
+            "shots/in.####.exr",
+            "-o",
+            "den dir/out.####.exr",
+            "--float",
+        ],
         capsys,
     )
     assert code == 0, err
     lines = out.strip().splitlines()
     assert len(lines) == 3
     words = shlex.split(lines[1])
-    assert words[:6] == ["svgf", "denoise", "shots/in.####.exr", "-o", "den dir/out.####.exr",
-                         "--float"]
+    assert words[:6] == [
+        "svgf",
+        "denoise",
+        "shots/in.####.exr",
+        "-o",
+        "den dir/out.####.exr",
+        "--float",
+    ]
     assert words[6:] == ["--frames", "5-8", "--warmup", "3"]
 
 

@@ -37,8 +37,14 @@ def test_json_events() -> None:
     progress.finish()
     events = [json.loads(line) for line in out.getvalue().splitlines()]
     assert [e["event"] for e in events] == ["warmup", "frame_done", "frame_done", "done"]
-    assert events[1] == {"event": "frame_done", "frame": 2, "index": 1, "total": 2,
-                         "seconds": 0.5, "percent": 50}
+    assert events[1] == {
+        "event": "frame_done",
+        "frame": 2,
+        "index": 1,
+        "total": 2,
+        "seconds": 0.5,
+        "percent": 50,
+    }
     # Start-up information goes to stderr so stdout stays pure JSON.
     assert "svgf start-up line" in err.getvalue()
 

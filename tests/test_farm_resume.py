@@ -66,7 +66,9 @@ def assert_no_partial_files(folder: Path, reference: dict[str, bytes]) -> list[s
 
 
 def test_sigkill_midway_then_resume_equals_uninterrupted_run(
-    sequence: Path, tmp_path: Path, reference: dict[str, bytes],
+    sequence: Path,
+    tmp_path: Path,
+    reference: dict[str, bytes],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     out = tmp_path / "out"
@@ -98,4 +100,3 @@ def test_signal_finishes_frame_in_flight_and_exits(
     last = int(err.split("interrupted by")[1].split("frame ")[1].split(" ")[0])
     assert f"o.{last:04d}.exr" in done
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
-

@@ -103,8 +103,11 @@ def quiet() -> Progress:
 
 def tasks_for(tmp_path: Path, frames: range, warmup: int = 0) -> list[FrameTask]:
     return [
-        FrameTask(f, tmp_path / f"in.{f:04d}.exr",
-                  None if i < warmup else tmp_path / "out" / f"out.{f:04d}.exr")
+        FrameTask(
+            f,
+            tmp_path / f"in.{f:04d}.exr",
+            None if i < warmup else tmp_path / "out" / f"out.{f:04d}.exr",
+        )
         for i, f in enumerate(frames)
     ]
 
@@ -113,8 +116,12 @@ def run(tasks: list[FrameTask], reader: FakeReader | None = None, **kwargs: Any)
     (tasks[0].input.parent / "out").mkdir(exist_ok=True)
     factory = kwargs.pop("factory", FakeDenoiser)
     return run_sequence(
-        tasks, CONFIG, kwargs.pop("progress", quiet()), make_denoiser=factory,
-        read=reader or FakeReader(), **kwargs,
+        tasks,
+        CONFIG,
+        kwargs.pop("progress", quiet()),
+        make_denoiser=factory,
+        read=reader or FakeReader(),
+        **kwargs,
     )
 
 
@@ -138,8 +145,9 @@ def test_reads_run_at_most_one_frame_ahead(tmp_path: Path) -> None:
     ]
 
 
-@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, EXIT_SIGINT),
-                                              (signal.SIGTERM, EXIT_SIGTERM)])
+@pytest.mark.parametrize(
+    ("signum", "code"), [(signal.SIGINT, EXIT_SIGINT), (signal.SIGTERM, EXIT_SIGTERM)]
+)
 def test_signal_finishes_the_frame_in_flight(tmp_path: Path, signum: int, code: int) -> None:
     def factory(params: SVGFParams, debug: bool) -> FakeDenoiser:
         d = FakeDenoiser(params, debug)
@@ -195,9 +203,14 @@ def test_history_from_other_params_is_refused(tmp_path: Path) -> None:
     run(tasks_for(tmp_path, range(1, 3)), save_history_to=history)
     other = RunConfig(params=SVGFParams(alpha=0.05), preset="paper", mapping=None)
     with pytest.raises(UsageError, match=r"alpha 0\.2 \(saved\) != 0\.05"):
-        run_sequence(tasks_for(tmp_path, range(3, 5)), other, quiet(),
-                     history=load_history(history), make_denoiser=FakeDenoiser,
-                     read=FakeReader())
+        run_sequence(
+            tasks_for(tmp_path, range(3, 5)),
+            other,
+            quiet(),
+            history=load_history(history),
+            make_denoiser=FakeDenoiser,
+            read=FakeReader(),
+        )
 
 
 def test_history_file_that_is_not_ours(tmp_path: Path) -> None:

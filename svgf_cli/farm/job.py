@@ -164,7 +164,6 @@ def build_job(
         )
     write_frames = [f for f in selected if not (skip_existing and f in existing)]
 
-
     chunks = plan_chunks(write_frames, [f for f, _ in usable], chunk_size=chunk_size, warmup=warmup)
     chunk_tasks: list[list[FrameTask]] = []
     for chunk in chunks:

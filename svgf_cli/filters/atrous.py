@@ -45,10 +45,36 @@ def luminance_stop_guides(
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
 ) -> None:
-    """Per pixel and signal: ``l(p)`` and ``1 / (sigma_l sqrt(g3x3(Var)) + eps)`` (eq. 5)."""
+    """Per pixel and signal: ``l(p)`` and ``1 / (sigma_l sqrt(g3x3(Var)) + eps)`` (eq. 5).
+
+    The 3x3 Gaussian is renormalised over in-image surface pixels (background variance is
+    meaningless); a pixel without any such neighbour keeps its own variance.
+    """
     num_signals = illumination.shape[0]
     height, width = depth.shape
     for y in prange(height):
+        total = np.zeros((num_signals, width), dtype=np.float32)
+        weight = np.zeros(width, dtype=np.float32)
+        surface = np.empty(width, dtype=np.float32)
+        for dy in range(-1, 2):
+            yy = y + dy
+            if yy < 0 or yy >= height:
+                continue
+            for dx in range(-1, 2):
+                x0 = max(0, -dx)
+                x1 = min(width, width - dx)
+                count = x1 - x0
+                k = _G1[dy + 1] * _G1[dx + 1]
+                z_q = depth[yy, x0 + dx:x1 + dx]
+                w = weight[x0:x1]
+                for i in range(count):
+                    surface[i] = k if z_q[i] > _ZERO else _ZERO
+                    w[i] += surface[i]
+                for s in range(num_signals):
+                    v_q = variance[s, yy, x0 + dx:x1 + dx]
+                    t = total[s, x0:x1]
+                    for i in range(count):
+                        t[i] += surface[i] * v_q[i]
         for s in range(num_signals):
             r = illumination[s, 0, y]
             g = illumination[s, 1, y]
@@ -56,24 +82,14 @@ def luminance_stop_guides(
             lum = out_luminance[s, y]
             for x in range(width):
                 lum[x] = luminance(r[x], g[x], b[x])
+            own = variance[s, y]
+            t = total[s]
             inv_scale = out_inverse_scale[s, y]
             for x in range(width):
-                total = _ZERO
-                weight = _ZERO
-                for dy in range(-1, 2):
-                    yy = y + dy
-                    if yy < 0 or yy >= height:
-                        continue
-                    for dx in range(-1, 2):
-                        xx = x + dx
-                        if xx < 0 or xx >= width or depth[yy, xx] <= _ZERO:
-                            continue
-                        k = _G1[dy + 1] * _G1[dx + 1]
-                        total += k * variance[s, yy, xx]
-                        weight += k
-                filtered = total / weight if weight > _ZERO else variance[s, y, x]
-                inv_scale[x] = _ONE / (sigma_luminance * np.sqrt(max(filtered, _ZERO)
-                                                                  + _VARIANCE_EPSILON))
+                filtered = t[x] / weight[x] if weight[x] > _ZERO else own[x]
+                inv_scale[x] = _ONE / (
+                    sigma_luminance * np.sqrt(max(filtered, _ZERO) + _VARIANCE_EPSILON)
+                )
 
 
 @njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")

@@ -21,7 +21,12 @@ from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
-from svgf_cli.filters.modulate import demodulate, remodulate, restore_background
+from svgf_cli.filters.modulate import (
+    demodulate,
+    filter_normals,
+    remodulate,
+    restore_background,
+)
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.reproject import accumulate, reproject
 from svgf_cli.filters.taa import taa_resolve
@@ -54,6 +59,7 @@ class _Workspace:
         h, w, s = self.height, self.width, self.num_signals
         shapes: dict[str, tuple[int, ...]] = {
             "normal": (3, h, w),
+            "filter_normal": (3, h, w),
             "ddx": (h, w),
             "ddy": (h, w),
             "depth_slope": (h, w),
@@ -69,6 +75,7 @@ class _Workspace:
             "variance": (s, h, w),
             "blurred": (s, 3, h, w),
             "ping_illumination": (s, 3, h, w),
+            "feedback_illumination": (s, 3, h, w),
             "pong_illumination": (s, 3, h, w),
             "ping_variance": (s, h, w),
             "pong_variance": (s, h, w),
@@ -144,6 +151,10 @@ class Denoiser:
         unit_normals(frame.normal, depth, normal)
         depth_gradients(depth, work["ddx"], work["ddy"], work["depth_slope"])
         normal_gradient(normal, depth, work["normal_width"])
+        # Spatial weights use filter_normal (negated where not demodulated); reprojection
+        # compares the true normals.
+        filter_normal = work["filter_normal"]
+        filter_normals(normal, frame.albedo, F32(p.albedo_epsilon), filter_normal)
         lap("gradients")
 
         # Demodulate each signal; emission belongs to direct (split) or color (combined).
@@ -190,43 +201,47 @@ class Denoiser:
         lap("reproject")
 
         variance = work["variance"]
-        blurred = work["blurred"] if p.spatial_variance_blur_color else None
+        blur = p.spatial_variance_blur_color
         estimate_variance(
-            accumulated, moments, history_length, depth, work["ddx"], work["ddy"], normal,
+            accumulated, moments, history_length, depth, work["ddx"], work["ddy"], filter_normal,
             history_threshold=float(p.variance_history_threshold),
             radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
             sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
-            sigma_normal=p.sigma_normal, out_variance=variance, out_illumination=blurred,
+            sigma_normal=p.sigma_normal, out_variance=variance,
+            out_illumination=work["blurred"] if blur else None,
         )
-        filtered = blurred if blurred is not None else accumulated
+        filtered_name = "blurred" if blur else "accumulated"
         lap("variance")
 
         # The colour history: the unfiltered accumulation unless an iteration feeds back.
+        # That iteration writes to its own buffer so later iterations cannot overwrite it.
         feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
-        history_source = filtered if feedback < 0 else None
+        history_name = filtered_name
+        filtered = work[filtered_name]
         filtered_variance = variance
         targets = (
-            (work["ping_illumination"], work["ping_variance"]),
-            (work["pong_illumination"], work["pong_variance"]),
+            ("ping_illumination", "ping_variance"),
+            ("pong_illumination", "pong_variance"),
         )
         for iteration in range(p.atrous_iterations):
             luminance_stop_guides(filtered, filtered_variance, depth, F32(p.sigma_luminance),
                                   work["guide_luminance"], work["guide_inverse_scale"])
-            out_illumination, out_variance = targets[iteration % 2]
+            out_name, variance_name = targets[iteration % 2]
+            if iteration == feedback:
+                out_name = history_name = "feedback_illumination"
+            out_illumination, out_variance = work[out_name], work[variance_name]
             atrous_iteration(
                 filtered, filtered_variance, work["guide_luminance"],
-                work["guide_inverse_scale"], depth, work["ddx"], work["ddy"], normal,
+                work["guide_inverse_scale"], depth, work["ddx"], work["ddy"], filter_normal,
                 1 << iteration, F32(p.sigma_depth), self._squarings, F32(p.sigma_normal),
                 out_illumination, out_variance,
             )
             filtered, filtered_variance = out_illumination, out_variance
-            if iteration == feedback:
-                history_source = filtered
         lap("atrous")
 
-        # Keep the history before the ping-pong buffers are reused by the next frame.
-        assert history_source is not None
-        self._store_history(frame, history_source, moments, history_length)
+        # Hand this frame's buffers to the history by swapping (no copies); the workspace
+        # takes the stale history arrays and overwrites them next frame.
+        self._store_history(frame, history_name)
         lap("reproject")
 
         radiance = work["radiance"]
@@ -344,30 +359,31 @@ class Denoiser:
             self._work = work
         return work
 
-    def _store_history(
-        self,
-        frame: Frame,
-        illumination: np.ndarray,
-        moments: np.ndarray,
-        history_length: np.ndarray,
-    ) -> None:
+    def _store_history(self, frame: Frame, illumination_name: str) -> None:
+        work = self._work
+        assert work is not None
         history = self._history
-        if history is None or history["history_illumination"].shape != illumination.shape:
+        if history is None or history["history_illumination"].shape != (
+            work[illumination_name].shape
+        ):
             history = {
-                "history_illumination": np.empty_like(illumination),
-                "history_moments": np.empty_like(moments),
-                "history_length": np.empty_like(history_length),
+                "history_illumination": np.empty_like(work[illumination_name]),
+                "history_moments": np.empty_like(work["moments"]),
+                "history_length": np.empty_like(work["history_length"]),
                 "prev_depth": np.empty_like(frame.depth),
-                "prev_normal": np.empty_like(frame.normal),
+                "prev_normal": np.empty_like(work["normal"]),
                 "prev_mesh_id": np.empty_like(frame.mesh_id),
             }
             self._history = history
-        assert self._work is not None
-        np.copyto(history["history_illumination"], illumination)
-        np.copyto(history["history_moments"], moments)
-        np.copyto(history["history_length"], history_length)
+        for key, name in (
+            ("history_illumination", illumination_name),
+            ("history_moments", "moments"),
+            ("history_length", "history_length"),
+            ("prev_normal", "normal"),
+        ):
+            history[key], work.planes[name] = work.planes[name], history[key]
+        # The frame's planes belong to the caller: copy.
         np.copyto(history["prev_depth"], frame.depth)
-        np.copyto(history["prev_normal"], self._work["normal"])
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
 
 

@@ -6,7 +6,9 @@ Remodulating with the same floored albedo makes the pair an exact inverse (a con
 stays constant even where one albedo channel is below ``eps``). Pixels whose albedo is below
 ``eps`` in every channel (black or metallic surfaces) are not demodulated at all: dividing
 by the floor would turn their noise into huge illumination values, so they are filtered as
-radiance (albedo treated as 1).
+radiance (albedo treated as 1) - and only among themselves: :func:`filter_normals` negates
+their normal for the edge-stopping weights, so ``max(0, n.n')`` is 0 between a demodulated
+and a non-demodulated pixel and radiance never mixes with illumination.
 """
 
 from __future__ import annotations
@@ -102,3 +104,19 @@ def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
         o = out[y]
         for x in range(width):
             o[x] = luminance(r[x], g[x], b[x])
+
+
+@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+def filter_normals(
+    unit_normal: np.ndarray, albedo: np.ndarray, eps: np.float32, out: np.ndarray
+) -> None:
+    """Normals for the spatial weights: negated where the pixel is not demodulated."""
+    height, width = unit_normal.shape[1], unit_normal.shape[2]
+    for y in prange(height):
+        for x in range(width):
+            sign = _ONE
+            if albedo[0, y, x] < eps and albedo[1, y, x] < eps and albedo[2, y, x] < eps:
+                sign = -_ONE
+            out[0, y, x] = sign * unit_normal[0, y, x]
+            out[1, y, x] = sign * unit_normal[1, y, x]
+            out[2, y, x] = sign * unit_normal[2, y, x]

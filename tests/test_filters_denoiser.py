@@ -1,0 +1,303 @@
+"""The whole SVGF pipeline through the public Denoiser API."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+from synthetic import (
+    edge_geometry,
+    make_frame,
+    static_sequence,
+    texture,
+    translating_sequence,
+)
+
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.params import SVGFParams, resolve_params
+
+F32 = np.float32
+
+
+def _radiance(frame) -> np.ndarray:
+    if frame.split:
+        return frame.direct + frame.indirect
+    return frame.color
+
+
+def _run(params: SVGFParams, frames, debug: bool = False):
+    denoiser = Denoiser(params, debug_layers=debug)
+    return [denoiser.process(f) for f in frames], denoiser
+
+
+@pytest.mark.parametrize("split", [True, False])
+def test_constant_input_stays_constant_everywhere(split: bool) -> None:
+    h, w = 20, 26
+    albedo = texture(w, h, seed=4)
+    depth = np.full((h, w), 4.0, dtype=F32)
+    depth[:3] = 0.0  # background rows pass through
+    motion = np.zeros((2, h, w), dtype=F32)
+    motion[0] = -0.6  # sub-pixel pan: bilinear history everywhere, 3x3 at the border
+    frames = [
+        make_frame(w, h, illumination=(0.7, 0.5, 0.3), albedo=albedo, emission=(0.1, 0.0, 0.2),
+                   depth=depth, motion=motion, split=split, seed=i)
+        for i in range(4)
+    ]
+    outputs, _ = _run(resolve_params("paper"), frames)
+    for frame, out in zip(frames, outputs, strict=True):
+        np.testing.assert_allclose(out.color, _radiance(frame), rtol=2e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["depth", "normal"])
+def test_no_spatial_leakage_across_geometry_edges(kind: str) -> None:
+    h, w = 16, 32
+    z, normal, mesh = edge_geometry(w, h, kind)
+    illumination = np.ones((3, h, w), dtype=F32)
+    illumination[:, :, w // 2:] = 3.0
+    # Luminance stop disabled: only depth/normal may stop the blur.
+    params = resolve_params("paper", sigma_luminance=1e6)
+
+    def left_of_edge(edge_kind: str) -> float:
+        zz, nn, mm = edge_geometry(w, h, edge_kind)
+        frame = make_frame(w, h, illumination=illumination, albedo=1.0, noise=0.2, seed=1,
+                           split=False, depth=zz, normal=nn, mesh_id=mm)
+        out = Denoiser(params).process(frame).color
+        return float(out[:, :, w // 2 - 3:w // 2].mean())
+
+    assert abs(left_of_edge(kind) - 1.0) < 0.1
+    assert left_of_edge("none") > 1.3  # the same setup without the edge does blur across
+
+
+def test_no_temporal_leakage_across_mesh_id_change() -> None:
+    h, w = 12, 16
+    params = resolve_params("paper", atrous_iterations=0)
+    mesh_before = np.ones((h, w), dtype=np.int32)
+    mesh_after = mesh_before.copy()
+    mesh_after[:, 8:] = 2  # a different object now covers the right half, same depth/normal
+    illum_after = np.ones((3, h, w), dtype=F32)
+    illum_after[:, :, 8:] = 4.0
+    frames = [make_frame(w, h, split=False, mesh_id=mesh_before, seed=i) for i in range(3)]
+    frames.append(make_frame(w, h, split=False, mesh_id=mesh_after, illumination=illum_after))
+    outputs, _ = _run(params, frames, debug=True)
+    last = outputs[-1]
+    np.testing.assert_array_equal(last.layers["history_length"][:, 8:], 1.0)
+    np.testing.assert_array_equal(last.layers["history_length"][:, :8], 4.0)
+    np.testing.assert_allclose(last.color[:, :, 8:], _radiance(frames[-1])[:, :, 8:], rtol=1e-6)
+
+
+def test_static_noisy_sequence_converges_and_variance_tracks_truth() -> None:
+    h, w, n, noise, alpha = 24, 24, 30, 0.25, 0.2
+    frames = static_sequence(n, w, h, split=False, illumination=1.0, albedo=0.5, noise=noise)
+    params = resolve_params("paper", atrous_iterations=0)
+    outputs, _ = _run(params, frames, debug=True)
+    truth = 0.5  # albedo * illumination
+    error = outputs[-1].color - truth
+    assert abs(float(error.mean())) < 0.01
+    # An exponential moving average keeps sum(w_i^2) of the per-frame noise.
+    weight_sq = 0.0
+    for h_len in range(1, n + 1):
+        a = max(alpha, 1.0 / h_len)
+        weight_sq = (1.0 - a) ** 2 * weight_sq + a**2
+    expected_rms = 0.5 * noise * np.sqrt(weight_sq)
+    rms = float(np.sqrt(np.mean(error**2)))
+    assert 0.85 < rms / expected_rms < 1.15
+    assert float(np.sqrt(np.mean((_radiance(frames[-1]) - truth) ** 2))) > 2.5 * rms
+    # Integrated moments: E[m2 - m1^2] = sigma^2 (1 - sum w^2) (illumination luminance).
+    variance = outputs[-1].layers["variance.color"]
+    expected_variance = noise**2 * (1.0 - weight_sq)
+    assert abs(float(variance.mean()) / expected_variance - 1.0) < 0.1
+    np.testing.assert_array_equal(outputs[-1].layers["history_length"], float(n))
+
+
+def test_filtering_reduces_error_of_noisy_input() -> None:
+    frames = static_sequence(6, 32, 24, illumination=1.0, noise=0.3, seed=3)
+    outputs, _ = _run(resolve_params("paper"), frames)
+    truth = make_frame(32, 24, illumination=1.0)
+    noisy_rms = np.sqrt(np.mean((_radiance(frames[-1]) - _radiance(truth)) ** 2))
+    out_rms = np.sqrt(np.mean((outputs[-1].color - _radiance(truth)) ** 2))
+    assert out_rms < 0.25 * noisy_rms
+
+
+def test_translating_sequence_without_noise_is_reproduced() -> None:
+    frames = translating_sequence(4, 40, 24, velocity=(1.5, 0.25), split=True, frequency=0.12)
+    params = resolve_params("paper", atrous_iterations=0)
+    outputs, _ = _run(params, frames)
+    inner = np.s_[:, 4:-4, 8:-4]  # away from where the pan uncovers new content
+    error = np.abs(outputs[-1].color - _radiance(frames[-1]))[inner]
+    assert error.max() < 1e-3
+
+
+def test_disocclusion_resets_history() -> None:
+    h, w, speed = 16, 32, 6
+    frames = []
+    for i in range(4):
+        depth = np.full((h, w), 8.0, dtype=F32)
+        mesh = np.ones((h, w), dtype=np.int32)
+        x0 = 2 + speed * i  # a box moving right over a wall
+        depth[4:12, x0:x0 + 6] = 3.0
+        mesh[4:12, x0:x0 + 6] = 2
+        motion = np.zeros((2, h, w), dtype=F32)
+        motion[0, 4:12, x0:x0 + 6] = -speed
+        frames.append(make_frame(w, h, depth=depth, mesh_id=mesh, motion=motion, noise=0.1,
+                                 seed=i))
+    outputs, _ = _run(resolve_params("paper"), frames, debug=True)
+    length = outputs[-1].layers["history_length"]
+    x0 = 2 + speed * 3
+    # Wall uncovered this frame. Its rim may reuse the wall that was visible right next to
+    # it (the paper's 3x3 fallback); the interior has no consistent history at all.
+    uncovered = length[4:12, x0 - speed:x0]
+    assert np.all(uncovered[1:-1, 1:-1] == 1.0)
+    assert np.all(length[4:12, x0:x0 + 6] == 4.0)  # the box, followed by its motion
+    assert np.all(length[:4] == 4.0)  # static wall
+
+
+def test_motion_outside_frame_and_zero_albedo_do_not_blow_up() -> None:
+    h, w = 12, 14
+    albedo = np.full((3, h, w), 0.6, dtype=F32)
+    albedo[:, 4:8, 4:8] = 0.0
+    motion = np.zeros((2, h, w), dtype=F32)
+    motion[0, :, :5] = -1e4
+    frames = [make_frame(w, h, albedo=albedo, motion=motion, noise=0.3, seed=i,
+                         emission=(0.0, 0.0, 0.0)) for i in range(3)]
+    outputs, _ = _run(resolve_params("paper"), frames, debug=True)
+    for out in outputs:
+        assert np.all(np.isfinite(out.color))
+    # Black albedo: radiance there is only noise around 0; the output stays that small.
+    assert float(np.abs(outputs[-1].color[:, 4:8, 4:8]).max()) < 0.5
+    np.testing.assert_array_equal(outputs[-1].layers["history_length"][:, :5], 1.0)
+
+
+def test_two_runs_are_bit_identical_across_thread_counts() -> None:
+    frames = translating_sequence(3, 36, 20, noise=0.2, seed=9)
+    params = resolve_params("paper", firefly_clamp=3.0, history_clamp=2.0, taa=True)
+    first, _ = _run(params, frames, debug=True)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        second, _ = _run(params, frames, debug=True)
+    finally:
+        numba.set_num_threads(threads)
+    for a, b in zip(first, second, strict=True):
+        assert a.color.tobytes() == b.color.tobytes()
+        assert a.layers.keys() == b.layers.keys()
+        for key in a.layers:
+            assert a.layers[key].tobytes() == b.layers[key].tobytes()
+
+
+def test_state_round_trip_continues_bit_identically() -> None:
+    frames = translating_sequence(5, 30, 18, noise=0.2, seed=4)
+    params = resolve_params("falcor", taa=True)
+    reference, denoiser = _run(params, frames[:3])
+    state = denoiser.state()
+    tail_a = [denoiser.process(f).color for f in frames[3:]]
+    resumed = Denoiser(params)
+    resumed.load_state(state)
+    assert resumed.frames_processed == 3
+    tail_b = [resumed.process(f).color for f in frames[3:]]
+    for a, b in zip(tail_a, tail_b, strict=True):
+        assert a.tobytes() == b.tobytes()
+    with pytest.raises(ValueError, match="different parameters"):
+        Denoiser(resolve_params("paper")).load_state(state)
+    broken = dict(state)
+    broken["history_length"] = np.zeros((4, 4), dtype=F32)
+    with pytest.raises(ValueError, match="history_length"):
+        Denoiser(params).load_state(broken)
+
+
+def test_reset_makes_the_next_frame_cold() -> None:
+    frames = static_sequence(3, 16, 12, noise=0.2)
+    denoiser = Denoiser(resolve_params("paper"), debug_layers=True)
+    for f in frames:
+        denoiser.process(f)
+    denoiser.reset()
+    assert denoiser.frames_processed == 0
+    out = denoiser.process(frames[0])
+    np.testing.assert_array_equal(out.layers["history_length"], 1.0)
+
+
+def test_resolution_change_raises() -> None:
+    denoiser = Denoiser(resolve_params("paper"))
+    denoiser.process(make_frame(32, 24))
+    with pytest.raises(ValueError, match="resolution changed from 32x24 to 16x16"):
+        denoiser.process(make_frame(16, 16))
+
+
+def test_temporal_off_filters_every_frame_cold() -> None:
+    frames = static_sequence(3, 20, 16, noise=0.3)
+    outputs, _ = _run(resolve_params("paper", temporal=False), frames, debug=True)
+    for frame, out in zip(frames, outputs, strict=True):
+        np.testing.assert_array_equal(out.layers["history_length"], 1.0)
+        assert not np.allclose(out.color, _radiance(frame))
+    single = Denoiser(resolve_params("paper", temporal=False)).process(frames[2]).color
+    assert single.tobytes() == outputs[2].color.tobytes()
+
+
+def test_atrous_off_outputs_the_temporal_accumulation() -> None:
+    frames = static_sequence(2, 20, 16, noise=0.3, split=False)
+    outputs, _ = _run(resolve_params("paper", atrous_iterations=0), frames)
+    # Frame 1 is cold (output = input); frame 2 blends with alpha = 1/2.
+    np.testing.assert_allclose(outputs[0].color, _radiance(frames[0]), rtol=1e-6, atol=1e-7)
+    expected = 0.5 * (_radiance(frames[0]) + _radiance(frames[1]))
+    np.testing.assert_allclose(outputs[1].color, expected, rtol=1e-5, atol=1e-6)
+
+
+def test_firefly_clamp_removes_an_isolated_spike() -> None:
+    frame = make_frame(16, 16, noise=0.05, seed=2, split=False)
+    assert frame.color is not None
+    frame.color[:, 8, 8] = 200.0
+    plain = Denoiser(resolve_params("paper", atrous_iterations=0)).process(frame).color
+    clamped = Denoiser(resolve_params("paper", atrous_iterations=0, firefly_clamp=3.0))
+    out = clamped.process(frame).color
+    assert plain[0, 8, 8] > 100.0
+    assert out[0, 8, 8] < 1.0
+
+
+def test_history_clamp_removes_lag_after_a_lighting_change() -> None:
+    h, w = 16, 16
+    before = static_sequence(8, w, h, split=False, illumination=1.0, noise=0.02)
+    after = make_frame(w, h, split=False, illumination=3.0, noise=0.02, seed=99)
+
+    def last(params: SVGFParams) -> float:
+        outputs, _ = _run(params, [*before, after])
+        return float(outputs[-1].color[:, 4:-4, 4:-4].mean())
+
+    lagging = last(resolve_params("paper", atrous_iterations=0))
+    clamped = last(resolve_params("paper", atrous_iterations=0, history_clamp=1.0))
+    assert lagging < 0.5 * (1.0 + 0.2 * 2.0) + 0.05  # alpha 0.2: mostly old lighting
+    assert clamped > 0.5 * 3.0 * 0.9
+
+
+def test_taa_blends_with_clamped_reprojected_previous_output() -> None:
+    frames = static_sequence(6, 16, 16, split=False, noise=0.3)
+    params = resolve_params("paper", atrous_iterations=0, temporal=False)
+    plain, _ = _run(params, frames)
+    taa, _ = _run(params.replace(taa=True, taa_alpha=0.2), frames)
+    np.testing.assert_array_equal(taa[0].color, plain[0].color)  # nothing to blend yet
+
+    def flicker(outs) -> float:
+        return float(np.mean([np.abs(b.color - a.color).mean()
+                              for a, b in zip(outs[2:], outs[3:], strict=False)]))
+
+    assert flicker(taa) < 0.5 * flicker(plain)
+    # The neighbourhood clamp: a sudden change is never hidden behind old output.
+    bright = make_frame(16, 16, split=False, illumination=5.0)
+    denoiser = Denoiser(params.replace(taa=True, taa_alpha=0.2))
+    for f in frames:
+        denoiser.process(f)
+    np.testing.assert_allclose(denoiser.process(bright).color, _radiance(bright), rtol=1e-6)
+
+
+def test_feedback_iteration_output_becomes_the_history() -> None:
+    frame = make_frame(24, 16, noise=0.3, seed=5)
+    params = resolve_params("paper")  # 5 iterations, feedback from the first
+
+    def history(p: SVGFParams) -> np.ndarray:
+        denoiser = Denoiser(p)
+        denoiser.process(frame)
+        return denoiser.state()["history_illumination"]
+
+    first_only = history(params.replace(atrous_iterations=1))
+    assert history(params).tobytes() == first_only.tobytes()
+    unfiltered = history(params.replace(feedback_iteration=-1))
+    assert not np.array_equal(unfiltered, first_only)
+    np.testing.assert_array_equal(unfiltered, history(params.replace(atrous_iterations=0)))
