@@ -36,11 +36,12 @@ def _plane3(value: ArrayLike, height: int, width: int) -> np.ndarray:
     array = np.asarray(value, dtype=F32)
     if array.ndim == 1:
         array = array.reshape(3, 1, 1)
-    return np.ascontiguousarray(np.broadcast_to(array, (3, height, width)), dtype=F32)
+    # Always a fresh writable copy (a read-only plane would make numba compile twice).
+    return np.array(np.broadcast_to(array, (3, height, width)), dtype=F32, order="C")
 
 
 def _plane(value: float | np.ndarray, height: int, width: int, dtype: type = F32) -> np.ndarray:
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=dtype), (height, width)))
+    return np.array(np.broadcast_to(np.asarray(value, dtype=dtype), (height, width)), order="C")
 
 
 def luminance_noise_variance(noise: float) -> float:

@@ -11,6 +11,7 @@ reused, so memory does not grow with the sequence length.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
@@ -127,6 +128,7 @@ class Denoiser:
     def process(self, frame: Frame) -> DenoisedFrame:
         """Denoise the next frame of the sequence."""
         frame.validate()
+        frame = _writable(frame)
         signals = frame.signals()
         names = tuple(name for name, _ in signals)
         height, width = frame.height, frame.width
@@ -385,6 +387,17 @@ class Denoiser:
         # The frame's planes belong to the caller: copy.
         np.copyto(history["prev_depth"], frame.depth)
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
+
+
+def _writable(frame: Frame) -> Frame:
+    """The frame with read-only planes copied: numba compiles a separate version of every
+    kernel for read-only arrays, which would double the JIT time for no benefit."""
+    planes = {}
+    for f in dataclasses.fields(frame):
+        plane = getattr(frame, f.name)
+        if isinstance(plane, np.ndarray) and not plane.flags.writeable:
+            planes[f.name] = plane.copy()
+    return dataclasses.replace(frame, **planes) if planes else frame
 
 
 def _check_params(p: SVGFParams) -> None:

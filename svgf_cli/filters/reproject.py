@@ -167,18 +167,22 @@ def reproject(
                     + w01 * prev_history_length[yb, xa]
                     + w11 * prev_history_length[yb, xb]
                 )
+                # Index the 4-D arrays directly: a per-pixel sub-array view would cost an
+                # atomic reference-count update, contended between threads.
                 for s in range(num_signals):
                     for c in range(3):
-                        plane = prev_illumination[s, c]
                         out_illumination[s, c, y, x] = (
-                            w00 * plane[ya, xa] + w10 * plane[ya, xb]
-                            + w01 * plane[yb, xa] + w11 * plane[yb, xb]
+                            w00 * prev_illumination[s, c, ya, xa]
+                            + w10 * prev_illumination[s, c, ya, xb]
+                            + w01 * prev_illumination[s, c, yb, xa]
+                            + w11 * prev_illumination[s, c, yb, xb]
                         )
                     for c in range(2):
-                        plane = prev_moments[s, c]
                         out_moments[s, c, y, x] = (
-                            w00 * plane[ya, xa] + w10 * plane[ya, xb]
-                            + w01 * plane[yb, xa] + w11 * plane[yb, xb]
+                            w00 * prev_moments[s, c, ya, xa]
+                            + w10 * prev_moments[s, c, ya, xb]
+                            + w01 * prev_moments[s, c, yb, xa]
+                            + w11 * prev_moments[s, c, yb, xb]
                         )
                 continue
 
@@ -234,46 +238,43 @@ def accumulate(
     """Exponential moving average with adaptive alpha (paper eq. 6, alpha = max(a, 1/h)).
 
     ``history_length_prev`` is the output of :func:`reproject` (0 = no history). Background
-    pixels get history length 0 and their current illumination.
+    pixels get history length 0 and their current illumination. Written branch-free over row
+    slices (a blend factor of exactly 1 where there is no history) so it vectorizes; the
+    history buffers must hold finite values everywhere.
     """
     num_signals = illumination.shape[0]
     height, width = depth.shape
     for y in prange(height):
+        blend = np.empty(width, dtype=np.float32)
+        blend_moments = np.empty(width, dtype=np.float32)
+        h_prev = history_length_prev[y]
+        z = depth[y]
+        h_out = out_history_length[y]
         for x in range(width):
-            h_prev = history_length_prev[y, x]
-            if depth[y, x] <= _ZERO:
-                h = _ZERO
-                a = _ONE
-                a_m = _ONE
-                h_prev = _ZERO
-            elif h_prev > _ZERO:
-                h = min(history_cap, h_prev + _ONE)
-                a = max(alpha, _ONE / h)
-                a_m = max(moments_alpha, _ONE / h)
-            else:
-                h = _ONE
-                a = _ONE
-                a_m = _ONE
-            out_history_length[y, x] = h
-            for s in range(num_signals):
-                r = illumination[s, 0, y, x]
-                g = illumination[s, 1, y, x]
-                b = illumination[s, 2, y, x]
-                lum = luminance(r, g, b)
-                if h_prev > _ZERO:
-                    hr = history_illumination[s, 0, y, x]
-                    hg = history_illumination[s, 1, y, x]
-                    hb = history_illumination[s, 2, y, x]
-                    m1 = history_moments[s, 0, y, x]
-                    m2 = history_moments[s, 1, y, x]
-                    out_illumination[s, 0, y, x] = hr + a * (r - hr)
-                    out_illumination[s, 1, y, x] = hg + a * (g - hg)
-                    out_illumination[s, 2, y, x] = hb + a * (b - hb)
-                    out_moments[s, 0, y, x] = m1 + a_m * (lum - m1)
-                    out_moments[s, 1, y, x] = m2 + a_m * (lum * lum - m2)
-                else:
-                    out_illumination[s, 0, y, x] = r
-                    out_illumination[s, 1, y, x] = g
-                    out_illumination[s, 2, y, x] = b
-                    out_moments[s, 0, y, x] = lum
-                    out_moments[s, 1, y, x] = lum * lum
+            surface = z[x] > _ZERO
+            reused = surface and h_prev[x] > _ZERO
+            h = min(history_cap, h_prev[x] + _ONE) if reused else _ONE
+            h_out[x] = h if surface else _ZERO
+            inv_h = _ONE / h
+            blend[x] = max(alpha, inv_h) if reused else _ONE
+            blend_moments[x] = max(moments_alpha, inv_h) if reused else _ONE
+        for s in range(num_signals):
+            r = illumination[s, 0, y]
+            g = illumination[s, 1, y]
+            b = illumination[s, 2, y]
+            m1_prev = history_moments[s, 0, y]
+            m2_prev = history_moments[s, 1, y]
+            m1 = out_moments[s, 0, y]
+            m2 = out_moments[s, 1, y]
+            for x in range(width):
+                lum = luminance(r[x], g[x], b[x])
+                a = blend_moments[x]
+                m1[x] = (_ONE - a) * m1_prev[x] + a * lum
+                m2[x] = (_ONE - a) * m2_prev[x] + a * (lum * lum)
+            for c in range(3):
+                current = illumination[s, c, y]
+                previous = history_illumination[s, c, y]
+                out = out_illumination[s, c, y]
+                for x in range(width):
+                    a = blend[x]
+                    out[x] = (_ONE - a) * previous[x] + a * current[x]
