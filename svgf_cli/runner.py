@@ -166,6 +166,18 @@ def stop_on_signals(immediate: bool = False) -> Iterator[StopFlag]:
             signal.signal(s, h)
 
 
+def _block_signals() -> None:
+    """Keep SIGINT/SIGTERM off the I/O threads: only the main thread may receive them.
+
+    CPython installs its handlers without SA_RESTART, so a signal delivered to a thread
+    that is inside OpenEXR's read() or write() interrupts the system call (EINTR), which the
+    library does not retry: the frame in flight was read or written wrong. Measured: a
+    SIGINT during a read-ahead made the next written frame differ from the uninterrupted run.
+    """
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+
+
 class DenoiserLike(Protocol):
     frames_processed: int
 
@@ -410,8 +422,8 @@ def run_sequence(
         write_exr(task.output, channels, attributes=attributes, half=half, compression=compression)
         return time.perf_counter() - t0
 
-    reader = ThreadPoolExecutor(1, thread_name_prefix="svgf-read")
-    writer = ThreadPoolExecutor(1, thread_name_prefix="svgf-write")
+    reader = ThreadPoolExecutor(1, thread_name_prefix="svgf-read", initializer=_block_signals)
+    writer = ThreadPoolExecutor(1, thread_name_prefix="svgf-write", initializer=_block_signals)
     pending: tuple[FrameTask, Future[float], float] | None = None
 
     def finish_pending() -> None:

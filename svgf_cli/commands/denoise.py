@@ -53,6 +53,7 @@ def _check_combinations(o: dict[str, Any]) -> None:
 
 @click.command(
     "denoise",
+    short_help="Denoise an EXR sequence with SVGF.",
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
 @click.argument("inputs", nargs=-1, required=True, metavar="INPUTS...")

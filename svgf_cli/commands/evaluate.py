@@ -39,7 +39,7 @@ def _write_text(path: str, text: str) -> None:
         raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from exc
 
 
-@click.command("evaluate")
+@click.command("evaluate", short_help="Score denoised frames against references and baselines.")
 @click.argument("denoised", metavar="DENOISED_PATTERN")
 @click.option(
     "--reference", "-r", required=True, metavar="PATTERN", help="Converged reference frames."

@@ -88,7 +88,7 @@ def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str
     return "\n".join(lines)
 
 
-@click.command("inspect")
+@click.command("inspect", short_help="Show an EXR's parts, channels and resolved layer roles.")
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option(
     "--preset-aovs",

@@ -17,7 +17,9 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
 
 
 @click.command(
-    "plan", context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100}
+    "plan",
+    short_help="Print the chunk list (JSON or commands) for farm submission.",
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100}
 )
 @click.option(
     "-f",

@@ -41,7 +41,7 @@ def resolve_threads(threads: int) -> int:
     return max(1, (os.cpu_count() or 1) if threads <= 0 else threads)
 
 
-@click.command(name="trace")
+@click.command(name="trace", short_help="Path-trace an OBJ scene into SVGF input frames.")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "-o", "--output", "output", required=True, metavar="PATTERN",
