@@ -107,7 +107,21 @@ def bench_size(width: int, height: int, frames: int, warmup: int, preset: str) -
             totals[stage] = totals.get(stage, 0.0) + seconds
     result = {stage: 1e3 * seconds / frames for stage, seconds in totals.items()}
     result["total"] = 1e3 * wall / frames
+    result["buffers_mb"] = denoiser_buffer_bytes(denoiser) / 2**20
     return result
+
+
+def denoiser_buffer_bytes(denoiser: Denoiser) -> int:
+    """Bytes of the full-frame arrays a Denoiser keeps between frames (workspace + history)."""
+    arrays: list[np.ndarray] = []
+    work = denoiser._work
+    if work is not None:
+        arrays += list(work.planes.values())
+    if denoiser._history is not None:
+        arrays += list(denoiser._history.values())
+    if denoiser._taa_previous is not None:
+        arrays.append(denoiser._taa_previous)
+    return sum(a.nbytes for a in arrays)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -124,12 +138,13 @@ def main(argv: list[str] | None = None) -> int:
         result = bench_size(width, height, args.frames, args.warmup, args.preset)
         pixels = width * height
         stages = "  ".join(f"{s} {result.get(s, 0.0):7.1f}" for s in STAGES)
-        extra = sorted(set(result) - set(STAGES) - {"total"})
+        extra = sorted(set(result) - set(STAGES) - {"total", "buffers_mb"})
         if extra:
             stages += "  " + "  ".join(f"{s} {result[s]:7.1f}" for s in extra)
         print(f"{width}x{height}: ms/frame  {stages}")
         print(f"{width}x{height}: total {result['total']:7.1f} ms/frame  "
-              f"{1e6 * result['total'] / pixels:6.1f} ns/pixel")
+              f"{1e6 * result['total'] / pixels:6.1f} ns/pixel  "
+              f"denoiser buffers {result['buffers_mb']:.0f} MB")
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(f"peak RSS {peak_mb:.0f} MB")
     return 0

@@ -37,7 +37,9 @@ _B3 = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0], dtype=
 _G1 = np.array([0.25, 0.5, 0.25], dtype=np.float32)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def luminance_stop_guides(
     illumination: np.ndarray,
     variance: np.ndarray,
@@ -93,7 +95,9 @@ def luminance_stop_guides(
                 )
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def atrous_iteration(
     illumination: np.ndarray,
     variance: np.ndarray,
@@ -107,6 +111,7 @@ def atrous_iteration(
     sigma_depth: np.float32,
     squarings: int,
     sigma_normal: np.float32,
+    propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
 ) -> None:
@@ -114,18 +119,23 @@ def atrous_iteration(
 
     ``guide_*`` come from :func:`luminance_stop_guides` for the same input. Background
     pixels (zero normal) receive no weight from surfaces and pass through unchanged.
+    Without ``propagate_variance`` (the last iteration: nothing reads its variance)
+    ``out_variance`` is not touched and the squared-weight variance sums are skipped.
     Rows are processed in chunks of ``CHUNK`` pixels (bounded scratch memory);
     each inner loop touches few arrays (LLVM gives up vectorizing a loop that would need
     many runtime alias checks).
     """
     for y in prange(depth.shape[0]):
+        # np.int64: the parfor index is uint64 in the gufunc but int64 when typed first,
+        # which would compile the row function twice.
         _atrous_row(
-            y, illumination, variance, guide_luminance, guide_inverse_scale, depth, ddx, ddy,
-            normal, step, sigma_depth, squarings, sigma_normal, out_illumination, out_variance,
+            np.int64(y), illumination, variance, guide_luminance, guide_inverse_scale, depth,
+            ddx, ddy, normal, step, sigma_depth, squarings, sigma_normal, propagate_variance,
+            out_illumination, out_variance,
         )
 
 
-@njit(fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 def _atrous_row(
     y: int,
     illumination: np.ndarray,
@@ -140,6 +150,7 @@ def _atrous_row(
     sigma_depth: np.float32,
     squarings: int,
     sigma_normal: np.float32,
+    propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
 ) -> None:
@@ -160,85 +171,108 @@ def _atrous_row(
         for x in range(0, first):
             for c in range(3):
                 out_illumination[s, c, y, x] = illumination[s, c, y, x]
-            out_variance[s, y, x] = variance[s, y, x]
         for x in range(last, width):
             for c in range(3):
                 out_illumination[s, c, y, x] = illumination[s, c, y, x]
-            out_variance[s, y, x] = variance[s, y, x]
-    if first < last:
-        # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
-        acc = np.empty((num_signals, 5, CHUNK), dtype=np.float32)
-        depth_exponent = np.empty(CHUNK, dtype=np.float32)
-        normal_weight = np.empty(CHUNK, dtype=np.float32)
-        tap_weight = np.empty(CHUNK, dtype=np.float32)
-        for chunk_start in range(first, last, CHUNK):
-            chunk_end = min(last, chunk_start + CHUNK)
-            n = chunk_end - chunk_start
-            for s in range(num_signals):
-                for c in range(3):
-                    sums = acc[s, 1 + c]
-                    values = illumination[s, c, y, chunk_start:chunk_end]
-                    for i in range(n):
-                        sums[i] = centre * values[i]
-                sums = acc[s, 0]
+        if propagate_variance:
+            for x in range(0, first):
+                out_variance[s, y, x] = variance[s, y, x]
+            for x in range(last, width):
+                out_variance[s, y, x] = variance[s, y, x]
+    if first >= last:
+        return
+    # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
+    acc = np.empty((num_signals, 5, CHUNK), dtype=np.float32)
+    depth_exponent = np.empty(CHUNK, dtype=np.float32)
+    normal_weight = np.empty(CHUNK, dtype=np.float32)
+    tap_weight = np.empty(CHUNK, dtype=np.float32)
+    for chunk_start in range(first, last, CHUNK):
+        chunk_end = min(last, chunk_start + CHUNK)
+        n = chunk_end - chunk_start
+        for s in range(num_signals):
+            sum_w = acc[s, 0]
+            sum_r = acc[s, 1]
+            sum_g = acc[s, 2]
+            sum_b = acc[s, 3]
+            r = illumination[s, 0, y, chunk_start:chunk_end]
+            g = illumination[s, 1, y, chunk_start:chunk_end]
+            b = illumination[s, 2, y, chunk_start:chunk_end]
+            for i in range(n):
+                sum_w[i] = centre
+                sum_r[i] = centre * r[i]
+                sum_g[i] = centre * g[i]
+                sum_b[i] = centre * b[i]
+            if propagate_variance:
+                sum_v = acc[s, 4]
+                v = variance[s, y, chunk_start:chunk_end]
                 for i in range(n):
-                    sums[i] = centre
-                sums = acc[s, 4]
-                values = variance[s, y, chunk_start:chunk_end]
-                for i in range(n):
-                    sums[i] = (centre * centre) * values[i]
-            for oy in range(-2, 3):
-                yy = y + oy * step
-                if yy < 0 or yy >= height:
+                    sum_v[i] = (centre * centre) * v[i]
+        for oy in range(-2, 3):
+            yy = y + oy * step
+            if yy < 0 or yy >= height:
+                continue
+            for ox in range(-2, 3):
+                if ox == 0 and oy == 0:
                     continue
-                for ox in range(-2, 3):
-                    if ox == 0 and oy == 0:
-                        continue
-                    d = ox * step
-                    x0 = max(chunk_start, -d)
-                    x1 = min(chunk_end, width - d)
-                    count = x1 - x0
-                    if count <= 0:
-                        continue
-                    a0 = x0 - chunk_start
-                    tap_geometry(
-                        depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
-                        normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
-                        depth[yy, x0 + d:x1 + d],
-                        normal[0, yy, x0 + d:x1 + d], normal[1, yy, x0 + d:x1 + d],
-                        normal[2, yy, x0 + d:x1 + d],
-                        F32(d), F32(oy * step), sigma_depth, squarings, sigma_normal,
-                        _B3[ox + 2] * _B3[oy + 2], depth_exponent, normal_weight, count,
-                    )
-                    for s in range(num_signals):
-                        l_p = guide_luminance[s, y, x0:x1]
-                        inv_p = guide_inverse_scale[s, y, x0:x1]
-                        l_q = guide_luminance[s, yy, x0 + d:x1 + d]
-                        sum_w = acc[s, 0, a0:a0 + count]
-                        for i in range(count):
-                            w = normal_weight[i] * fast_exp(
-                                -(depth_exponent[i] + abs(l_p[i] - l_q[i]) * inv_p[i])
-                            )
-                            tap_weight[i] = w
-                            sum_w[i] += w
-                        for c in range(3):
-                            values = illumination[s, c, yy, x0 + d:x1 + d]
-                            sums = acc[s, 1 + c, a0:a0 + count]
-                            for i in range(count):
-                                sums[i] += tap_weight[i] * values[i]
+                d = ox * step
+                x0 = max(chunk_start, -d)
+                x1 = min(chunk_end, width - d)
+                count = x1 - x0
+                if count <= 0:
+                    continue
+                a0 = x0 - chunk_start
+                tap_geometry(
+                    depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
+                    normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
+                    depth[yy, x0 + d:x1 + d],
+                    normal[0, yy, x0 + d:x1 + d], normal[1, yy, x0 + d:x1 + d],
+                    normal[2, yy, x0 + d:x1 + d],
+                    F32(d), F32(oy * step), sigma_depth, squarings, sigma_normal,
+                    _B3[ox + 2] * _B3[oy + 2], depth_exponent, normal_weight, count,
+                )
+                for s in range(num_signals):
+                    l_p = guide_luminance[s, y, x0:x1]
+                    inv_p = guide_inverse_scale[s, y, x0:x1]
+                    l_q = guide_luminance[s, yy, x0 + d:x1 + d]
+                    sum_w = acc[s, 0, a0:a0 + count]
+                    for i in range(count):
+                        w = normal_weight[i] * fast_exp(
+                            -(depth_exponent[i] + abs(l_p[i] - l_q[i]) * inv_p[i])
+                        )
+                        tap_weight[i] = w
+                        sum_w[i] += w
+                    r_q = illumination[s, 0, yy, x0 + d:x1 + d]
+                    g_q = illumination[s, 1, yy, x0 + d:x1 + d]
+                    b_q = illumination[s, 2, yy, x0 + d:x1 + d]
+                    sum_r = acc[s, 1, a0:a0 + count]
+                    sum_g = acc[s, 2, a0:a0 + count]
+                    sum_b = acc[s, 3, a0:a0 + count]
+                    for i in range(count):
+                        w = tap_weight[i]
+                        sum_r[i] += w * r_q[i]
+                        sum_g[i] += w * g_q[i]
+                        sum_b[i] += w * b_q[i]
+                    if propagate_variance:
                         values = variance[s, yy, x0 + d:x1 + d]
                         sums = acc[s, 4, a0:a0 + count]
                         for i in range(count):
                             sums[i] += (tap_weight[i] * tap_weight[i]) * values[i]
-            for s in range(num_signals):
-                sum_w = acc[s, 0]
-                o_r = out_illumination[s, 0, y, chunk_start:chunk_end]
-                o_g = out_illumination[s, 1, y, chunk_start:chunk_end]
-                o_b = out_illumination[s, 2, y, chunk_start:chunk_end]
+        for s in range(num_signals):
+            sum_w = acc[s, 0]
+            sum_r = acc[s, 1]
+            sum_g = acc[s, 2]
+            sum_b = acc[s, 3]
+            o_r = out_illumination[s, 0, y, chunk_start:chunk_end]
+            o_g = out_illumination[s, 1, y, chunk_start:chunk_end]
+            o_b = out_illumination[s, 2, y, chunk_start:chunk_end]
+            for i in range(n):
+                inv = _ONE / sum_w[i]
+                o_r[i] = sum_r[i] * inv
+                o_g[i] = sum_g[i] * inv
+                o_b[i] = sum_b[i] * inv
+            if propagate_variance:
+                sum_v = acc[s, 4]
                 o_v = out_variance[s, y, chunk_start:chunk_end]
                 for i in range(n):
                     inv = _ONE / sum_w[i]
-                    o_r[i] = acc[s, 1, i] * inv
-                    o_g[i] = acc[s, 2, i] * inv
-                    o_b[i] = acc[s, 3, i] * inv
-                    o_v[i] = acc[s, 4, i] * (inv * inv)
+                    o_v[i] = sum_v[i] * (inv * inv)

@@ -22,7 +22,9 @@ _ZERO = F32(0.0)
 _ONE = F32(1.0)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def firefly_clamp(
     illumination: np.ndarray, depth: np.ndarray, k: np.float32, out: np.ndarray
 ) -> None:
@@ -68,7 +70,9 @@ def firefly_clamp(
                     out[s, 2, y, x] = b * scale
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def history_clamp(
     history: np.ndarray,
     history_length: np.ndarray,

@@ -6,7 +6,13 @@ history (+ optional history clamp) -> accumulate -> variance -> a-trous iteratio
 emission, sum the signals, restore background -> optional TAA.
 
 All buffers are float32 structure-of-arrays planes, allocated once per resolution and
-reused, so memory does not grow with the sequence length.
+reused, so memory does not grow with the sequence length. Scratch is shared between stages
+(names are roles; a buffer is taken on first use): the reprojected history is accumulated in
+place, the a-trous ping-pong reuses the demodulated illumination once it is dead, the
+reprojection thresholds live in the a-trous variance buffers until those are needed, and the
+output radiance is a fresh array per frame handed to the caller (no resident copy).
+At 1080p with two signals the resident set is about 60 float32 planes (~0.5 GB) including
+the history.
 """
 
 from __future__ import annotations
@@ -26,10 +32,11 @@ from svgf_cli.filters.modulate import (
     demodulate,
     filter_normals,
     remodulate,
+    remodulate_add,
     restore_background,
 )
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.filters.reproject import accumulate, reproject
+from svgf_cli.filters.reproject import accumulate_in_place, reproject
 from svgf_cli.filters.taa import taa_resolve
 from svgf_cli.filters.variance import estimate_variance
 from svgf_cli.frame import DenoisedFrame, Frame
@@ -47,50 +54,50 @@ _HISTORY_KEYS = (
 )
 
 
+# Illumination-shaped (S, 3, H, W) scratch roles, in order of preference for a-trous outputs.
+_ILLUMINATION_SCRATCH = ("demodulated", "accumulated", "spare_a", "spare_b", "spare_c")
+
+
 @dataclass
 class _Workspace:
-    """Per-frame scratch buffers for one resolution and signal count (reused every frame)."""
+    """Per-frame scratch buffers for one resolution and signal count (reused every frame).
+
+    A plane is allocated on first use, so optional stages (firefly clamp, colour blur, TAA)
+    cost no memory unless enabled.
+    """
 
     height: int
     width: int
     num_signals: int
     planes: dict[str, np.ndarray] = field(default_factory=dict)
 
-    def __post_init__(self) -> None:
+    def shape(self, name: str) -> tuple[int, ...]:
         h, w, s = self.height, self.width, self.num_signals
+        if name in _ILLUMINATION_SCRATCH:
+            return (s, 3, h, w)
         shapes: dict[str, tuple[int, ...]] = {
             "normal": (3, h, w),
             "filter_normal": (3, h, w),
             "ddx": (h, w),
             "ddy": (h, w),
-            "depth_slope": (h, w),
-            "normal_width": (h, w),
-            "illumination": (s, 3, h, w),
-            "clamped": (s, 3, h, w),
-            "resampled_illumination": (s, 3, h, w),
-            "resampled_moments": (s, 2, h, w),
-            "resampled_length": (h, w),
-            "accumulated": (s, 3, h, w),
+            # resampled and then (in place) accumulated moments and history length
             "moments": (s, 2, h, w),
             "history_length": (h, w),
             "variance": (s, h, w),
-            "blurred": (s, 3, h, w),
-            "ping_illumination": (s, 3, h, w),
-            "feedback_illumination": (s, 3, h, w),
-            "pong_illumination": (s, 3, h, w),
-            "ping_variance": (s, h, w),
-            "pong_variance": (s, h, w),
+            "variance_a": (s, h, w),
+            "variance_b": (s, h, w),
             "guide_luminance": (s, h, w),
             "guide_inverse_scale": (s, h, w),
-            "radiance": (3, h, w),
-            "signal_radiance": (3, h, w),
-            "original": (3, h, w),
             "taa": (3, h, w),
         }
-        self.planes = {name: np.zeros(shape, dtype=F32) for name, shape in shapes.items()}
+        return shapes[name]
 
     def __getitem__(self, name: str) -> np.ndarray:
-        return self.planes[name]
+        plane = self.planes.get(name)
+        if plane is None:
+            plane = np.zeros(self.shape(name), dtype=F32)
+            self.planes[name] = plane
+        return plane
 
 
 class Denoiser:
@@ -151,8 +158,12 @@ class Denoiser:
         depth = frame.depth
         normal = work["normal"]
         unit_normals(frame.normal, depth, normal)
-        depth_gradients(depth, work["ddx"], work["ddy"], work["depth_slope"])
-        normal_gradient(normal, depth, work["normal_width"])
+        # The reprojection thresholds are only needed until the a-trous writes variance:
+        # they borrow its variance buffers (one (H, W) plane each, also with one signal).
+        depth_slope = work["variance_a"][0]
+        normal_width = work["variance_b"][0]
+        depth_gradients(depth, work["ddx"], work["ddy"], depth_slope)
+        normal_gradient(normal, depth, normal_width)
         # Spatial weights use filter_normal (negated where not demodulated); reprojection
         # compares the true normals.
         filter_normal = work["filter_normal"]
@@ -162,83 +173,103 @@ class Denoiser:
         # Demodulate each signal; emission belongs to direct (split) or color (combined).
         emission = frame.emission
         has_emission = emission is not None
-        emission_plane = emission if emission is not None else work["radiance"]
+        # Without emission any (3, H, W) float32 plane will do: the kernels never read it.
+        emission_plane = emission if emission is not None else frame.albedo
         eps = F32(p.albedo_epsilon)
-        illumination = work["illumination"]
-        original = work["original"]
-        original.fill(0.0)
+        illumination = work["demodulated"]
         for index, (_, signal) in enumerate(signals):
             demodulate(signal, emission_plane, has_emission and index == 0, frame.albedo, eps,
                        illumination[index])
-            original += signal
         if p.firefly_clamp > 0.0:
-            firefly_clamp(illumination, depth, F32(p.firefly_clamp), work["clamped"])
-            illumination = work["clamped"]
+            firefly_clamp(illumination, depth, F32(p.firefly_clamp), work["spare_a"])
+            illumination = work["spare_a"]
         lap("demodulate")
 
-        resampled_length = work["resampled_length"]
-        history = self._history
-        if p.temporal and history is not None:
-            reproject(
-                frame.motion, depth, normal, frame.mesh_id, work["depth_slope"],
-                work["normal_width"], history["prev_depth"], history["prev_normal"],
-                history["prev_mesh_id"], history["history_illumination"],
-                history["history_moments"], history["history_length"],
-                F32(p.depth_tolerance), F32(p.depth_slack), F32(p.normal_tolerance),
-                work["resampled_illumination"], work["resampled_moments"], resampled_length,
-            )
-            if p.history_clamp > 0.0:
-                history_clamp(work["resampled_illumination"], resampled_length, illumination,
-                              depth, F32(p.history_clamp))
-        else:
-            resampled_length.fill(0.0)
+        # Reproject into the accumulation buffers and accumulate in place (element-wise).
         accumulated = work["accumulated"]
         moments = work["moments"]
         history_length = work["history_length"]
-        accumulate(
-            illumination, work["resampled_illumination"], work["resampled_moments"],
-            resampled_length, depth, F32(p.alpha), F32(p.moments_alpha), F32(p.history_cap),
-            accumulated, moments, history_length,
+        history = self._history
+        if p.temporal and history is not None:
+            reproject(
+                frame.motion, depth, normal, frame.mesh_id, depth_slope, normal_width,
+                history["prev_depth"], history["prev_normal"], history["prev_mesh_id"],
+                history["history_illumination"], history["history_moments"],
+                history["history_length"], F32(p.depth_tolerance), F32(p.depth_slack),
+                F32(p.normal_tolerance), accumulated, moments, history_length,
+            )
+            if p.history_clamp > 0.0:
+                history_clamp(accumulated, history_length, illumination, depth,
+                              F32(p.history_clamp))
+        else:
+            # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
+            history_length.fill(0.0)
+            accumulated.fill(0.0)
+            moments.fill(0.0)
+        accumulate_in_place(
+            illumination, accumulated, moments, history_length, depth, F32(p.alpha),
+            F32(p.moments_alpha), F32(p.history_cap),
         )
+        busy = {"accumulated"}  # the demodulated (and clamped) illumination is dead now
         lap("reproject")
 
+        def scratch(*protected: str) -> str:
+            """An illumination-shaped buffer name not in ``protected``."""
+            for name in _ILLUMINATION_SCRATCH:
+                if name not in protected:
+                    return name
+            raise AssertionError("out of scratch buffers")
+
         variance = work["variance"]
-        blur = p.spatial_variance_blur_color
+        filtered_name = "accumulated"
+        blurred = None
+        if p.spatial_variance_blur_color:
+            filtered_name = scratch(*busy)
+            blurred = work[filtered_name]
         estimate_variance(
             accumulated, moments, history_length, depth, work["ddx"], work["ddy"], filter_normal,
             history_threshold=float(p.variance_history_threshold),
             radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
             sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
-            sigma_normal=p.sigma_normal, out_variance=variance,
-            out_illumination=work["blurred"] if blur else None,
+            sigma_normal=p.sigma_normal, out_variance=variance, out_illumination=blurred,
         )
-        filtered_name = "blurred" if blur else "accumulated"
         lap("variance")
 
         # The colour history: the unfiltered accumulation unless an iteration feeds back.
-        # That iteration writes to its own buffer so later iterations cannot overwrite it.
+        # That iteration's output is protected so later iterations cannot overwrite it.
+        # The last iteration's propagated variance is never read, so it is not computed.
         feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
         history_name = filtered_name
+        filtered_name_now = filtered_name
         filtered = work[filtered_name]
         filtered_variance = variance
-        targets = (
-            ("ping_illumination", "ping_variance"),
-            ("pong_illumination", "pong_variance"),
-        )
+        # "variance" itself is reported as a debug layer; otherwise it is scratch after use.
+        variance_names = ("variance_a", "variance_b")
+        if not self.debug_layers:
+            variance_names = ("variance_a", "variance", "variance_b")
+        guide_luminance = work["guide_luminance"]
+        guide_inverse_scale = work["guide_inverse_scale"]
         for iteration in range(p.atrous_iterations):
             luminance_stop_guides(filtered, filtered_variance, depth, F32(p.sigma_luminance),
-                                  work["guide_luminance"], work["guide_inverse_scale"])
-            out_name, variance_name = targets[iteration % 2]
+                                  guide_luminance, guide_inverse_scale)
+            out_name = scratch(filtered_name_now, history_name)
             if iteration == feedback:
-                out_name = history_name = "feedback_illumination"
-            out_illumination, out_variance = work[out_name], work[variance_name]
+                history_name = out_name
+            propagate = iteration + 1 < p.atrous_iterations
+            out_variance = filtered_variance  # not written when not propagated
+            if propagate:
+                out_variance = next(
+                    work[v] for v in variance_names if work[v] is not filtered_variance
+                )
+            out_illumination = work[out_name]
             atrous_iteration(
-                filtered, filtered_variance, work["guide_luminance"],
-                work["guide_inverse_scale"], depth, work["ddx"], work["ddy"], filter_normal,
-                1 << iteration, F32(p.sigma_depth), self._squarings, F32(p.sigma_normal),
-                out_illumination, out_variance,
+                filtered, filtered_variance, guide_luminance, guide_inverse_scale, depth,
+                work["ddx"], work["ddy"], filter_normal, 1 << iteration, F32(p.sigma_depth),
+                self._squarings, F32(p.sigma_normal), propagate, out_illumination,
+                out_variance,
             )
             filtered, filtered_variance = out_illumination, out_variance
+            filtered_name_now = out_name
         lap("atrous")
 
         # Hand this frame's buffers to the history by swapping (no copies); the workspace
@@ -246,20 +277,23 @@ class Denoiser:
         self._store_history(frame, history_name)
         lap("reproject")
 
-        radiance = work["radiance"]
-        radiance.fill(0.0)
+        # Remodulate, restore the background and sum the signals straight into a fresh
+        # output array (handed to the caller, so nothing full-frame stays resident).
+        radiance = np.zeros((3, height, width), dtype=F32)
         layers: dict[str, np.ndarray] = {}
-        signal_radiance = work["signal_radiance"]
         for index, (name, signal) in enumerate(signals):
-            remodulate(filtered[index], emission_plane, has_emission and index == 0,
-                       frame.albedo, eps, signal_radiance)
-            radiance += signal_radiance
             if self.debug_layers:
+                signal_radiance = np.empty((3, height, width), dtype=F32)
+                remodulate(filtered[index], emission_plane, has_emission and index == 0,
+                           frame.albedo, eps, signal_radiance)
                 restore_background(signal_radiance, signal, depth)
+                radiance += signal_radiance
                 for c, channel in enumerate("RGB"):
-                    layers[f"{name}.{channel}"] = signal_radiance[c].copy()
+                    layers[f"{name}.{channel}"] = signal_radiance[c]
                 layers[f"variance.{name}"] = variance[index].copy()
-        restore_background(radiance, original, depth)
+            else:
+                remodulate_add(filtered[index], signal, emission_plane,
+                               has_emission and index == 0, frame.albedo, eps, depth, radiance)
         if self.debug_layers:
             layers["history_length"] = history_length.copy()
         lap("modulate")
@@ -274,7 +308,7 @@ class Denoiser:
             output = self._taa_previous.copy()
             lap("taa")
         else:
-            output = radiance.copy()
+            output = radiance
 
         self._frames_processed += 1
         self.stage_seconds = timings
@@ -369,9 +403,9 @@ class Denoiser:
             work[illumination_name].shape
         ):
             history = {
-                "history_illumination": np.empty_like(work[illumination_name]),
-                "history_moments": np.empty_like(work["moments"]),
-                "history_length": np.empty_like(work["history_length"]),
+                "history_illumination": np.zeros_like(work[illumination_name]),
+                "history_moments": np.zeros_like(work["moments"]),
+                "history_length": np.zeros_like(work["history_length"]),
                 "prev_depth": np.empty_like(frame.depth),
                 "prev_normal": np.empty_like(work["normal"]),
                 "prev_mesh_id": np.empty_like(frame.mesh_id),

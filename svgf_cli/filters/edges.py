@@ -36,7 +36,9 @@ def normal_squarings(sigma_normal: float) -> int:
     return -1
 
 
-@njit(inline="always", fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    inline="always", fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def tap_geometry(
     z_p: np.ndarray,
     gx_p: np.ndarray,

@@ -49,7 +49,7 @@ def _int32_bits_as_float32(typingctx, bits):  # type: ignore[no-untyped-def]
     return signature, codegen
 
 
-@njit(inline="always", fastmath=True, cache=True, error_model="numpy")
+@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
 def fast_exp(x: np.float32) -> np.float32:
     """exp(x) for float32 ``x <= 0`` (positive x is treated as 0; below -87 gives ~1e-38)."""
     t = min(max(x * _LOG2E, _EXP2_MIN), _ZERO)
@@ -60,7 +60,7 @@ def fast_exp(x: np.float32) -> np.float32:
     return poly * _int32_bits_as_float32(bits)
 
 
-@njit(inline="always", fastmath=True, cache=True, error_model="numpy")
+@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
 def luminance(r: np.float32, g: np.float32, b: np.float32) -> np.float32:
     """Rec.709 luminance of one linear RGB value."""
     return LUMA_R * r + LUMA_G * g + LUMA_B * b

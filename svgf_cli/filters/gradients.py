@@ -15,7 +15,7 @@ F32 = np.float32
 _ZERO = F32(0.0)
 
 
-@njit(inline="always", fastmath=True, cache=True, error_model="numpy")
+@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
 def _pick_one_sided(
     left_ok: bool, right_ok: bool, left: np.float32, right: np.float32
 ) -> np.float32:
@@ -28,7 +28,9 @@ def _pick_one_sided(
     return _ZERO
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def depth_gradients(depth: np.ndarray, ddx: np.ndarray, ddy: np.ndarray, slope: np.ndarray) -> None:
     """Per-axis depth derivatives ``ddx``, ``ddy`` (signed, depth units per pixel) and the
     reprojection slope ``max(|ddx|, |ddy|)`` (Falcor's ``LinearZ.y``). Background gets 0."""
@@ -62,7 +64,7 @@ def depth_gradients(depth: np.ndarray, ddx: np.ndarray, ddy: np.ndarray, slope: 
             slope[y, x] = max(abs(gx), abs(gy))
 
 
-@njit(inline="always", fastmath=True, cache=True, error_model="numpy")
+@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
 def _normal_step(
     normal: np.ndarray, y: int, x: int, y0: int, x0: int, y1: int, x1: int, ok0: bool, ok1: bool
 ) -> tuple[np.float32, np.float32, np.float32]:
@@ -85,7 +87,9 @@ def _normal_step(
     return d1x, d1y, d1z
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def normal_gradient(normal: np.ndarray, depth: np.ndarray, out: np.ndarray) -> None:
     """``length(fwidth(n))`` with fwidth = |ddx n| + |ddy n| per component (Falcor's
     ``PositionNormalFwidth.y``), one-sided as described in the module docstring."""
@@ -107,7 +111,9 @@ def normal_gradient(normal: np.ndarray, depth: np.ndarray, out: np.ndarray) -> N
             out[y, x] = np.sqrt(fx * fx + fy * fy + fz * fz)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def unit_normals(normal: np.ndarray, depth: np.ndarray, out: np.ndarray) -> None:
     """Normalise normals; background and degenerate normals become (0, 0, 0).
 

@@ -23,7 +23,7 @@ _ONE = F32(1.0)
 _ZERO = F32(0.0)
 
 
-@njit(inline="always", fastmath=True, cache=True, error_model="numpy")
+@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
 def _effective_albedo(
     ar: np.float32, ag: np.float32, ab: np.float32, eps: np.float32
 ) -> tuple[np.float32, np.float32, np.float32]:
@@ -32,7 +32,9 @@ def _effective_albedo(
     return max(ar, eps), max(ag, eps), max(ab, eps)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def demodulate(
     signal: np.ndarray,
     emission: np.ndarray,
@@ -57,7 +59,9 @@ def demodulate(
             out[2, y, x] = (signal[2, y, x] - eb) / ab
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def remodulate(
     illumination: np.ndarray,
     emission: np.ndarray,
@@ -81,7 +85,9 @@ def remodulate(
             out[2, y, x] = ab * illumination[2, y, x] + eb
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.ndarray) -> None:
     """Background pixels (depth <= 0) are not filtered: copy their input radiance back."""
     height, width = depth.shape
@@ -93,7 +99,9 @@ def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.nda
                 radiance[2, y, x] = original[2, y, x]
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
     """Rec.709 luminance of a (3, H, W) image into an (H, W) plane."""
     height, width = rgb.shape[1], rgb.shape[2]
@@ -106,7 +114,9 @@ def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
             o[x] = luminance(r[x], g[x], b[x])
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def filter_normals(
     unit_normal: np.ndarray, albedo: np.ndarray, eps: np.float32, out: np.ndarray
 ) -> None:
@@ -120,3 +130,38 @@ def filter_normals(
             out[0, y, x] = sign * unit_normal[0, y, x]
             out[1, y, x] = sign * unit_normal[1, y, x]
             out[2, y, x] = sign * unit_normal[2, y, x]
+
+
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def remodulate_add(
+    illumination: np.ndarray,
+    signal: np.ndarray,
+    emission: np.ndarray,
+    has_emission: bool,
+    albedo: np.ndarray,
+    eps: np.float32,
+    depth: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """``out +=`` :func:`remodulate` of one signal on surface pixels, ``+= signal`` on
+    background (depth <= 0): remodulation, background restore and the sum of the signals in
+    one pass, without a full-frame temporary per signal."""
+    height, width = illumination.shape[1], illumination.shape[2]
+    for y in prange(height):
+        for x in range(width):
+            if depth[y, x] <= _ZERO:
+                out[0, y, x] += signal[0, y, x]
+                out[1, y, x] += signal[1, y, x]
+                out[2, y, x] += signal[2, y, x]
+                continue
+            er = eg = eb = _ZERO
+            if has_emission:
+                er = emission[0, y, x]
+                eg = emission[1, y, x]
+                eb = emission[2, y, x]
+            ar, ag, ab = _effective_albedo(albedo[0, y, x], albedo[1, y, x], albedo[2, y, x], eps)
+            out[0, y, x] += ar * illumination[0, y, x] + er
+            out[1, y, x] += ag * illumination[1, y, x] + eg
+            out[2, y, x] += ab * illumination[2, y, x] + eb

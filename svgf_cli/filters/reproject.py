@@ -35,7 +35,9 @@ _NORMAL_SLACK = F32(0.01)
 _MIN_BILINEAR_WEIGHT = F32(0.01)
 
 
-@njit(inline="always", fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    inline="always", fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def _tap_consistent(
     tx: int,
     ty: int,
@@ -66,7 +68,9 @@ def _tap_consistent(
     return dx * dx + dy * dy + dz * dz <= max_normal_diff_sq
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def reproject(
     motion: np.ndarray,
     depth: np.ndarray,
@@ -221,7 +225,6 @@ def reproject(
                 out_moments[s, 1, y, x] *= inv
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
 def accumulate(
     illumination: np.ndarray,
     history_illumination: np.ndarray,
@@ -238,23 +241,54 @@ def accumulate(
     """Exponential moving average with adaptive alpha (paper eq. 6, alpha = max(a, 1/h)).
 
     ``history_length_prev`` is the output of :func:`reproject` (0 = no history). Background
-    pixels get history length 0 and their current illumination. Written branch-free over row
-    slices (a blend factor of exactly 1 where there is no history) so it vectorizes; the
-    history buffers must hold finite values everywhere.
+    pixels get history length 0 and their current illumination. The ``out_*`` arrays may be
+    the history arrays themselves (the Denoiser accumulates in place); otherwise the history
+    is copied into them first and :func:`accumulate_in_place` blends there.
+    """
+    for source, target in (
+        (history_illumination, out_illumination),
+        (history_moments, out_moments),
+        (history_length_prev, out_history_length),
+    ):
+        if source is not target:
+            np.copyto(target, source)
+    accumulate_in_place(illumination, out_illumination, out_moments, out_history_length, depth,
+                        alpha, moments_alpha, history_cap)
+
+
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def accumulate_in_place(
+    illumination: np.ndarray,
+    history_illumination: np.ndarray,
+    history_moments: np.ndarray,
+    history_length: np.ndarray,
+    depth: np.ndarray,
+    alpha: np.float32,
+    moments_alpha: np.float32,
+    history_cap: np.float32,
+) -> None:
+    """:func:`accumulate` overwriting the (reprojected) history arrays with the result.
+
+    Written branch-free over row slices (a blend factor of exactly 1 where there is no
+    history) so it vectorizes; the history buffers must hold finite values everywhere.
+    Reading and writing the same array (rather than a separate output that may alias it)
+    keeps LLVM's runtime alias checks passing, so the vector loops run.
     """
     num_signals = illumination.shape[0]
     height, width = depth.shape
     for y in prange(height):
         blend = np.empty(width, dtype=np.float32)
         blend_moments = np.empty(width, dtype=np.float32)
-        h_prev = history_length_prev[y]
+        h_row = history_length[y]
         z = depth[y]
-        h_out = out_history_length[y]
         for x in range(width):
+            h_prev = h_row[x]
             surface = z[x] > _ZERO
-            reused = surface and h_prev[x] > _ZERO
-            h = min(history_cap, h_prev[x] + _ONE) if reused else _ONE
-            h_out[x] = h if surface else _ZERO
+            reused = surface and h_prev > _ZERO
+            h = min(history_cap, h_prev + _ONE) if reused else _ONE
+            h_row[x] = h if surface else _ZERO
             inv_h = _ONE / h
             blend[x] = max(alpha, inv_h) if reused else _ONE
             blend_moments[x] = max(moments_alpha, inv_h) if reused else _ONE
@@ -262,19 +296,16 @@ def accumulate(
             r = illumination[s, 0, y]
             g = illumination[s, 1, y]
             b = illumination[s, 2, y]
-            m1_prev = history_moments[s, 0, y]
-            m2_prev = history_moments[s, 1, y]
-            m1 = out_moments[s, 0, y]
-            m2 = out_moments[s, 1, y]
+            m1 = history_moments[s, 0, y]
+            m2 = history_moments[s, 1, y]
             for x in range(width):
                 lum = luminance(r[x], g[x], b[x])
                 a = blend_moments[x]
-                m1[x] = (_ONE - a) * m1_prev[x] + a * lum
-                m2[x] = (_ONE - a) * m2_prev[x] + a * (lum * lum)
+                m1[x] = (_ONE - a) * m1[x] + a * lum
+                m2[x] = (_ONE - a) * m2[x] + a * (lum * lum)
             for c in range(3):
                 current = illumination[s, c, y]
-                previous = history_illumination[s, c, y]
-                out = out_illumination[s, c, y]
+                out = history_illumination[s, c, y]
                 for x in range(width):
                     a = blend[x]
-                    out[x] = (_ONE - a) * previous[x] + a * current[x]
+                    out[x] = (_ONE - a) * out[x] + a * current[x]

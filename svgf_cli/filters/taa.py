@@ -16,7 +16,9 @@ F32 = np.float32
 _ONE = F32(1.0)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def taa_resolve(
     current: np.ndarray,
     previous: np.ndarray,

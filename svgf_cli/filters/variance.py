@@ -30,7 +30,9 @@ _ZERO = F32(0.0)
 _ONE = F32(1.0)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def temporal_variance(moments: np.ndarray, out: np.ndarray) -> None:
     """``Var = max(0, m2 - m1^2)`` for every signal; moments (S, 2, H, W), out (S, H, W)."""
     num_signals = moments.shape[0]
@@ -44,7 +46,9 @@ def temporal_variance(moments: np.ndarray, out: np.ndarray) -> None:
                 o[x] = max(m2[x] - m1[x] * m1[x], _ZERO)
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def spatial_variance(
     illumination: np.ndarray,
     moments: np.ndarray,
@@ -168,7 +172,9 @@ def spatial_variance(
                     out_illumination[s, 2, y, x] = acc[s, 6, i] * inv
 
 
-@njit(parallel=True, fastmath=True, cache=True, boundscheck=False, error_model="numpy")
+@njit(
+    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
 def boost_short_history(
     variance: np.ndarray, history_length: np.ndarray, history_threshold: np.float32
 ) -> None:
