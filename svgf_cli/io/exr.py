@@ -67,10 +67,19 @@ def write_exr(
     def is_half(name: str) -> bool:
         return bool(half) if isinstance(half, bool) else bool(half.get(name, False))
 
-    formats = [oiio.TypeDesc("half") if is_half(n) else oiio.TypeDesc("float") for n in names]
-    spec = oiio.ImageSpec(w, h, len(names), oiio.TypeDesc("float"))
-    spec.channelnames = tuple(names)
-    spec.channelformats = tuple(formats)
+    if all(is_half(n) for n in names):
+        # All-half (the denoised RGBA default): convert in numpy and hand OpenImageIO a half
+        # buffer. Its own float->half conversion measured 0.67 s against 0.43 s for a float
+        # write of 1080p RGBA; numpy rounds to nearest-even exactly as OpenEXR's half does.
+        with np.errstate(over="ignore"):  # above 65504 becomes inf, as in OpenEXR's half
+            pixels = pixels.astype(np.float16)
+        spec = oiio.ImageSpec(w, h, len(names), oiio.TypeDesc("half"))
+        spec.channelnames = tuple(names)
+    else:
+        formats = [oiio.TypeDesc("half") if is_half(n) else oiio.TypeDesc("float") for n in names]
+        spec = oiio.ImageSpec(w, h, len(names), oiio.TypeDesc("float"))
+        spec.channelnames = tuple(names)
+        spec.channelformats = tuple(formats)
     check_compression(compression, names, float_channels=[n for n in names if not is_half(n)])
     spec.attribute("compression", compression)
     # OpenImageIO stamps the current time as DateTime unless one is given; an empty value
