@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.edges import tap_geometry
-from svgf_cli.filters.fastmath import fast_exp, luminance
+from svgf_cli.filters.fastmath import FASTMATH, fast_exp, luminance
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -38,7 +38,7 @@ _G1 = np.array([0.25, 0.5, 0.25], dtype=np.float32)
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def luminance_stop_guides(
     illumination: np.ndarray,
@@ -96,7 +96,7 @@ def luminance_stop_guides(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def atrous_iteration(
     illumination: np.ndarray,
@@ -135,7 +135,7 @@ def atrous_iteration(
         )
 
 
-@njit(fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 def _atrous_row(
     y: int,
     illumination: np.ndarray,

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from svgf_cli.filters.fastmath import luminance
+from svgf_cli.filters.fastmath import FASTMATH, luminance
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -23,7 +23,7 @@ _ONE = F32(1.0)
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def firefly_clamp(
     illumination: np.ndarray, depth: np.ndarray, k: np.float32, out: np.ndarray
@@ -71,7 +71,7 @@ def firefly_clamp(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def history_clamp(
     history: np.ndarray,

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from svgf_cli.filters.fastmath import FASTMATH
+
 F32 = np.float32
 _ZERO = F32(0.0)
 DEPTH_EPSILON = F32(1e-3)
@@ -37,7 +39,8 @@ def normal_squarings(sigma_normal: float) -> int:
 
 
 @njit(
-    inline="always", fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
 )
 def tap_geometry(
     z_p: np.ndarray,

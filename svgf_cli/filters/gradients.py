@@ -11,11 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from svgf_cli.filters.fastmath import FASTMATH
+
 F32 = np.float32
 _ZERO = F32(0.0)
 
 
-@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
 def _pick_one_sided(
     left_ok: bool, right_ok: bool, left: np.float32, right: np.float32
 ) -> np.float32:
@@ -29,7 +31,7 @@ def _pick_one_sided(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def depth_gradients(depth: np.ndarray, ddx: np.ndarray, ddy: np.ndarray, slope: np.ndarray) -> None:
     """Per-axis depth derivatives ``ddx``, ``ddy`` (signed, depth units per pixel) and the
@@ -64,7 +66,7 @@ def depth_gradients(depth: np.ndarray, ddx: np.ndarray, ddy: np.ndarray, slope: 
             slope[y, x] = max(abs(gx), abs(gy))
 
 
-@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
 def _normal_step(
     normal: np.ndarray, y: int, x: int, y0: int, x0: int, y1: int, x1: int, ok0: bool, ok1: bool
 ) -> tuple[np.float32, np.float32, np.float32]:
@@ -88,7 +90,7 @@ def _normal_step(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def normal_gradient(normal: np.ndarray, depth: np.ndarray, out: np.ndarray) -> None:
     """``length(fwidth(n))`` with fwidth = |ddx n| + |ddy n| per component (Falcor's
@@ -112,7 +114,7 @@ def normal_gradient(normal: np.ndarray, depth: np.ndarray, out: np.ndarray) -> N
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def unit_normals(normal: np.ndarray, depth: np.ndarray, out: np.ndarray) -> None:
     """Normalise normals; background and degenerate normals become (0, 0, 0).

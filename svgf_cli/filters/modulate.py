@@ -16,14 +16,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from svgf_cli.filters.fastmath import luminance
+from svgf_cli.filters.fastmath import FASTMATH, luminance
 
 F32 = np.float32
 _ONE = F32(1.0)
 _ZERO = F32(0.0)
 
 
-@njit(inline="always", fastmath=True, cache=True, nogil=True, error_model="numpy")
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
 def _effective_albedo(
     ar: np.float32, ag: np.float32, ab: np.float32, eps: np.float32
 ) -> tuple[np.float32, np.float32, np.float32]:
@@ -33,7 +33,7 @@ def _effective_albedo(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def demodulate(
     signal: np.ndarray,
@@ -60,7 +60,7 @@ def demodulate(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def remodulate(
     illumination: np.ndarray,
@@ -86,7 +86,7 @@ def remodulate(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.ndarray) -> None:
     """Background pixels (depth <= 0) are not filtered: copy their input radiance back."""
@@ -100,7 +100,7 @@ def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.nda
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
     """Rec.709 luminance of a (3, H, W) image into an (H, W) plane."""
@@ -115,7 +115,7 @@ def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def filter_normals(
     unit_normal: np.ndarray, albedo: np.ndarray, eps: np.float32, out: np.ndarray
@@ -133,7 +133,7 @@ def filter_normals(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def remodulate_add(
     illumination: np.ndarray,

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from svgf_cli.filters.fastmath import luminance
+from svgf_cli.filters.fastmath import FASTMATH, luminance
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -36,7 +36,8 @@ _MIN_BILINEAR_WEIGHT = F32(0.01)
 
 
 @njit(
-    inline="always", fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
 )
 def _tap_consistent(
     tx: int,
@@ -69,7 +70,7 @@ def _tap_consistent(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def reproject(
     motion: np.ndarray,
@@ -257,7 +258,7 @@ def accumulate(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def accumulate_in_place(
     illumination: np.ndarray,

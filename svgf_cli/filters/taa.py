@@ -12,12 +12,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from svgf_cli.filters.fastmath import FASTMATH
+
 F32 = np.float32
 _ONE = F32(1.0)
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def taa_resolve(
     current: np.ndarray,

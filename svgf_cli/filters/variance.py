@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.edges import tap_geometry
-from svgf_cli.filters.fastmath import fast_exp
+from svgf_cli.filters.fastmath import FASTMATH, fast_exp
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -31,7 +31,7 @@ _ONE = F32(1.0)
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def temporal_variance(moments: np.ndarray, out: np.ndarray) -> None:
     """``Var = max(0, m2 - m1^2)`` for every signal; moments (S, 2, H, W), out (S, H, W)."""
@@ -47,7 +47,7 @@ def temporal_variance(moments: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def spatial_variance(
     illumination: np.ndarray,
@@ -173,7 +173,7 @@ def spatial_variance(
 
 
 @njit(
-    parallel=True, fastmath=True, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def boost_short_history(
     variance: np.ndarray, history_length: np.ndarray, history_threshold: np.float32
