@@ -7,32 +7,20 @@ keeps peak-memory readings (ru_maxrss) honest and JIT caches warm per stage. Pas
 
 from __future__ import annotations
 
-import os
-import platform
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from svgf_cli.results import machine_description
+
 BENCH_DIR = Path(__file__).resolve().parent
 ORDER = ["filters", "e2e", "trace", "oidn"]
 
 
-def machine_line() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
 def main(argv: list[str]) -> int:
     wanted = argv or ORDER
-    print(f"svgf benchmarks on {machine_line()}", flush=True)
+    print(f"svgf benchmarks on {machine_description()}", flush=True)
     failed = []
     for name in wanted:
         script = BENCH_DIR / f"bench_{name}.py"
