@@ -12,9 +12,14 @@ kernel ``h = (1/16, 1/4, 3/8, 1/4, 1/16)`` dilated by ``s``, each tap weighted b
 ``Var' = sum(h^2 w^2 Var) / (sum h w)^2`` (eq. 2). ``g3x3`` is the 3x3 Gaussian (1/4 centre,
 1/8 edge, 1/16 corner), renormalised over in-image surface pixels; it only drives w_l.
 
-Direct and indirect share the geometry: ``h * w_n`` and the w_z exponent are computed once
-per tap and both signals' luminance stops are applied in the same pass (``exp`` of the summed
-exponents, one fast polynomial exp per signal and tap).
+How it is fast: the kernel is register-blocked. For one kernel row (a fixed vertical offset)
+a single vectorized loop over pixels evaluates that row's five taps with the running sums in
+registers, so each centre pixel's guides and sums are loaded and stored once per kernel row,
+not once per tap. Direct and indirect share ``h * w_n`` and the w_z exponent; each signal
+then pays one fast polynomial exp. Taps that fall outside the image are given weight 0 and
+the centre pixel's address, so the image border runs the same vector loop as the interior.
+The loop touches ~35 arrays; :func:`noalias_njit` tells LLVM the written ones never overlap
+the read ones, which it cannot check cheaply at run time.
 """
 
 from __future__ import annotations
@@ -22,19 +27,24 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from svgf_cli.filters.edges import tap_geometry
-from svgf_cli.filters.fastmath import FASTMATH, fast_exp, luminance
+from svgf_cli.filters.edges import DEPTH_EPSILON
+from svgf_cli.filters.fastmath import FASTMATH, fast_exp, fast_unit_pow, fma, luminance
+from svgf_cli.filters.noalias import check_disjoint, noalias_njit
 
 F32 = np.float32
+U = np.uint64  # unsigned indices: numba adds no negative-index wrap-around, loops vectorize
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _VARIANCE_EPSILON = F32(1e-10)
-# Pixels per row chunk. Smaller chunks keep the buffers in L1 but pay more per-tap slicing
-# overhead; measured here 2048 (a whole 1080p row) was fastest.
-CHUNK = 2048
+# Keeps 0/0 away for background centres (depth 0) without changing any real weight.
+_TINY = F32(1e-20)
+# Pixels per row chunk: the accumulators and the touched row pieces stay in L1/L2.
+CHUNK = 256
 _B3 = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0], dtype=np.float32)
 # g3x3 weights are the outer product of (1/4, 1/2, 1/4): 1/16 corner, 1/8 edge, 1/4 centre.
 _G1 = np.array([0.25, 0.5, 0.25], dtype=np.float32)
+
+_JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
 @njit(
@@ -95,9 +105,7 @@ def luminance_stop_guides(
                 )
 
 
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
+
 def atrous_iteration(
     illumination: np.ndarray,
     variance: np.ndarray,
@@ -108,36 +116,40 @@ def atrous_iteration(
     ddy: np.ndarray,
     normal: np.ndarray,
     step: int,
-    sigma_depth: np.float32,
-    squarings: int,
-    sigma_normal: np.float32,
+    sigma_depth: float,
+    sigma_normal: float,
     propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
 ) -> None:
     """One a-trous iteration at ``step`` over (S, 3, H, W) illumination and (S, H, W) variance.
 
-    ``guide_*`` come from :func:`luminance_stop_guides` for the same input. Background
-    pixels (zero normal) receive no weight from surfaces and pass through unchanged.
-    Without ``propagate_variance`` (the last iteration: nothing reads its variance)
-    ``out_variance`` is not touched and the squared-weight variance sums are skipped.
-    Rows are processed in chunks of ``CHUNK`` pixels (bounded scratch memory);
-    each inner loop touches few arrays (LLVM gives up vectorizing a loop that would need
-    many runtime alias checks).
+    ``S`` is 1 (combined colour) or 2 (direct and indirect). ``guide_*`` come from
+    :func:`luminance_stop_guides` for the same input. Background pixels (zero normal)
+    receive no weight from surfaces and pass through unchanged. Without
+    ``propagate_variance`` (the last iteration: nothing reads its variance) ``out_variance``
+    is not touched. Outputs must not overlap any input (checked).
     """
-    for y in prange(depth.shape[0]):
-        # np.int64: the parfor index is uint64 in the gufunc but int64 when typed first,
-        # which would compile the row function twice.
-        _atrous_row(
-            np.int64(y), illumination, variance, guide_luminance, guide_inverse_scale, depth,
-            ddx, ddy, normal, step, sigma_depth, squarings, sigma_normal, propagate_variance,
-            out_illumination, out_variance,
-        )
+    num_signals = illumination.shape[0]
+    if num_signals not in (1, 2):
+        raise ValueError("atrous_iteration filters one or two signals")
+    written = {"out_illumination": out_illumination}
+    if propagate_variance:
+        written["out_variance"] = out_variance
+    check_disjoint(written, {
+        "illumination": illumination, "variance": variance, "guide_luminance": guide_luminance,
+        "guide_inverse_scale": guide_inverse_scale, "depth": depth, "ddx": ddx, "ddy": ddy,
+        "normal": normal,
+    })
+    _atrous_rows(
+        illumination, variance, guide_luminance, guide_inverse_scale, depth, ddx, ddy, normal,
+        np.int64(step), F32(sigma_depth), F32(sigma_normal), bool(propagate_variance),
+        out_illumination, out_variance,
+    )
 
 
-@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
-def _atrous_row(
-    y: int,
+@njit(parallel=True, **_JIT)
+def _atrous_rows(
     illumination: np.ndarray,
     variance: np.ndarray,
     guide_luminance: np.ndarray,
@@ -148,16 +160,52 @@ def _atrous_row(
     normal: np.ndarray,
     step: int,
     sigma_depth: np.float32,
-    squarings: int,
     sigma_normal: np.float32,
     propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
 ) -> None:
-    """Row ``y`` of :func:`atrous_iteration` (a plain function so LLVM sees simple loops)."""
+    """All rows of :func:`atrous_iteration` in parallel, one scratch block per row."""
+    for y in prange(depth.shape[0]):
+        # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
+        sums = np.empty((2, 5, CHUNK), dtype=np.float32)
+        # np.int64: the parfor index is uint64 in the gufunc but int64 when typed first,
+        # which would compile the row function twice.
+        _atrous_row(
+            np.int64(y), sums, illumination, variance, guide_luminance, guide_inverse_scale,
+            depth, ddx, ddy, normal, step, sigma_depth, sigma_normal, propagate_variance,
+            out_illumination, out_variance,
+        )
+
+
+@noalias_njit(**_JIT)
+def _atrous_row(
+    y: int,
+    sums: np.ndarray,
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
+    depth: np.ndarray,
+    ddx: np.ndarray,
+    ddy: np.ndarray,
+    normal: np.ndarray,
+    step: int,
+    sigma_depth: np.float32,
+    sigma_normal: np.float32,
+    propagate_variance: bool,
+    out_illumination: np.ndarray,
+    out_variance: np.ndarray,
+) -> None:
+    """Row ``y``: chunks of ``CHUNK`` pixels, kernel rows, then per-tap-validity segments.
+
+    The loop always filters two signals. A single signal is read as both (``second`` = 0);
+    the duplicate sums are identical and discarded. One compiled loop body instead of two
+    (or four with numba flag specialisations) keeps compile time and code paths down.
+    """
     num_signals = illumination.shape[0]
+    second = num_signals - 1
     height, width = depth.shape
-    centre = _B3[2] * _B3[2]
     # Only the span between the first and last surface pixel of the row is filtered;
     # background outside it passes through (sky rows cost nothing).
     z_row = depth[y]
@@ -179,100 +227,170 @@ def _atrous_row(
                 out_variance[s, y, x] = variance[s, y, x]
             for x in range(last, width):
                 out_variance[s, y, x] = variance[s, y, x]
-    if first >= last:
-        return
-    # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
-    acc = np.empty((num_signals, 5, CHUNK), dtype=np.float32)
-    depth_exponent = np.empty(CHUNK, dtype=np.float32)
-    normal_weight = np.empty(CHUNK, dtype=np.float32)
-    tap_weight = np.empty(CHUNK, dtype=np.float32)
+    centre = _B3[2] * _B3[2]
+    bounds = np.empty(6, dtype=np.int64)
+    offsets = np.empty(5, dtype=np.int64)
+    kernel = np.empty(5, dtype=np.float32)
     for chunk_start in range(first, last, CHUNK):
         chunk_end = min(last, chunk_start + CHUNK)
-        n = chunk_end - chunk_start
-        for s in range(num_signals):
-            sum_w = acc[s, 0]
-            sum_r = acc[s, 1]
-            sum_g = acc[s, 2]
-            sum_b = acc[s, 3]
-            r = illumination[s, 0, y, chunk_start:chunk_end]
-            g = illumination[s, 1, y, chunk_start:chunk_end]
-            b = illumination[s, 2, y, chunk_start:chunk_end]
-            for i in range(n):
-                sum_w[i] = centre
-                sum_r[i] = centre * r[i]
-                sum_g[i] = centre * g[i]
-                sum_b[i] = centre * b[i]
-            if propagate_variance:
-                sum_v = acc[s, 4]
-                v = variance[s, y, chunk_start:chunk_end]
-                for i in range(n):
-                    sum_v[i] = (centre * centre) * v[i]
+        for t in range(2):
+            s = t * second
+            for i in range(chunk_end - chunk_start):
+                x = U(chunk_start + i)
+                sums[t, 0, i] = centre
+                sums[t, 1, i] = centre * illumination[s, 0, y, x]
+                sums[t, 2, i] = centre * illumination[s, 1, y, x]
+                sums[t, 3, i] = centre * illumination[s, 2, y, x]
+                sums[t, 4, i] = (centre * centre) * variance[s, y, x]
+        # Tap validity changes at x = s, 2s, w - 2s and w - s (in any order when w < 4s);
+        # between consecutive bounds every tap is either inside the image or not.
+        bounds[0] = chunk_start
+        bounds[1] = step
+        bounds[2] = 2 * step
+        bounds[3] = width - 2 * step
+        bounds[4] = width - step
+        bounds[5] = chunk_end
+        for i in range(1, 5):
+            bounds[i] = min(max(bounds[i], chunk_start), chunk_end)
+        bounds[1:5].sort()
         for oy in range(-2, 3):
             yy = y + oy * step
             if yy < 0 or yy >= height:
                 continue
-            for ox in range(-2, 3):
-                if ox == 0 and oy == 0:
-                    continue
-                d = ox * step
-                x0 = max(chunk_start, -d)
-                x1 = min(chunk_end, width - d)
-                count = x1 - x0
+            for segment in range(5):
+                start = bounds[segment]
+                count = bounds[segment + 1] - start
                 if count <= 0:
                     continue
-                a0 = x0 - chunk_start
-                tap_geometry(
-                    depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
-                    normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
-                    depth[yy, x0 + d:x1 + d],
-                    normal[0, yy, x0 + d:x1 + d], normal[1, yy, x0 + d:x1 + d],
-                    normal[2, yy, x0 + d:x1 + d],
-                    F32(d), F32(oy * step), sigma_depth, squarings, sigma_normal,
-                    _B3[ox + 2] * _B3[oy + 2], depth_exponent, normal_weight, count,
+                for k in range(5):
+                    offset = (k - 2) * step
+                    inside = start + offset >= 0 and start + count - 1 + offset < width
+                    # Outside taps (and the centre, already in the sums) read the centre
+                    # pixel with weight 0: same loop, no branch, nothing added.
+                    offsets[k] = offset if inside else 0
+                    real = inside and not (oy == 0 and k == 2)
+                    kernel[k] = _B3[k] * _B3[oy + 2] if real else _ZERO
+                _segment(
+                    sums, illumination, variance, guide_luminance, guide_inverse_scale, depth,
+                    ddx, ddy, normal, y, yy, start, count, start - chunk_start, step, oy,
+                    offsets, kernel, sigma_depth, sigma_normal, second,
                 )
-                for s in range(num_signals):
-                    l_p = guide_luminance[s, y, x0:x1]
-                    inv_p = guide_inverse_scale[s, y, x0:x1]
-                    l_q = guide_luminance[s, yy, x0 + d:x1 + d]
-                    sum_w = acc[s, 0, a0:a0 + count]
-                    for i in range(count):
-                        w = normal_weight[i] * fast_exp(
-                            -(depth_exponent[i] + abs(l_p[i] - l_q[i]) * inv_p[i])
-                        )
-                        tap_weight[i] = w
-                        sum_w[i] += w
-                    r_q = illumination[s, 0, yy, x0 + d:x1 + d]
-                    g_q = illumination[s, 1, yy, x0 + d:x1 + d]
-                    b_q = illumination[s, 2, yy, x0 + d:x1 + d]
-                    sum_r = acc[s, 1, a0:a0 + count]
-                    sum_g = acc[s, 2, a0:a0 + count]
-                    sum_b = acc[s, 3, a0:a0 + count]
-                    for i in range(count):
-                        w = tap_weight[i]
-                        sum_r[i] += w * r_q[i]
-                        sum_g[i] += w * g_q[i]
-                        sum_b[i] += w * b_q[i]
-                    if propagate_variance:
-                        values = variance[s, yy, x0 + d:x1 + d]
-                        sums = acc[s, 4, a0:a0 + count]
-                        for i in range(count):
-                            sums[i] += (tap_weight[i] * tap_weight[i]) * values[i]
         for s in range(num_signals):
-            sum_w = acc[s, 0]
-            sum_r = acc[s, 1]
-            sum_g = acc[s, 2]
-            sum_b = acc[s, 3]
-            o_r = out_illumination[s, 0, y, chunk_start:chunk_end]
-            o_g = out_illumination[s, 1, y, chunk_start:chunk_end]
-            o_b = out_illumination[s, 2, y, chunk_start:chunk_end]
-            for i in range(n):
-                inv = _ONE / sum_w[i]
-                o_r[i] = sum_r[i] * inv
-                o_g[i] = sum_g[i] * inv
-                o_b[i] = sum_b[i] * inv
+            for i in range(chunk_end - chunk_start):
+                x = U(chunk_start + i)
+                inverse = _ONE / sums[s, 0, i]
+                out_illumination[s, 0, y, x] = sums[s, 1, i] * inverse
+                out_illumination[s, 1, y, x] = sums[s, 2, i] * inverse
+                out_illumination[s, 2, y, x] = sums[s, 3, i] * inverse
             if propagate_variance:
-                sum_v = acc[s, 4]
-                o_v = out_variance[s, y, chunk_start:chunk_end]
-                for i in range(n):
-                    inv = _ONE / sum_w[i]
-                    o_v[i] = sum_v[i] * (inv * inv)
+                for i in range(chunk_end - chunk_start):
+                    x = U(chunk_start + i)
+                    inverse = _ONE / sums[s, 0, i]
+                    out_variance[s, y, x] = sums[s, 4, i] * (inverse * inverse)
+
+
+@njit(inline="always", **_JIT)
+def _segment(
+    sums: np.ndarray,
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
+    depth: np.ndarray,
+    ddx: np.ndarray,
+    ddy: np.ndarray,
+    normal: np.ndarray,
+    y: int,
+    yy: int,
+    start: int,
+    count: int,
+    sums_start: int,
+    step: int,
+    oy: int,
+    offsets: np.ndarray,
+    kernel: np.ndarray,
+    sigma_depth: np.float32,
+    sigma_normal: np.float32,
+    second: int,
+) -> None:
+    """Add one kernel row's five taps to ``sums`` for ``count`` pixels from ``start``."""
+    o0, o1, o2, o3, o4 = offsets[0], offsets[1], offsets[2], offsets[3], offsets[4]
+    h0, h1, h2, h3, h4 = kernel[0], kernel[1], kernel[2], kernel[3], kernel[4]
+    fy = F32(oy * step)
+    f0, f1, f3, f4 = F32(-2 * step), F32(-step), F32(step), F32(2 * step)
+    uy = U(y)
+    uq = U(yy)
+    for i in range(count):
+        x = start + i
+        px = U(x)
+        a = U(sums_start + i)
+        zp = depth[uy, px]
+        centre = (
+            zp, DEPTH_EPSILON * zp + _TINY, ddx[uy, px], ddy[uy, px] * fy,
+            normal[0, uy, px], normal[1, uy, px], normal[2, uy, px],
+            guide_luminance[0, uy, px], guide_inverse_scale[0, uy, px],
+            guide_luminance[second, uy, px], guide_inverse_scale[second, uy, px],
+        )
+        acc = (
+            sums[0, 0, a], sums[0, 1, a], sums[0, 2, a], sums[0, 3, a], sums[0, 4, a],
+            sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a],
+        )
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+                   U(x + o0), h0, f0, sigma_depth, sigma_normal, second)
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+                   U(x + o1), h1, f1, sigma_depth, sigma_normal, second)
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+                   U(x + o2), h2, _ZERO, sigma_depth, sigma_normal, second)
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+                   U(x + o3), h3, f3, sigma_depth, sigma_normal, second)
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+                   U(x + o4), h4, f4, sigma_depth, sigma_normal, second)
+        sums[0, 0, a], sums[0, 1, a], sums[0, 2, a], sums[0, 3, a], sums[0, 4, a] = acc[:5]
+        sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a] = acc[5:]
+
+
+@njit(**_JIT)
+def _tap(
+    acc: tuple,
+    centre: tuple,
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    guide_luminance: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray,
+    uq: np.uint64,
+    qx: np.uint64,
+    kernel: np.float32,
+    offset_x: np.float32,
+    sigma_depth: np.float32,
+    sigma_normal: np.float32,
+    second: int,
+) -> tuple:
+    """One tap: eqs. 3-5 for both signals and their weighted sums (eqs. 1-2).
+
+    ``w_n`` is ``fast_unit_pow`` (exp2 of a scaled log2; relative error ~1e-4 at
+    sigma_n = 128), branch-free for any sigma_n.
+    """
+    zp, depth_floor, gx, gy, nx, ny, nz, lum0, inv0, lum1, inv1 = centre
+    projected = abs(fma(gx, offset_x, gy))
+    depth_exponent = abs(zp - depth[uq, qx]) / fma(sigma_depth, projected, depth_floor)
+    cosine = fma(nx, normal[0, uq, qx], fma(ny, normal[1, uq, qx], nz * normal[2, uq, qx]))
+    normal_weight = kernel * fast_unit_pow(max(cosine, _ZERO), sigma_normal)
+    w0 = normal_weight * fast_exp(
+        -fma(abs(lum0 - guide_luminance[0, uq, qx]), inv0, depth_exponent)
+    )
+    w1 = normal_weight * fast_exp(
+        -fma(abs(lum1 - guide_luminance[second, uq, qx]), inv1, depth_exponent)
+    )
+    return (
+        acc[0] + w0,
+        fma(w0, illumination[0, 0, uq, qx], acc[1]),
+        fma(w0, illumination[0, 1, uq, qx], acc[2]),
+        fma(w0, illumination[0, 2, uq, qx], acc[3]),
+        fma(w0 * w0, variance[0, uq, qx], acc[4]),
+        acc[5] + w1,
+        fma(w1, illumination[second, 0, uq, qx], acc[6]),
+        fma(w1, illumination[second, 1, uq, qx], acc[7]),
+        fma(w1, illumination[second, 2, uq, qx], acc[8]),
+        fma(w1 * w1, variance[second, uq, qx], acc[9]),
+    )

@@ -264,9 +264,8 @@ class Denoiser:
             out_illumination = work[out_name]
             atrous_iteration(
                 filtered, filtered_variance, guide_luminance, guide_inverse_scale, depth,
-                work["ddx"], work["ddy"], filter_normal, 1 << iteration, F32(p.sigma_depth),
-                self._squarings, F32(p.sigma_normal), propagate, out_illumination,
-                out_variance,
+                work["ddx"], work["ddy"], filter_normal, 1 << iteration, p.sigma_depth,
+                p.sigma_normal, propagate, out_illumination, out_variance,
             )
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name

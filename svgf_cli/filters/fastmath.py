@@ -5,7 +5,9 @@
 splits ``t = x * log2(e)`` into its integer part (truncation, no rounding instruction) and
 fraction ``f`` in (-1, 0], evaluates ``2**f`` with a degree-4 polynomial (relative error
 < 4e-6, fitted for this project) and builds ``2**integer`` from the IEEE-754 exponent bits,
-so a loop calling it stays branch-free and vectorizes.
+so a loop calling it stays branch-free and vectorizes. ``fast_log2`` is the mirror image
+(exponent bits plus a degree-7 polynomial for the mantissa, absolute error < 1e-6), and
+``fast_unit_pow`` combines the two for ``c ** e`` on ``[0, 1]``.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ LUMA_G = F32(0.7152)
 LUMA_B = F32(0.0722)
 
 _LOG2E = F32(1.4426950408889634)
+_LN2 = F32(0.6931471805599453)
 _EXP2_MIN = F32(-126.0)
 _ZERO = F32(0.0)
 # 2**f on [-1, 0]: least squares on relative error with the constant pinned to 1.
@@ -39,6 +42,16 @@ _C2 = F32(0.23943874)
 _C3 = F32(0.05319557)
 _C4 = F32(0.00681833)
 _ONE = F32(1.0)
+# log2(1 + t) on t in [0, 1): least squares on absolute error with log2(1) = 0 pinned.
+_L1 = F32(1.4426592588424683)
+_L2 = F32(-0.7204583883285522)
+_L3 = F32(0.47289368510246277)
+_L4 = F32(-0.3242958188056946)
+_L5 = F32(0.19230864942073822)
+_L6 = F32(-0.07835815101861954)
+_L7 = F32(0.015251433476805687)
+_MANTISSA_MASK = np.int32(0x007FFFFF)
+_ONE_BITS = np.int32(0x3F800000)
 
 
 @intrinsic
@@ -57,13 +70,69 @@ def _int32_bits_as_float32(typingctx, bits):  # type: ignore[no-untyped-def]
     return signature, codegen
 
 
+@intrinsic
+def fma(typingctx, a, b, c):  # type: ignore[no-untyped-def]
+    """``a * b + c`` rounded once (``llvm.fma.f32``; one vfmadd instruction, vectorizes).
+
+    Explicit, unlike letting LLVM contract ``a * b + c`` under a fast-math flag: whether a
+    contraction happens would depend on how the code was inlined, which differs between a
+    fresh compile and a cache load (see ``FASTMATH``); an explicit fma rounds the same way in
+    every build.
+    """
+    if not (a == b == c == types.float32):
+        return None
+    signature = types.float32(types.float32, types.float32, types.float32)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        f32 = llvm_ir.FloatType()
+        function = builder.module.declare_intrinsic(
+            "llvm.fma", [f32], llvm_ir.FunctionType(f32, [f32, f32, f32])
+        )
+        return builder.call(function, args)
+
+    return signature, codegen
+
+
+@intrinsic
+def _float32_as_int32_bits(typingctx, value):  # type: ignore[no-untyped-def]
+    """Reinterpret a float32 as its 32 IEEE-754 bits (an LLVM bitcast; vectorizes)."""
+    if value != types.float32:
+        return None
+    signature = types.int32(value)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        return builder.bitcast(args[0], llvm_ir.IntType(32))
+
+    return signature, codegen
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
+def fast_log2(x: np.float32) -> np.float32:
+    """log2(x) for finite float32 ``x > 0`` (normal numbers; absolute error < 1e-6)."""
+    bits = _float32_as_int32_bits(x)
+    # Not named like any caller's variable: numba's inline="always" can let an inlined
+    # callee's local overwrite a caller's variable of the same name (seen with "exponent").
+    log2_whole = np.float32((bits >> 23) - 127)
+    t = _int32_bits_as_float32((bits & _MANTISSA_MASK) | _ONE_BITS) - _ONE
+    poly = fma(t, fma(t, fma(t, fma(t, fma(t, _L7, _L6), _L5), _L4), _L3), _L2)
+    return fma(t, fma(t, poly, _L1), log2_whole)
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
+def fast_unit_pow(c: np.float32, exponent: np.float32) -> np.float32:
+    """``c ** exponent`` for ``c`` in [0, 1] and ``exponent >= 1`` (0 for ``c <= 0``)."""
+    safe = max(c, F32(1e-30))
+    power = fast_exp(exponent * fast_log2(safe) * _LN2)
+    return power if c > _ZERO else _ZERO
+
+
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
 def fast_exp(x: np.float32) -> np.float32:
     """exp(x) for float32 ``x <= 0`` (positive x is treated as 0; below -87 gives ~1e-38)."""
     t = min(max(x * _LOG2E, _EXP2_MIN), _ZERO)
     whole = np.int32(t)  # truncates toward zero, so frac lies in (-1, 0]
     frac = t - np.float32(whole)
-    poly = _ONE + frac * (_C1 + frac * (_C2 + frac * (_C3 + frac * _C4)))
+    poly = fma(frac, fma(frac, fma(frac, fma(frac, _C4, _C3), _C2), _C1), _ONE)
     bits = (whole + 127) << 23
     return poly * _int32_bits_as_float32(bits)
 

@@ -1,0 +1,173 @@
+"""The a-trous kernel against a direct float64 transcription of the paper's equations 1-5.
+
+The fast kernel is register-blocked, splits each row into tap-validity segments and gives
+out-of-image taps weight 0 at the centre's address; this reference loops over pixels and
+taps the obvious way, so every border, background and step case is checked independently.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
+from svgf_cli.filters.edges import DEPTH_EPSILON
+from svgf_cli.filters.fastmath import fast_log2, fast_unit_pow, fma
+
+F32 = np.float32
+B3 = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
+
+
+def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np.ndarray]:
+    """A sloped surface with a depth step, a normal crease, background columns and rows."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    depth = 4.0 + 0.05 * x + 0.02 * y
+    depth[:, width // 2:] += 1.5  # silhouette
+    normal = np.zeros((3, height, width))
+    normal[2] = -1.0
+    normal[0, height // 2:] = 0.6  # crease
+    normal /= np.linalg.norm(normal, axis=0)
+    background = np.zeros((height, width), dtype=bool)
+    background[:, :2] = True
+    background[0] = True
+    background[height - 2, width // 3] = True  # an isolated hole
+    depth[background] = 0.0
+    normal[:, background] = 0.0
+    ddx = np.gradient(depth, axis=1)
+    ddy = np.gradient(depth, axis=0)
+    illumination = rng.gamma(1.5, 0.7, (num_signals, 3, height, width))
+    variance = rng.gamma(1.0, 0.3, (num_signals, height, width))
+    return {
+        "illumination": illumination.astype(F32), "variance": variance.astype(F32),
+        "depth": depth.astype(F32), "ddx": ddx.astype(F32), "ddy": ddy.astype(F32),
+        "normal": normal.astype(F32),
+    }
+
+
+def _reference(scene: dict[str, np.ndarray], luminance: np.ndarray, inverse_scale: np.ndarray,
+               step: int, sigma_depth: float, sigma_normal: float) -> tuple[np.ndarray, ...]:
+    """Equations 1-5 for every pixel and signal, in float64, one tap at a time."""
+    c_in = scene["illumination"].astype(np.float64)
+    v_in = scene["variance"].astype(np.float64)
+    z, gx, gy = (scene[k].astype(np.float64) for k in ("depth", "ddx", "ddy"))
+    n = scene["normal"].astype(np.float64)
+    num_signals, _, height, width = c_in.shape
+    c_out = np.empty_like(c_in)
+    v_out = np.empty_like(v_in)
+    for s in range(num_signals):
+        for py in range(height):
+            for px in range(width):
+                sum_w = sum_w2v = 0.0
+                sum_c = np.zeros(3)
+                for j in range(5):
+                    for i in range(5):
+                        qy, qx = py + (j - 2) * step, px + (i - 2) * step
+                        if not (0 <= qy < height and 0 <= qx < width):
+                            continue
+                        h = B3[i] * B3[j]
+                        if (qy, qx) == (py, px):
+                            w = h
+                        else:
+                            projected = abs(gx[py, px] * (qx - px) + gy[py, px] * (qy - py))
+                            w_z = abs(z[py, px] - z[qy, qx]) / (
+                                sigma_depth * projected + float(DEPTH_EPSILON) * z[py, px]
+                                + 1e-20
+                            )
+                            cosine = max(0.0, float(n[:, py, px] @ n[:, qy, qx]))
+                            w_l = abs(luminance[s, py, px] - luminance[s, qy, qx])
+                            w_l *= inverse_scale[s, py, px]
+                            w = h * cosine**sigma_normal * np.exp(-(w_z + w_l))
+                        sum_w += w
+                        sum_c += w * c_in[s, :, qy, qx]
+                        sum_w2v += w * w * v_in[s, qy, qx]
+                c_out[s, :, py, px] = sum_c / sum_w
+                v_out[s, py, px] = sum_w2v / sum_w**2
+    return c_out, v_out
+
+
+@pytest.mark.parametrize(
+    ("num_signals", "step", "sigma_normal", "width"),
+    [(2, 1, 128.0, 23), (2, 2, 128.0, 19), (1, 4, 128.0, 21), (2, 8, 64.0, 13),
+     (1, 2, 100.0, 17), (2, 1, 1.0, 9)],
+)
+def test_atrous_iteration_matches_the_equations(
+    num_signals: int, step: int, sigma_normal: float, width: int
+) -> None:
+    height = 14
+    scene = _scene(num_signals, height, width, seed=step + width)
+    luminance = np.empty((num_signals, height, width), dtype=F32)
+    inverse_scale = np.empty_like(luminance)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
+                          luminance, inverse_scale)
+    out_c = np.full_like(scene["illumination"], np.nan)
+    out_v = np.full_like(scene["variance"], np.nan)
+    atrous_iteration(
+        scene["illumination"], scene["variance"], luminance, inverse_scale, scene["depth"],
+        scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, sigma_normal, True, out_c,
+        out_v,
+    )
+    want_c, want_v = _reference(scene, luminance.astype(np.float64),
+                                inverse_scale.astype(np.float64), step, 1.0, sigma_normal)
+    # fast_exp (4e-6) and fast_unit_pow (~1e-4 at sigma_n = 128) set the tolerance.
+    np.testing.assert_allclose(out_c, want_c, rtol=2e-4, atol=1e-6)
+    np.testing.assert_allclose(out_v, want_v, rtol=4e-4, atol=1e-7)
+    # Background keeps its value: outside a row's surface span it is copied, a hole inside
+    # the span gets only its own centre weight (c h^2 / h^2, within an ulp).
+    np.testing.assert_array_equal(out_c[..., :2], scene["illumination"][..., :2])
+    np.testing.assert_array_equal(out_c[..., 0, :], scene["illumination"][..., 0, :])
+    hole = (slice(None), slice(None), height - 2, width // 3)
+    np.testing.assert_allclose(out_c[hole], scene["illumination"][hole], rtol=1e-6)
+
+
+def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing() -> None:
+    scene = _scene(2, 10, 12, seed=1)
+    luminance = np.empty((2, 10, 12), dtype=F32)
+    inverse_scale = np.empty_like(luminance)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
+                          luminance, inverse_scale)
+    args = (luminance, inverse_scale, scene["depth"], scene["ddx"], scene["ddy"],
+            scene["normal"], 1, 1.0, 128.0)
+    out_c = np.empty_like(scene["illumination"])
+    untouched = np.full_like(scene["variance"], 7.0)
+    atrous_iteration(scene["illumination"], scene["variance"], *args, False, out_c, untouched)
+    assert np.all(untouched == 7.0)
+    with pytest.raises(ValueError, match="out_illumination overlaps illumination"):
+        atrous_iteration(scene["illumination"], scene["variance"], *args, True,
+                         scene["illumination"], untouched)
+    with pytest.raises(ValueError, match="out_variance overlaps variance"):
+        atrous_iteration(scene["illumination"], scene["variance"], *args, True, out_c,
+                         scene["variance"])
+
+
+def test_fast_log2_pow_and_fma() -> None:
+    from numba import njit
+
+    @njit
+    def evaluate(x: np.ndarray, exponent: np.float32) -> tuple[np.ndarray, np.ndarray]:
+        log2 = np.empty_like(x)
+        power = np.empty_like(x)
+        for i in range(x.size):
+            log2[i] = fast_log2(x[i])
+            power[i] = fast_unit_pow(x[i], exponent)
+        return log2, power
+
+    x = np.geomspace(1e-30, 1.0, 4001).astype(F32)
+    log2, power = evaluate(x, F32(100.0))
+    want_log2 = np.log2(x.astype(np.float64))
+    assert np.all(np.abs(log2 - want_log2) < 1e-6 + 1.2e-7 * np.abs(want_log2))
+    want = x.astype(np.float64) ** 100.0
+    relative = np.abs(power - want) / np.maximum(want, 1e-300)
+    # Near 1 (the weights that matter) 1e-4; deep in the tail (< 1e-30) still 1e-3.
+    assert np.max(relative[x > 0.5]) < 1e-4
+    assert np.max(relative[want > 1e-36]) < 2e-3
+    assert evaluate(np.array([0.0], dtype=F32), F32(3.0))[1][0] == 0.0
+
+    @njit
+    def fused(a: np.float32, b: np.float32, c: np.float32) -> np.float32:
+        return fma(a, b, c)
+
+    # 1 + 2^-23 squared is 1 + 2^-22 + 2^-46: one rounding keeps the 2^-46 a product-then-sum
+    # would lose.
+    a = F32(1.0 + 2.0**-23)
+    assert fused(a, a, F32(-(1.0 + 2.0**-22))) == F32(2.0**-46)
