@@ -120,6 +120,38 @@ def test_atrous_iteration_matches_the_equations(
     np.testing.assert_allclose(out_c[hole], scene["illumination"][hole], rtol=1e-6)
 
 
+@pytest.mark.parametrize(("num_signals", "width"), [(2, 11), (1, 7), (2, 2), (1, 1)])
+def test_luminance_stop_guides_match_the_renormalised_gaussian(
+    num_signals: int, width: int
+) -> None:
+    height = 6
+    scene = _scene(num_signals, height, max(width, 3), seed=width)
+    scene = {k: np.ascontiguousarray(v[..., :width]) for k, v in scene.items()}
+    luminance = np.empty((num_signals, height, width), dtype=F32)
+    inverse_scale = np.empty_like(luminance)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
+                          luminance, inverse_scale)
+    c = scene["illumination"].astype(np.float64)
+    want_luminance = 0.2126 * c[:, 0] + 0.7152 * c[:, 1] + 0.0722 * c[:, 2]
+    np.testing.assert_allclose(luminance, want_luminance, rtol=1e-6)
+    g = np.array([0.25, 0.5, 0.25])
+    surface = scene["depth"] > 0
+    v = scene["variance"].astype(np.float64)
+    for s in range(num_signals):
+        for y in range(height):
+            for x in range(width):
+                total = weight = 0.0
+                for j in range(3):
+                    for i in range(3):
+                        qy, qx = y + j - 1, x + i - 1
+                        if 0 <= qy < height and 0 <= qx < width and surface[qy, qx]:
+                            weight += g[i] * g[j]
+                            total += g[i] * g[j] * v[s, qy, qx]
+                filtered = total / weight if weight > 0 else v[s, y, x]
+                want = 1.0 / (4.0 * np.sqrt(max(filtered, 0.0) + 1e-10))
+                np.testing.assert_allclose(inverse_scale[s, y, x], want, rtol=1e-5)
+
+
 def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing() -> None:
     scene = _scene(2, 10, 12, seed=1)
     luminance = np.empty((2, 10, 12), dtype=F32)

@@ -29,6 +29,7 @@ from numba import njit, prange
 from svgf_cli.filters.fastmath import FASTMATH, luminance
 
 F32 = np.float32
+U = np.uint64
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _NORMAL_SLACK = F32(0.01)
@@ -56,16 +57,19 @@ def _tap_consistent(
     height, width = prev_depth.shape
     if tx < 0 or ty < 0 or tx >= width or ty >= height:
         return False
-    z_prev = prev_depth[ty, tx]
+    # Unsigned from here: numba then skips its negative-index wrap-around on every load.
+    ux = U(tx)
+    uy = U(ty)
+    z_prev = prev_depth[uy, ux]
     if z_prev <= _ZERO:
         return False
-    if prev_mesh_id[ty, tx] != mesh:
+    if prev_mesh_id[uy, ux] != mesh:
         return False
     if abs(z_prev - z) > max_depth_diff:
         return False
-    dx = nx - prev_normal[0, ty, tx]
-    dy = ny - prev_normal[1, ty, tx]
-    dz = nz - prev_normal[2, ty, tx]
+    dx = nx - prev_normal[0, uy, ux]
+    dy = ny - prev_normal[1, uy, ux]
+    dz = nz - prev_normal[2, uy, ux]
     return dx * dx + dy * dy + dz * dz <= max_normal_diff_sq
 
 
@@ -162,10 +166,10 @@ def reproject(
                 w01 *= inv
                 w11 *= inv
                 # Taps with zero weight may lie outside the image: clamp their index.
-                xa = min(max(x0, 0), width - 1)
-                xb = min(max(x0 + 1, 0), width - 1)
-                ya = min(max(y0, 0), height - 1)
-                yb = min(max(y0 + 1, 0), height - 1)
+                xa = U(min(max(x0, 0), width - 1))
+                xb = U(min(max(x0 + 1, 0), width - 1))
+                ya = U(min(max(y0, 0), height - 1))
+                yb = U(min(max(y0 + 1, 0), height - 1))
                 out_history_length[y, x] = (
                     w00 * prev_history_length[ya, xa]
                     + w10 * prev_history_length[ya, xb]
@@ -208,12 +212,13 @@ def reproject(
                                            prev_mesh_id):
                         continue
                     count += 1
-                    h_sum += prev_history_length[ty, tx]
+                    uy, ux = U(ty), U(tx)
+                    h_sum += prev_history_length[uy, ux]
                     for s in range(num_signals):
                         for c in range(3):
-                            out_illumination[s, c, y, x] += prev_illumination[s, c, ty, tx]
-                        out_moments[s, 0, y, x] += prev_moments[s, 0, ty, tx]
-                        out_moments[s, 1, y, x] += prev_moments[s, 1, ty, tx]
+                            out_illumination[s, c, y, x] += prev_illumination[s, c, uy, ux]
+                        out_moments[s, 0, y, x] += prev_moments[s, 0, uy, ux]
+                        out_moments[s, 1, y, x] += prev_moments[s, 1, uy, ux]
             if count == 0:
                 out_history_length[y, x] = _ZERO
                 continue
