@@ -28,6 +28,8 @@ from svgf_cli.filters.fastmath import FASTMATH, fast_exp
 F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
+# Pixels of ordinary history between two short-history runs below which the runs merge.
+RUN_GAP = 16
 
 
 @njit(
@@ -75,101 +77,139 @@ def spatial_variance(
     (S, H, W) are not touched. With ``blur_color`` the weighted mean illumination is written
     to ``out_illumination`` for the same pixels (Falcor's behaviour).
     """
+    height, width = depth.shape
+    for y in prange(height):
+        # Runs of pixels that need the estimate (disocclusions: thin slivers along
+        # silhouettes, ~0.3% of a moving 1080p frame). Runs closer than RUN_GAP merge, so a
+        # sliver costs one short vector loop and the pixels between runs cost nothing.
+        hrow = history_length[y]
+        x = 0
+        while x < width:
+            while x < width and not (hrow[x] > _ZERO and hrow[x] < history_threshold):
+                x += 1
+            if x >= width:
+                break
+            first = x
+            last = x
+            while x < width and x - last <= RUN_GAP:
+                if hrow[x] > _ZERO and hrow[x] < history_threshold:
+                    last = x
+                x += 1
+            x = last + 1
+            _spatial_variance_run(
+                np.int64(y), first, last, illumination, moments, history_length, depth, ddx, ddy,
+                normal, history_threshold, radius, sigma_depth, sigma_luminance, squarings,
+                sigma_normal, blur_color, out_variance, out_illumination,
+            )
+
+
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _spatial_variance_run(
+    y: int,
+    first: int,
+    last: int,
+    illumination: np.ndarray,
+    moments: np.ndarray,
+    history_length: np.ndarray,
+    depth: np.ndarray,
+    ddx: np.ndarray,
+    ddy: np.ndarray,
+    normal: np.ndarray,
+    history_threshold: np.float32,
+    radius: int,
+    sigma_depth: np.float32,
+    sigma_luminance: np.float32,
+    squarings: int,
+    sigma_normal: np.float32,
+    blur_color: bool,
+    out_variance: np.ndarray,
+    out_illumination: np.ndarray,
+) -> None:
+    """:func:`spatial_variance` for the pixels of row ``y`` in ``[first, last]`` that need it."""
     num_signals = moments.shape[0]
     height, width = depth.shape
     inv_sigma_l = _ONE / sigma_luminance
-    for y in prange(height):
-        # Contiguous run of pixels that need the estimate in this row (often none).
-        first = width
-        last = -1
-        hrow = history_length[y]
-        for x in range(width):
-            h = hrow[x]
-            if h > _ZERO and h < history_threshold:
-                first = min(first, x)
-                last = max(last, x)
-        if last < first:
+    hrow = history_length[y]
+    run = last + 1 - first
+    # Per signal: sum w, sum w^2, sum w*m1, sum w*m2, sum w*rgb.
+    acc = np.zeros((num_signals, 7, run), dtype=np.float32)
+    depth_exponent = np.empty(run, dtype=np.float32)
+    normal_weight = np.empty(run, dtype=np.float32)
+    tap_weight = np.empty(run, dtype=np.float32)
+    for oy in range(-radius, radius + 1):
+        yy = y + oy
+        if yy < 0 or yy >= height:
             continue
-        run = last + 1 - first
-        # Per signal: sum w, sum w^2, sum w*m1, sum w*m2, sum w*rgb.
-        acc = np.zeros((num_signals, 7, run), dtype=np.float32)
-        depth_exponent = np.empty(run, dtype=np.float32)
-        normal_weight = np.empty(run, dtype=np.float32)
-        tap_weight = np.empty(run, dtype=np.float32)
-        for oy in range(-radius, radius + 1):
-            yy = y + oy
-            if yy < 0 or yy >= height:
+        for ox in range(-radius, radius + 1):
+            x0 = max(first, -ox)
+            x1 = min(last + 1, width - ox)
+            count = x1 - x0
+            if count <= 0:
                 continue
-            for ox in range(-radius, radius + 1):
-                x0 = max(first, -ox)
-                x1 = min(last + 1, width - ox)
-                count = x1 - x0
-                if count <= 0:
-                    continue
-                a = x0 - first
-                tap_geometry(
-                    depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
-                    normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
-                    depth[yy, x0 + ox:x1 + ox],
-                    normal[0, yy, x0 + ox:x1 + ox], normal[1, yy, x0 + ox:x1 + ox],
-                    normal[2, yy, x0 + ox:x1 + ox],
-                    F32(ox), F32(oy), sigma_depth, squarings, sigma_normal, _ONE,
-                    depth_exponent, normal_weight, count,
-                )
-                if ox == 0 and oy == 0:
-                    # The centre always counts fully, also where its normal is degenerate.
-                    for i in range(count):
-                        depth_exponent[i] = _ZERO
-                        normal_weight[i] = _ONE
-                for s in range(num_signals):
-                    m1_p = moments[s, 0, y, x0:x1]
-                    m1_q = moments[s, 0, yy, x0 + ox:x1 + ox]
-                    m2_q = moments[s, 1, yy, x0 + ox:x1 + ox]
-                    sum_w = acc[s, 0, a:a + count]
-                    sum_w2 = acc[s, 1, a:a + count]
-                    sum_m1 = acc[s, 2, a:a + count]
-                    sum_m2 = acc[s, 3, a:a + count]
-                    for i in range(count):
-                        w = normal_weight[i] * fast_exp(
-                            -(depth_exponent[i] + abs(m1_p[i] - m1_q[i]) * inv_sigma_l)
-                        )
-                        tap_weight[i] = w
-                        sum_w[i] += w
-                        sum_w2[i] += w * w
-                        sum_m1[i] += w * m1_q[i]
-                        sum_m2[i] += w * m2_q[i]
-                    if blur_color:
-                        r_q = illumination[s, 0, yy, x0 + ox:x1 + ox]
-                        g_q = illumination[s, 1, yy, x0 + ox:x1 + ox]
-                        b_q = illumination[s, 2, yy, x0 + ox:x1 + ox]
-                        sum_r = acc[s, 4, a:a + count]
-                        sum_g = acc[s, 5, a:a + count]
-                        sum_b = acc[s, 6, a:a + count]
-                        for i in range(count):
-                            w = tap_weight[i]
-                            sum_r[i] += w * r_q[i]
-                            sum_g[i] += w * g_q[i]
-                            sum_b[i] += w * b_q[i]
-        for x in range(first, last + 1):
-            h = hrow[x]
-            if not (h > _ZERO and h < history_threshold):
-                continue
-            i = x - first
+            a = x0 - first
+            tap_geometry(
+                depth[y, x0:x1], ddx[y, x0:x1], ddy[y, x0:x1],
+                normal[0, y, x0:x1], normal[1, y, x0:x1], normal[2, y, x0:x1],
+                depth[yy, x0 + ox:x1 + ox],
+                normal[0, yy, x0 + ox:x1 + ox], normal[1, yy, x0 + ox:x1 + ox],
+                normal[2, yy, x0 + ox:x1 + ox],
+                F32(ox), F32(oy), sigma_depth, squarings, sigma_normal, _ONE,
+                depth_exponent, normal_weight, count,
+            )
+            if ox == 0 and oy == 0:
+                # The centre always counts fully, also where its normal is degenerate.
+                for i in range(count):
+                    depth_exponent[i] = _ZERO
+                    normal_weight[i] = _ONE
             for s in range(num_signals):
-                sum_w = acc[s, 0, i]
-                inv = _ONE / sum_w
-                mean1 = acc[s, 2, i] * inv
-                mean2 = acc[s, 3, i] * inv
-                population = max(mean2 - mean1 * mean1, _ZERO)
-                # Reliability-weights correction; h-frame averages have 1/h of the spread.
-                shrink = acc[s, 1, i] * inv * inv / max(h, _ONE)
-                if shrink < _ONE:
-                    population /= _ONE - shrink
-                out_variance[s, y, x] = population
+                m1_p = moments[s, 0, y, x0:x1]
+                m1_q = moments[s, 0, yy, x0 + ox:x1 + ox]
+                m2_q = moments[s, 1, yy, x0 + ox:x1 + ox]
+                sum_w = acc[s, 0, a:a + count]
+                sum_w2 = acc[s, 1, a:a + count]
+                sum_m1 = acc[s, 2, a:a + count]
+                sum_m2 = acc[s, 3, a:a + count]
+                for i in range(count):
+                    w = normal_weight[i] * fast_exp(
+                        -(depth_exponent[i] + abs(m1_p[i] - m1_q[i]) * inv_sigma_l)
+                    )
+                    tap_weight[i] = w
+                    sum_w[i] += w
+                    sum_w2[i] += w * w
+                    sum_m1[i] += w * m1_q[i]
+                    sum_m2[i] += w * m2_q[i]
                 if blur_color:
-                    out_illumination[s, 0, y, x] = acc[s, 4, i] * inv
-                    out_illumination[s, 1, y, x] = acc[s, 5, i] * inv
-                    out_illumination[s, 2, y, x] = acc[s, 6, i] * inv
+                    r_q = illumination[s, 0, yy, x0 + ox:x1 + ox]
+                    g_q = illumination[s, 1, yy, x0 + ox:x1 + ox]
+                    b_q = illumination[s, 2, yy, x0 + ox:x1 + ox]
+                    sum_r = acc[s, 4, a:a + count]
+                    sum_g = acc[s, 5, a:a + count]
+                    sum_b = acc[s, 6, a:a + count]
+                    for i in range(count):
+                        w = tap_weight[i]
+                        sum_r[i] += w * r_q[i]
+                        sum_g[i] += w * g_q[i]
+                        sum_b[i] += w * b_q[i]
+    for x in range(first, last + 1):
+        h = hrow[x]
+        if not (h > _ZERO and h < history_threshold):
+            continue
+        i = x - first
+        for s in range(num_signals):
+            sum_w = acc[s, 0, i]
+            inv = _ONE / sum_w
+            mean1 = acc[s, 2, i] * inv
+            mean2 = acc[s, 3, i] * inv
+            population = max(mean2 - mean1 * mean1, _ZERO)
+            # Reliability-weights correction; h-frame averages have 1/h of the spread.
+            shrink = acc[s, 1, i] * inv * inv / max(h, _ONE)
+            if shrink < _ONE:
+                population /= _ONE - shrink
+            out_variance[s, y, x] = population
+            if blur_color:
+                out_illumination[s, 0, y, x] = acc[s, 4, i] * inv
+                out_illumination[s, 1, y, x] = acc[s, 5, i] * inv
+                out_illumination[s, 2, y, x] = acc[s, 6, i] * inv
 
 
 @njit(
