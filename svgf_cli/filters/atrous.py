@@ -25,11 +25,12 @@ the read ones, which it cannot check cheaply at run time.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.edges import DEPTH_EPSILON
 from svgf_cli.filters.fastmath import FASTMATH, fast_exp, fast_log2, fma, luminance
 from svgf_cli.filters.noalias import check_disjoint, noalias_njit
+from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
 U = np.uint64  # unsigned indices: numba adds no negative-index wrap-around, loops vectorize
@@ -70,7 +71,7 @@ def luminance_stop_guides(
         {"illumination": illumination, "variance": variance, "depth": depth},
     )
     _guide_rows(illumination, variance, depth, F32(sigma_luminance), out_luminance,
-                out_inverse_scale)
+                out_inverse_scale, np.int64(get_num_threads()))
 
 
 @njit(parallel=True, **_JIT)
@@ -81,12 +82,17 @@ def _guide_rows(
     sigma_luminance: np.float32,
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
+    threads: int,
 ) -> None:
     """All rows of :func:`luminance_stop_guides` in parallel."""
-    for y in prange(depth.shape[0]):
+    height = depth.shape[0]
+    for i in prange(balanced_row_count(height, threads)):
+        y = balanced_row(i, height, threads)
+        if y >= height:
+            continue
         # Surface weight, then the weighted variance sums of both signals.
         sums = np.empty((3, depth.shape[1]), dtype=np.float32)
-        _guide_row(np.int64(y), sums, illumination, variance, depth, sigma_luminance,
+        _guide_row(y, sums, illumination, variance, depth, sigma_luminance,
                    out_luminance, out_inverse_scale)
 
 
@@ -194,7 +200,7 @@ def atrous_iteration(
     _atrous_rows(
         illumination, variance, guide_luminance, guide_inverse_scale, depth, ddx, ddy, normal,
         np.int64(step), F32(sigma_depth), F32(sigma_normal), bool(propagate_variance),
-        out_illumination, out_variance,
+        out_illumination, out_variance, np.int64(get_num_threads()),
     )
 
 
@@ -214,15 +220,18 @@ def _atrous_rows(
     propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
+    threads: int,
 ) -> None:
     """All rows of :func:`atrous_iteration` in parallel, one scratch block per row."""
-    for y in prange(depth.shape[0]):
+    height = depth.shape[0]
+    for i in prange(balanced_row_count(height, threads)):
+        y = balanced_row(i, height, threads)
+        if y >= height:
+            continue
         # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
         sums = np.empty((2, 5, CHUNK), dtype=np.float32)
-        # np.int64: the parfor index is uint64 in the gufunc but int64 when typed first,
-        # which would compile the row function twice.
         _atrous_row(
-            np.int64(y), sums, illumination, variance, guide_luminance, guide_inverse_scale,
+            y, sums, illumination, variance, guide_luminance, guide_inverse_scale,
             depth, ddx, ddy, normal, step, sigma_depth, sigma_normal, propagate_variance,
             out_illumination, out_variance,
         )

@@ -24,9 +24,10 @@ depend on the scene's units; history length is resampled, not read nearest-neigh
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
+from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
 U = np.uint64
@@ -73,9 +74,6 @@ def _tap_consistent(
     return dx * dx + dy * dy + dz * dz <= max_normal_diff_sq
 
 
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
 def reproject(
     motion: np.ndarray,
     depth: np.ndarray,
@@ -102,11 +100,47 @@ def reproject(
     resampled history into the ``out_*`` arrays; ``out_history_length`` is the resampled
     previous history length, 0 where the history is rejected (disocclusion).
     """
+    _reproject_rows(
+        motion, depth, normal, mesh_id, depth_slope, normal_width, prev_depth, prev_normal,
+        prev_mesh_id, prev_illumination, prev_moments, prev_history_length,
+        F32(depth_tolerance), F32(depth_slack), F32(normal_tolerance), out_illumination,
+        out_moments, out_history_length, np.int64(get_num_threads()),
+    )
+
+
+@njit(
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def _reproject_rows(
+    motion: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray,
+    mesh_id: np.ndarray,
+    depth_slope: np.ndarray,
+    normal_width: np.ndarray,
+    prev_depth: np.ndarray,
+    prev_normal: np.ndarray,
+    prev_mesh_id: np.ndarray,
+    prev_illumination: np.ndarray,
+    prev_moments: np.ndarray,
+    prev_history_length: np.ndarray,
+    depth_tolerance: np.float32,
+    depth_slack: np.float32,
+    normal_tolerance: np.float32,
+    out_illumination: np.ndarray,
+    out_moments: np.ndarray,
+    out_history_length: np.ndarray,
+    threads: int,
+) -> None:
+    """All rows of :func:`reproject`, balanced over the threads (see ``rows``)."""
     num_signals = prev_illumination.shape[0]
     height, width = depth.shape
     fwidth = F32(width)
     fheight = F32(height)
-    for y in prange(height):
+    for i in prange(balanced_row_count(height, threads)):
+        y = balanced_row(i, height, threads)
+        if y >= height:
+            continue
         for x in range(width):
             z = depth[y, x]
             px = F32(x) + motion[0, y, x]
