@@ -33,3 +33,4 @@ results: $(STAMP)
 
 clean:
 	rm -rf $(VENV) demo bench/out results .pytest_cache .ruff_cache
+	find svgf_cli svgf_trace -name '*.nbi' -delete -o -name '*.nbc' -delete
