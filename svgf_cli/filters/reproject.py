@@ -141,10 +141,12 @@ def _reproject_rows(
         y = balanced_row(i, height, threads)
         if y >= height:
             continue
+        uy = U(y)
         for x in range(width):
-            z = depth[y, x]
-            px = F32(x) + motion[0, y, x]
-            py = F32(y) + motion[1, y, x]
+            ux = U(x)
+            z = depth[uy, ux]
+            px = F32(x) + motion[0, uy, ux]
+            py = F32(y) + motion[1, uy, ux]
             # Positions this far outside cannot reach a tap (and NaN motion fails every
             # comparison), which also keeps the int conversions below in range.
             reachable = (
@@ -155,19 +157,19 @@ def _reproject_rows(
                 and py < fheight + F32(1.0)
             )
             if not reachable:
-                out_history_length[y, x] = _ZERO
+                out_history_length[uy, ux] = _ZERO
                 for s in range(num_signals):
                     for c in range(3):
-                        out_illumination[s, c, y, x] = _ZERO
-                    out_moments[s, 0, y, x] = _ZERO
-                    out_moments[s, 1, y, x] = _ZERO
+                        out_illumination[s, c, uy, ux] = _ZERO
+                    out_moments[s, 0, uy, ux] = _ZERO
+                    out_moments[s, 1, uy, ux] = _ZERO
                 continue
-            nx = normal[0, y, x]
-            ny = normal[1, y, x]
-            nz = normal[2, y, x]
-            mesh = mesh_id[y, x]
-            max_depth_diff = depth_tolerance * (depth_slope[y, x] + depth_slack * z)
-            max_normal_diff = normal_tolerance * (normal_width[y, x] + _NORMAL_SLACK)
+            nx = normal[0, uy, ux]
+            ny = normal[1, uy, ux]
+            nz = normal[2, uy, ux]
+            mesh = mesh_id[uy, ux]
+            max_depth_diff = depth_tolerance * (depth_slope[uy, ux] + depth_slack * z)
+            max_normal_diff = normal_tolerance * (normal_width[uy, ux] + _NORMAL_SLACK)
             max_normal_diff_sq = max_normal_diff * max_normal_diff
 
             fx0 = np.floor(px)
@@ -204,7 +206,7 @@ def _reproject_rows(
                 xb = U(min(max(x0 + 1, 0), width - 1))
                 ya = U(min(max(y0, 0), height - 1))
                 yb = U(min(max(y0 + 1, 0), height - 1))
-                out_history_length[y, x] = (
+                out_history_length[uy, ux] = (
                     w00 * prev_history_length[ya, xa]
                     + w10 * prev_history_length[ya, xb]
                     + w01 * prev_history_length[yb, xa]
@@ -214,14 +216,14 @@ def _reproject_rows(
                 # atomic reference-count update, contended between threads.
                 for s in range(num_signals):
                     for c in range(3):
-                        out_illumination[s, c, y, x] = (
+                        out_illumination[s, c, uy, ux] = (
                             w00 * prev_illumination[s, c, ya, xa]
                             + w10 * prev_illumination[s, c, ya, xb]
                             + w01 * prev_illumination[s, c, yb, xa]
                             + w11 * prev_illumination[s, c, yb, xb]
                         )
                     for c in range(2):
-                        out_moments[s, c, y, x] = (
+                        out_moments[s, c, uy, ux] = (
                             w00 * prev_moments[s, c, ya, xa]
                             + w10 * prev_moments[s, c, ya, xb]
                             + w01 * prev_moments[s, c, yb, xa]
@@ -236,9 +238,9 @@ def _reproject_rows(
             h_sum = _ZERO
             for s in range(num_signals):
                 for c in range(3):
-                    out_illumination[s, c, y, x] = _ZERO
-                out_moments[s, 0, y, x] = _ZERO
-                out_moments[s, 1, y, x] = _ZERO
+                    out_illumination[s, c, uy, ux] = _ZERO
+                out_moments[s, 0, uy, ux] = _ZERO
+                out_moments[s, 1, uy, ux] = _ZERO
             for ty in range(cy - 1, cy + 2):
                 for tx in range(cx - 1, cx + 2):
                     if not _tap_consistent(tx, ty, z, nx, ny, nz, mesh, max_depth_diff,
@@ -246,23 +248,23 @@ def _reproject_rows(
                                            prev_mesh_id):
                         continue
                     count += 1
-                    uy, ux = U(ty), U(tx)
-                    h_sum += prev_history_length[uy, ux]
+                    qy, qx = U(ty), U(tx)
+                    h_sum += prev_history_length[qy, qx]
                     for s in range(num_signals):
                         for c in range(3):
-                            out_illumination[s, c, y, x] += prev_illumination[s, c, uy, ux]
-                        out_moments[s, 0, y, x] += prev_moments[s, 0, uy, ux]
-                        out_moments[s, 1, y, x] += prev_moments[s, 1, uy, ux]
+                            out_illumination[s, c, uy, ux] += prev_illumination[s, c, qy, qx]
+                        out_moments[s, 0, uy, ux] += prev_moments[s, 0, qy, qx]
+                        out_moments[s, 1, uy, ux] += prev_moments[s, 1, qy, qx]
             if count == 0:
-                out_history_length[y, x] = _ZERO
+                out_history_length[uy, ux] = _ZERO
                 continue
             inv = _ONE / F32(count)
-            out_history_length[y, x] = h_sum * inv
+            out_history_length[uy, ux] = h_sum * inv
             for s in range(num_signals):
                 for c in range(3):
-                    out_illumination[s, c, y, x] *= inv
-                out_moments[s, 0, y, x] *= inv
-                out_moments[s, 1, y, x] *= inv
+                    out_illumination[s, c, uy, ux] *= inv
+                out_moments[s, 0, uy, ux] *= inv
+                out_moments[s, 1, uy, ux] *= inv
 
 
 def accumulate(
