@@ -330,3 +330,29 @@ def test_offset_data_window_and_tiled(tmp_path: Path, tiled: bool) -> None:
     assert np.array_equal(frame.color, planes(channels, "R", "G", "B"))
     assert np.array_equal(frame.depth, channels["Z"])
     assert np.array_equal(frame.motion, planes(channels, "motion.X", "motion.Y"))
+
+
+def test_half_colour_and_uint_id_channels_decode_exactly(tmp_path: Path) -> None:
+    """Mixed channel types as renderers write them: half radiance, float data, uint ids
+    (written with the OpenEXR bindings: OpenImageIO would normalise a float buffer into a
+    uint channel)."""
+    import OpenEXR
+
+    channels = gbuffer(seed=5, split=True)
+    ids = (np.arange(H * W, dtype=np.uint32).reshape(H, W) % 7) * 1000 + 5
+    ids[0, 0] = 2**32 - 1  # beyond int32: clamped, not wrapped
+    half = {n for n in channels if n.split(".")[0] in ("R", "G", "B", "direct", "indirect")}
+    data: dict[str, np.ndarray] = {
+        n: (v.astype(np.float16) if n in half else v) for n, v in channels.items()
+    }
+    data["id"] = ids
+    path = tmp_path / "mixed.exr"
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, data) as out:
+        out.write(str(path))
+    frame = read_frame(path, build_mapping()).frame
+    as_half = channels["direct.R"].astype(np.float16).astype(np.float32)
+    assert np.array_equal(frame.direct[0], as_half)
+    assert np.array_equal(frame.depth, channels["Z"])  # float data stays exact
+    assert frame.mesh_id[0, 0] == np.iinfo(np.int32).max
+    assert np.array_equal(frame.mesh_id.ravel()[1:], ids.ravel()[1:].astype(np.int32))

@@ -533,7 +533,9 @@ def read_frame(
         finite = np.isfinite(raw_id)
         limit = float(np.iinfo(np.int32).max)
         mesh_id = np.full((height, width), -1, dtype=np.int32)
-        mesh_id[finite] = np.clip(np.rint(raw_id[finite]), -limit, limit).astype(np.int32)
+        # In float64: float32 rounds the int32 limit up to 2^31, which wraps negative.
+        rounded = np.rint(raw_id[finite].astype(np.float64))
+        mesh_id[finite] = np.clip(rounded, -limit, limit).astype(np.int32)
     else:
         mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
 
