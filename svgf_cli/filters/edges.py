@@ -1,8 +1,9 @@
-"""Edge-stopping weights shared by the spatial kernels (paper section 4.3, equations 3-5).
+"""Edge-stopping weights of the spatial-variance kernel (paper section 4.3, equations 3-5).
 
-The kernels loop taps outer and pixels inner; for one tap offset these helpers fill row
+That kernel loops taps outer and pixels inner; for one tap offset these helpers fill row
 buffers over a contiguous run of centre pixels ``p`` and their neighbours ``q = p + offset``,
-so every inner loop is branch-free and vectorizes.
+so every inner loop is branch-free and vectorizes. The a-trous evaluates the same depth and
+normal terms register-blocked in ``atrous._tap`` (with ``DEPTH_EPSILON`` from here).
 
 * depth: ``|z(p) - z(q)| / (sigma_z * |grad z(p) . (p - q)| + eps * z(p))`` is the exponent
   of ``w_z`` (the paper's projected gradient; Falcor uses ``|grad z| * |p - q|`` instead,

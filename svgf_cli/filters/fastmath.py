@@ -6,8 +6,8 @@ splits ``t = x * log2(e)`` into its integer part (truncation, no rounding instru
 fraction ``f`` in (-1, 0], evaluates ``2**f`` with a degree-4 polynomial (relative error
 < 4e-6, fitted for this project) and builds ``2**integer`` from the IEEE-754 exponent bits,
 so a loop calling it stays branch-free and vectorizes. ``fast_log2`` is the mirror image
-(exponent bits plus a degree-7 polynomial for the mantissa, absolute error < 1e-6), and
-``fast_unit_pow`` combines the two for ``c ** e`` on ``[0, 1]``.
+(exponent bits plus a degree-7 polynomial for the mantissa, absolute error < 1e-6); the
+a-trous uses it to fold ``cos ** sigma_n`` into its single exp.
 """
 
 from __future__ import annotations
@@ -116,14 +116,6 @@ def fast_log2(x: np.float32) -> np.float32:
     t = _int32_bits_as_float32((bits & _MANTISSA_MASK) | _ONE_BITS) - _ONE
     poly = fma(t, fma(t, fma(t, fma(t, fma(t, _L7, _L6), _L5), _L4), _L3), _L2)
     return fma(t, fma(t, poly, _L1), log2_whole)
-
-
-@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
-def fast_unit_pow(c: np.float32, exponent: np.float32) -> np.float32:
-    """``c ** exponent`` for ``c`` in [0, 1] and ``exponent >= 1`` (0 for ``c <= 0``)."""
-    safe = max(c, F32(1e-30))
-    power = fast_exp(exponent * fast_log2(safe) * _LN2)
-    return power if c > _ZERO else _ZERO
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
