@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from svgf_cli.filters.edges import DEPTH_EPSILON
+from svgf_cli.filters.edges import DEPTH_EPSILON, DEPTH_TINY
 from svgf_cli.filters.fastmath import FASTMATH, fast_exp, fast_log2, fma, luminance
 from svgf_cli.filters.noalias import check_disjoint, noalias_njit
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
@@ -37,10 +37,8 @@ U = np.uint64  # unsigned indices: numba adds no negative-index wrap-around, loo
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _VARIANCE_EPSILON = F32(1e-10)
-# Keeps 0/0 away for background centres (depth 0) without changing any real weight.
-_TINY = F32(1e-20)
 _TINY_COSINE = F32(1e-30)
-_LN2 = F32(0.6931471805599453)
+_LN2 = 0.6931471805599453  # sigma_n * ln 2 is formed once per call
 # Pixels per row chunk: the accumulators and the touched row pieces stay in L1/L2.
 CHUNK = 256
 _B3 = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0], dtype=np.float32)
@@ -199,7 +197,7 @@ def atrous_iteration(
     })
     _atrous_rows(
         illumination, variance, guide_luminance, guide_inverse_scale, depth, ddx, ddy, normal,
-        np.int64(step), F32(sigma_depth), F32(sigma_normal), bool(propagate_variance),
+        np.int64(step), F32(sigma_depth), F32(sigma_normal * _LN2), bool(propagate_variance),
         out_illumination, out_variance, np.int64(get_num_threads()),
     )
 
@@ -216,13 +214,17 @@ def _atrous_rows(
     normal: np.ndarray,
     step: int,
     sigma_depth: np.float32,
-    sigma_normal: np.float32,
+    normal_log_scale: np.float32,
     propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
     threads: int,
 ) -> None:
-    """All rows of :func:`atrous_iteration` in parallel, one scratch block per row."""
+    """All rows of :func:`atrous_iteration` in parallel, one scratch block per row.
+
+    ``normal_log_scale`` is ``sigma_n ln 2`` (so ``w_n = exp(normal_log_scale log2(cos))``),
+    multiplied once here rather than once per tap.
+    """
     height = depth.shape[0]
     for i in prange(balanced_row_count(height, threads)):
         y = balanced_row(i, height, threads)
@@ -232,7 +234,7 @@ def _atrous_rows(
         sums = np.empty((2, 5, CHUNK), dtype=np.float32)
         _atrous_row(
             y, sums, illumination, variance, guide_luminance, guide_inverse_scale,
-            depth, ddx, ddy, normal, step, sigma_depth, sigma_normal, propagate_variance,
+            depth, ddx, ddy, normal, step, sigma_depth, normal_log_scale, propagate_variance,
             out_illumination, out_variance,
         )
 
@@ -251,7 +253,7 @@ def _atrous_row(
     normal: np.ndarray,
     step: int,
     sigma_depth: np.float32,
-    sigma_normal: np.float32,
+    normal_log_scale: np.float32,
     propagate_variance: bool,
     out_illumination: np.ndarray,
     out_variance: np.ndarray,
@@ -332,7 +334,7 @@ def _atrous_row(
                 _segment(
                     sums, illumination, variance, guide_luminance, guide_inverse_scale, depth,
                     ddx, ddy, normal, y, yy, start, count, start - chunk_start, step, oy,
-                    offsets, kernel, sigma_depth, sigma_normal, second,
+                    offsets, kernel, sigma_depth, normal_log_scale, second,
                 )
         for s in range(num_signals):
             for i in range(chunk_end - chunk_start):
@@ -369,7 +371,7 @@ def _segment(
     offsets: np.ndarray,
     kernel: np.ndarray,
     sigma_depth: np.float32,
-    sigma_normal: np.float32,
+    normal_log_scale: np.float32,
     second: int,
 ) -> None:
     """Add one kernel row's five taps to ``sums`` for ``count`` pixels from ``start``."""
@@ -385,7 +387,7 @@ def _segment(
         a = U(sums_start + i)
         zp = depth[uy, px]
         centre = (
-            zp, DEPTH_EPSILON * zp + _TINY, ddx[uy, px], ddy[uy, px] * fy,
+            zp, DEPTH_EPSILON * zp + DEPTH_TINY, ddx[uy, px], ddy[uy, px] * fy,
             normal[0, uy, px], normal[1, uy, px], normal[2, uy, px],
             guide_luminance[0, uy, px], guide_inverse_scale[0, uy, px],
             guide_luminance[second, uy, px], guide_inverse_scale[second, uy, px],
@@ -395,15 +397,15 @@ def _segment(
             sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a],
         )
         acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
-                   U(x + o0), h0, f0, sigma_depth, sigma_normal, second)
+                   U(x + o0), h0, f0, sigma_depth, normal_log_scale, second)
         acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
-                   U(x + o1), h1, f1, sigma_depth, sigma_normal, second)
+                   U(x + o1), h1, f1, sigma_depth, normal_log_scale, second)
         acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
-                   U(x + o2), h2, _ZERO, sigma_depth, sigma_normal, second)
+                   U(x + o2), h2, _ZERO, sigma_depth, normal_log_scale, second)
         acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
-                   U(x + o3), h3, f3, sigma_depth, sigma_normal, second)
+                   U(x + o3), h3, f3, sigma_depth, normal_log_scale, second)
         acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
-                   U(x + o4), h4, f4, sigma_depth, sigma_normal, second)
+                   U(x + o4), h4, f4, sigma_depth, normal_log_scale, second)
         sums[0, 0, a], sums[0, 1, a], sums[0, 2, a], sums[0, 3, a], sums[0, 4, a] = acc[:5]
         sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a] = acc[5:]
 
@@ -422,7 +424,7 @@ def _tap(
     kernel: np.float32,
     offset_x: np.float32,
     sigma_depth: np.float32,
-    sigma_normal: np.float32,
+    normal_log_scale: np.float32,
     second: int,
 ) -> tuple:
     """One tap: eqs. 3-5 for both signals and their weighted sums (eqs. 1-2).
@@ -437,7 +439,7 @@ def _tap(
     cosine = fma(nx, normal[0, uq, qx], fma(ny, normal[1, uq, qx], nz * normal[2, uq, qx]))
     # w_n w_z w_l = exp(sigma_n ln(cos) - z term - l term): one exp per signal, the
     # normal power joins the exponent (w_n = 0 where cos <= 0, as max(0, .) gives).
-    log_normal = sigma_normal * fast_log2(max(cosine, _TINY_COSINE)) * _LN2
+    log_normal = normal_log_scale * fast_log2(max(cosine, _TINY_COSINE))
     shared = log_normal - depth_exponent
     weight = kernel if cosine > _ZERO else _ZERO
     w0 = weight * fast_exp(shared - abs(lum0 - guide_luminance[0, uq, qx]) * inv0)

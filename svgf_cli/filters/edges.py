@@ -27,7 +27,7 @@ F32 = np.float32
 _ZERO = F32(0.0)
 DEPTH_EPSILON = F32(1e-3)
 # Keeps 0/0 away for background centres (depth 0) without changing any real weight.
-_TINY = F32(1e-20)
+DEPTH_TINY = F32(1e-20)
 
 
 def normal_squarings(sigma_normal: float) -> int:
@@ -69,7 +69,8 @@ def tap_geometry(
     for i in range(count):
         z = z_p[i]
         projected = abs(gx_p[i] * offset_x + gy_p[i] * offset_y)
-        depth_exponent[i] = abs(z - z_q[i]) / (sigma_depth * projected + DEPTH_EPSILON * z + _TINY)
+        floor = DEPTH_EPSILON * z + DEPTH_TINY
+        depth_exponent[i] = abs(z - z_q[i]) / (sigma_depth * projected + floor)
     if squarings == 7:
         for i in range(count):
             c = max(nx_p[i] * nx_q[i] + ny_p[i] * ny_q[i] + nz_p[i] * nz_q[i], _ZERO)

@@ -33,7 +33,6 @@ LUMA_G = F32(0.7152)
 LUMA_B = F32(0.0722)
 
 _LOG2E = F32(1.4426950408889634)
-_LN2 = F32(0.6931471805599453)
 _EXP2_MIN = F32(-126.0)
 _ZERO = F32(0.0)
 # 2**f on [-1, 0]: least squares on relative error with the constant pinned to 1.
