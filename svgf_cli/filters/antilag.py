@@ -1,31 +1,38 @@
-"""Anti-lag: shorten the history where the lighting changed (runs between reprojection and
+"""Anti-lag: shorten the history where the lighting changed (between reprojection and
 accumulation).
 
-SVGF rejects history only with geometric tests, so a moving light, a moving shadow, a
-dimmed light or a sliding reflection keeps its stale colour for about 1/alpha frames. This
-stage compares, per signal, the reprojected history with the current frame in a
-(2r+1)^2 window around every pixel, over the pixels that have history:
+SVGF rejects history only with geometric tests, so under a moving light, a moving shadow, a
+dimmed light or a sliding reflection the stale colour fades only at rate alpha (about
+1/alpha frames). This stage tests, per signal, whether the reprojected history still agrees
+with the current frame beyond what the noise explains, and where it does not it lowers the
+history length, so that the accumulation's blend factor ``max(alpha, 1/h)`` takes more of
+the current frame. It needs nothing from the renderer.
 
-* ``m_c``, ``m_h``: window means of the current and of the history luminance;
-* ``var``: the per-sample noise variance of the current luminance, the larger of the
-  window's sample variance (Bessel-corrected) and the mean temporal variance
-  ``m2 - m1^2`` carried by the history moments (a few 1-spp samples often miss the
-  outliers that a long history has seen);
-* the history is stale where ``(m_h - m_c)^2 > k^2 var / n + (tolerance * max(m_c, m_h))^2``:
-  more than ``k`` standard errors of ``m_c`` (``sigma``) plus a small relative tolerance;
-* there, ``b^2 = (m_h - m_c)^2 - var / n`` (an unbiased estimate of the history's squared
-  bias) and ``lambda = b^2 / (b^2 + var / N)``: the blend weight of the current frame that
-  minimises the expected squared error of the filtered result, ``(1 - a)^2 b^2 +
-  a^2 var / N``, where ``N`` (``spatial_samples``) is the number of pixels the spatial filter
-  averages; elsewhere ``lambda = 0``.
+Statistics are gathered on cells of 2x2 pixels (a quarter of the work) over a window of
+``(2r+1)^2`` cells around each cell, from the pixels that have history (``h > 0``):
 
-``lambda`` is dilated by a 3x3 maximum (a change seen by a window reaches its border pixels)
-and lowers the history length to ``h <= 1/lambda - 1``, so the accumulation's blend factor
-``max(alpha, 1/(h + 1))`` is at least ``lambda`` and the moments follow (``lambda = 1``
-drops the history and the variance falls back to the spatial estimate). Every term scales
-with the signal, so the test is the same at any exposure. Nothing changes where the
-difference is within the noise: at 1 spp the test is conservative, where the change is real
-it is decisive.
+* ``m_c``: mean current luminance; ``m_h``: mean of the reprojected first moment ``m1``
+  (the temporally accumulated luminance; unlike the colour history it is never spatially
+  filtered, so it carries no bias from the a-trous feedback at edges);
+* ``var``: per-sample noise variance of the current luminance, the larger of the window's
+  Bessel-corrected sample variance and its mean temporal variance ``m2 - m1^2`` (a few
+  1-spp samples often miss the outliers that a long history has seen);
+* the noise of ``m_h``: a share ``max(1/h_mean, alpha_m / (2 - alpha_m))`` of a sample's
+  (short histories are averages of few frames; a long exponential average keeps
+  ``alpha_m / (2 - alpha_m)``);
+* stale where ``(m_h - m_c)^2 > k^2 (var / n) (1 + share) + (tolerance max(m_c, m_h))^2``:
+  more than ``k`` (``sigma``) standard errors of the difference plus a small relative
+  tolerance;
+* there ``b^2 = (m_h - m_c)^2 - var / n`` (the history's squared bias, unbiased) and
+  ``lambda = b^2 / (b^2 + var / N)``, the blend weight of the current frame that minimises
+  the expected squared error ``(1 - a)^2 b^2 + a^2 var / N`` of a result the spatial filter
+  averages over ``N`` pixels (``spatial_samples``); elsewhere ``lambda = 0``.
+
+``lambda`` is dilated by the 3x3 cell maximum (a change seen by a window reaches its border
+pixels) and each pixel with history gets ``h <= 1/lambda - 1`` (``lambda = 1`` drops the
+history: the next accumulation restarts at ``h = 1`` and the variance falls back to the
+spatial estimate). Every term scales with the signal, so the test is the same at any
+exposure; where the difference is within the noise nothing changes.
 """
 
 from __future__ import annotations
@@ -38,17 +45,22 @@ from svgf_cli.filters.fastmath import FASTMATH
 F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
+CELL = 2  # pixels per cell side
 # Fewer pixels with history than this in a window: no decision (the statistics are noise).
 MIN_SAMPLES = 4
-# Window sums: valid count, sum l, sum l^2, sum history l, sum temporal variance.
-_TERMS = 5
+# Sums per cell: count, sum l, sum l^2, sum m1, sum (m2 - m1^2), sum h.
+_TERMS = 6
 
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
+def cell_shape(height: int, width: int) -> tuple[int, int]:
+    """Cells covering an image: (ceil(H / 2), ceil(W / 2))."""
+    return (height + CELL - 1) // CELL, (width + CELL - 1) // CELL
+
+
 def antilag(
     illumination: np.ndarray,
-    history_illumination: np.ndarray,
     history_moments: np.ndarray,
     history_length: np.ndarray,
     depth: np.ndarray,
@@ -57,144 +69,178 @@ def antilag(
     sigma: float,
     spatial_samples: float,
     tolerance: float,
+    moments_alpha: float,
     scratch: np.ndarray,
     out_lambda: np.ndarray,
 ) -> int:
     """Lower ``history_length`` (S, H, W) in place where the history disagrees with the frame.
 
-    ``illumination`` and ``history_illumination`` are (S, 3, H, W) (current demodulated
-    signal and reprojected history), ``history_moments`` (S, 2, H, W), ``luminance_weights``
-    (3,) float32. ``scratch`` is a float32 (5, H, W) buffer, ``out_lambda`` (S, H, W)
-    receives the dilated blend weight (0 where the history is kept as it is). Returns the
-    number of (signal, pixel) histories that were shortened.
+    ``illumination`` is the current demodulated signal (S, 3, H, W), ``history_moments``
+    the reprojected moments (S, 2, H, W), ``luminance_weights`` (3,) float32, ``radius`` in
+    cells. ``scratch`` is float32 (2 * 6 + 1, Hc, Wc) and ``out_lambda`` (S, Hc, Wc)
+    receives the dilated blend weight per cell (see :func:`cell_shape`). Returns how many
+    (signal, pixel) histories were shortened.
     """
-    num_signals = illumination.shape[0]
+    terms = scratch[:_TERMS]
+    row_sums = scratch[_TERMS:2 * _TERMS]
+    spare = scratch[2 * _TERMS]
     shortened = 0
-    for s in range(num_signals):
-        _window_terms(illumination[s], history_illumination[s], history_moments[s],
-                      history_length[s], depth, luminance_weights, np.int64(radius), scratch)
-        _blend_weight(scratch, np.int64(radius), F32(sigma), F32(spatial_samples),
-                      F32(tolerance), out_lambda[s])
-        shortened += int(_dilate_and_shorten(out_lambda[s], history_length[s], scratch[0]))
+    for s in range(illumination.shape[0]):
+        _cell_terms(illumination[s], history_moments[s], history_length[s], depth,
+                    luminance_weights, terms)
+        _row_box(terms, np.int64(radius), row_sums)
+        _cell_lambda(row_sums, np.int64(radius), F32(sigma), F32(spatial_samples),
+                     F32(tolerance), F32(moments_alpha), spare)
+        _dilate(spare, out_lambda[s])
+        shortened += int(_shorten(history_length[s], out_lambda[s]))
     return shortened
 
 
 @njit(parallel=True, **_JIT)
-def _window_terms(
+def _cell_terms(
     current: np.ndarray,
-    history: np.ndarray,
     moments: np.ndarray,
     history_length: np.ndarray,
     depth: np.ndarray,
     weights: np.ndarray,
-    radius: int,
     out: np.ndarray,
 ) -> None:
-    """Per-pixel terms over pixels with history, summed along x over ``2r+1`` pixels.
-
-    Running sums are kept in float64 so that adding and removing values along a row does
-    not drift.
-    """
+    """Sums of the per-pixel terms over each cell's pixels that have history."""
     height, width = depth.shape
+    cells_y, cells_x = out.shape[1], out.shape[2]
     wr, wg, wb = weights[0], weights[1], weights[2]
-    for y in prange(height):
-        terms = np.empty((_TERMS, width), dtype=np.float64)
-        for x in range(width):
-            valid = history_length[y, x] > _ZERO and depth[y, x] > _ZERO
-            lum = wr * current[0, y, x] + wg * current[1, y, x] + wb * current[2, y, x]
-            lum_h = wr * history[0, y, x] + wg * history[1, y, x] + wb * history[2, y, x]
-            m1 = moments[0, y, x]
-            temporal = max(moments[1, y, x] - m1 * m1, _ZERO)
-            v = 1.0 if valid else 0.0
-            terms[0, x] = v
-            terms[1, x] = v * lum
-            terms[2, x] = v * lum * lum
-            terms[3, x] = v * lum_h
-            terms[4, x] = v * temporal
+    for cy in prange(cells_y):
+        pixel = np.zeros((_TERMS, CELL * cells_x), dtype=np.float32)
         for t in range(_TERMS):
-            running = 0.0
-            for x in range(min(radius, width)):
-                running += terms[t, x]
+            for cx in range(cells_x):
+                out[t, cy, cx] = _ZERO
+        for y in range(CELL * cy, min(CELL * cy + CELL, height)):
+            r, g, b = current[0, y], current[1, y], current[2, y]
+            m1_row, m2_row = moments[0, y], moments[1, y]
+            h_row, z_row = history_length[y], depth[y]
             for x in range(width):
-                if x + radius < width:
-                    running += terms[t, x + radius]
-                if x - radius - 1 >= 0:
-                    running -= terms[t, x - radius - 1]
-                out[t, y, x] = running
+                h = h_row[x]
+                v = _ONE if (h > _ZERO and z_row[x] > _ZERO) else _ZERO
+                lum = v * (wr * r[x] + wg * g[x] + wb * b[x])
+                m1 = v * m1_row[x]
+                pixel[0, x] = v
+                pixel[1, x] = lum
+                pixel[2, x] = lum * lum
+                pixel[3, x] = m1
+                pixel[4, x] = max(v * m2_row[x] - m1 * m1, _ZERO)
+                pixel[5, x] = v * h
+            for t in range(_TERMS):
+                row = pixel[t]
+                acc = out[t, cy]
+                for cx in range(cells_x):
+                    acc[cx] += row[CELL * cx] + row[CELL * cx + 1]
 
 
 @njit(parallel=True, **_JIT)
-def _blend_weight(
+def _row_box(terms: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """Sum every term along x over ``2r+1`` cells (cells outside the image count 0)."""
+    cells_y, cells_x = terms.shape[1], terms.shape[2]
+    for job in prange(_TERMS * cells_y):
+        t = job // cells_y
+        cy = job % cells_y
+        row = terms[t, cy]
+        acc = out[t, cy]
+        for cx in range(cells_x):
+            acc[cx] = _ZERO
+        for offset in range(-radius, radius + 1):
+            first = max(0, -offset)
+            last = min(cells_x, cells_x - offset)
+            if last <= first:
+                continue
+            # Slices, so that every index is provably non-negative and the loop vectorizes.
+            source = row[first + offset:last + offset]
+            target = acc[first:last]
+            for i in range(last - first):
+                target[i] += source[i]
+
+
+@njit(parallel=True, **_JIT)
+def _cell_lambda(
     row_sums: np.ndarray,
     radius: int,
     sigma: np.float32,
     spatial_samples: np.float32,
     tolerance: np.float32,
-    out_lambda: np.ndarray,
+    moments_alpha: np.float32,
+    out: np.ndarray,
 ) -> None:
-    """Sum the row sums over ``2r+1`` rows and evaluate the blend weight (module docstring)."""
-    height, width = out_lambda.shape
+    """Sum the row sums over ``2r+1`` cell rows and evaluate the blend weight per cell."""
+    cells_y, cells_x = out.shape
     k2 = sigma * sigma
     tol2 = tolerance * tolerance
     inv_spatial = _ONE / spatial_samples
-    for y in prange(height):
-        sums = np.zeros((_TERMS, width), dtype=np.float32)
-        for yy in range(max(y - radius, 0), min(y + radius + 1, height)):
+    stationary = moments_alpha / (F32(2.0) - moments_alpha)
+    for cy in prange(cells_y):
+        sums = np.zeros((_TERMS, cells_x), dtype=np.float32)
+        for yy in range(max(cy - radius, 0), min(cy + radius + 1, cells_y)):
             for t in range(_TERMS):
                 row = row_sums[t, yy]
                 acc = sums[t]
-                for x in range(width):
-                    acc[x] += row[x]
-        out = out_lambda[y]
-        for x in range(width):
-            n = sums[0, x]
+                for cx in range(cells_x):
+                    acc[cx] += row[cx]
+        o = out[cy]
+        for cx in range(cells_x):
+            n = sums[0, cx]
             inv_n = _ONE / max(n, _ONE)
-            mean_c = sums[1, x] * inv_n
-            mean_h = sums[3, x] * inv_n
-            spread = max(sums[2, x] * inv_n - mean_c * mean_c, _ZERO)
-            sample_var = spread * n / max(n - _ONE, _ONE)
-            var = max(sample_var, sums[4, x] * inv_n)
+            mean_c = sums[1, cx] * inv_n
+            mean_h = sums[3, cx] * inv_n
+            spread = max(sums[2, cx] * inv_n - mean_c * mean_c, _ZERO)
+            var = max(spread * n / max(n - _ONE, _ONE), sums[4, cx] * inv_n)
+            share = max(_ONE / max(sums[5, cx] * inv_n, _ONE), stationary)
             diff = mean_h - mean_c
-            level = max(mean_c, mean_h)
             diff2 = diff * diff
-            standard_error2 = var * inv_n
-            significant = diff2 > k2 * standard_error2 + tol2 * level * level
-            bias2 = diff2 - standard_error2
-            noise = var * inv_spatial
-            lam = bias2 / (bias2 + noise) if significant else _ZERO
-            out[x] = lam if n >= F32(MIN_SAMPLES) else _ZERO
+            level = max(mean_c, mean_h)
+            stale = diff2 > k2 * var * inv_n * (_ONE + share) + tol2 * level * level
+            stale = stale and n >= F32(MIN_SAMPLES)
+            bias2 = max(diff2 - var * inv_n, _ZERO)
+            # A limit of the history length, 1/lambda - 1, is what the pixels need.
+            o[cx] = bias2 / (bias2 + var * inv_spatial + F32(1e-30)) if stale else _ZERO
 
 
 @njit(parallel=True, **_JIT)
-def _dilate_and_shorten(
-    lam: np.ndarray, history_length: np.ndarray, scratch: np.ndarray
-) -> int:
-    """3x3 maximum of ``lam`` (in place, via ``scratch``), then ``h = min(h, 1/lam - 1)``."""
-    height, width = lam.shape
-    for y in prange(height):
-        for x in range(width):
-            best = lam[y, x]
-            if x > 0:
-                best = max(best, lam[y, x - 1])
-            if x + 1 < width:
-                best = max(best, lam[y, x + 1])
-            scratch[y, x] = best
+def _dilate(cells: np.ndarray, out: np.ndarray) -> None:
+    """3x3 maximum over cells (separable: rows here, columns while writing)."""
+    cells_y, cells_x = cells.shape
+    for cy in prange(cells_y):
+        best = np.zeros(cells_x, dtype=np.float32)
+        for yy in range(max(cy - 1, 0), min(cy + 2, cells_y)):
+            row = cells[yy]
+            for cx in range(cells_x):
+                best[cx] = max(best[cx], row[cx])
+        o = out[cy]
+        for cx in range(cells_x):
+            o[cx] = best[cx]
+        for cx in range(1, cells_x):
+            o[cx] = max(o[cx], best[cx - 1])
+        for cx in range(cells_x - 1):
+            o[cx] = max(o[cx], best[cx + 1])
+
+
+@njit(parallel=True, **_JIT)
+def _shorten(history_length: np.ndarray, cell_lambda: np.ndarray) -> int:
+    """``h = min(h, 1/lambda - 1)`` for every pixel with history under a cell with lambda."""
+    height, width = history_length.shape
+    cells_x = cell_lambda.shape[1]
     count = 0
     for y in prange(height):
+        limit = np.empty(CELL * cells_x, dtype=np.float32)
+        weights = cell_lambda[y // CELL]
+        for cx in range(cells_x):
+            weight = weights[cx]
+            cap = _ONE / weight - _ONE if weight > _ZERO else F32(np.inf)
+            limit[CELL * cx] = max(cap, _ZERO)
+            limit[CELL * cx + 1] = max(cap, _ZERO)
+        h_row = history_length[y]
         row_count = 0
         for x in range(width):
-            best = scratch[y, x]
-            if y > 0:
-                best = max(best, scratch[y - 1, x])
-            if y + 1 < height:
-                best = max(best, scratch[y + 1, x])
-            h = history_length[y, x]
-            keep = h > _ZERO and best > _ZERO
-            lam[y, x] = best if keep else _ZERO
-            if keep:
-                limit = max(_ONE / best - _ONE, _ZERO)
-                if limit < h:
-                    history_length[y, x] = limit
-                    row_count += 1
+            h = h_row[x]
+            shorter = limit[x] < h
+            h_row[x] = limit[x] if shorter else h
+            row_count += 1 if shorter else 0
         count += row_count
     return count
