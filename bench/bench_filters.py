@@ -27,7 +27,9 @@ from svgf_cli.filters.params import resolve_params
 from svgf_cli.frame import Frame, Signal
 
 F32 = np.float32
-STAGES = ("values", "gradients", "demodulate", "reproject", "variance", "atrous", "modulate")
+STAGES = (
+    "values", "gradients", "demodulate", "reproject", "variance", "atrous", "history", "modulate",
+)
 
 
 class SceneCanvas:

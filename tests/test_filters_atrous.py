@@ -38,10 +38,12 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     ddy = np.gradient(depth, axis=0)
     illumination = rng.gamma(1.5, 0.7, (num_signals, 3, height, width))
     variance = rng.gamma(1.0, 0.3, (num_signals, height, width))
-    # Radiance-mode pixels: a block in signal 0, scattered pixels in the last signal.
-    mode = np.zeros((num_signals, height, width), dtype=np.uint8)
-    mode[0, 2:6, 3:7] = 1
-    mode[-1] |= (rng.uniform(size=(height, width)) < 0.15).astype(np.uint8)
+    # Radiance-mode pixels (mode mask bits): a block in signal 0, scattered pixels in the
+    # last signal, and a bit of an unrelated signal (2) that must not matter.
+    mode = np.zeros((height, width), dtype=np.uint16)
+    mode[2:6, 3:7] |= 1
+    mode |= ((rng.uniform(size=(height, width)) < 0.15) << (num_signals - 1)).astype(np.uint16)
+    mode[::3] |= 4
     return {
         "illumination": illumination.astype(F32), "variance": variance.astype(F32),
         "mode": mode, "depth": depth.astype(F32), "ddx": ddx.astype(F32),
@@ -58,7 +60,7 @@ def _reference(scene: dict[str, np.ndarray], luminance: np.ndarray, inverse_scal
                step: int, sigma_depth: float, sigma_normal: float) -> tuple[np.ndarray, ...]:
     """Equations 1-5 for every pixel and signal, in float64, one tap at a time; weight 0
     between pixels of different modes."""
-    mode = scene["mode"]
+    mode = np.stack([(scene["mode"] >> s) & 1 for s in range(scene["illumination"].shape[0])])
     c_in = scene["illumination"].astype(np.float64)
     v_in = scene["variance"].astype(np.float64)
     z, gx, gy = (scene[k].astype(np.float64) for k in ("depth", "ddx", "ddy"))
@@ -111,7 +113,7 @@ def test_atrous_iteration_matches_the_equations(
     scene = _scene(num_signals, height, width, seed=step + width)
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"],
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
                           scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     out_c = np.full_like(scene["illumination"], np.nan)
     out_v = np.full_like(scene["variance"], np.nan)
@@ -142,11 +144,11 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     scene = {k: np.ascontiguousarray(v[..., :width]) for k, v in scene.items()}
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"],
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
                           scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     lum = _luminance(scene["illumination"])
     # The mode rides in the sign: radiance-mode guides are -(l + 1e-30).
-    radiance_mode = scene["mode"] == 1
+    radiance_mode = np.stack([(scene["mode"] >> s) & 1 for s in range(num_signals)]) == 1
     assert np.all((luminance < 0) == radiance_mode)
     np.testing.assert_allclose(np.abs(luminance), lum, rtol=1e-6)
     g = np.array([0.25, 0.5, 0.25])
@@ -172,7 +174,7 @@ def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing(
     scene = _scene(2, 10, 12, seed=1)
     luminance = np.empty((2, 10, 12), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"],
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
                           scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     args = (luminance, inverse_scale, scene["depth"], scene["ddx"], scene["ddy"],
             scene["normal"], 1, 1.0, 128.0)

@@ -48,16 +48,19 @@ def test_demodulate_remodulate_round_trip_with_black_and_implausible_albedo() ->
     depth[5, 6] = 0.0  # background: not counted
     albedo[:, 5, 6] = 0.0
     illumination = np.empty_like(signal)
-    mode = np.empty((h, w), dtype=np.uint8)
+    mode = np.full((h, w), 0xFFFF, dtype=np.uint16)
     counts = np.zeros((h, 6), dtype=np.int64)
-    demodulate(signal, albedo, depth, *RULE, illumination, mode, counts)
+    demodulate(signal, albedo, depth, *RULE, 0, illumination, mode, counts)
     floor = np.maximum(1e-3, 0.02 * albedo.max(axis=0))
     divisor = np.maximum(albedo, floor)
     radiance_mode = np.zeros((h, w), dtype=bool)
     radiance_mode[0, 0] = radiance_mode[2, 2] = radiance_mode[5, 6] = True
     divisor[:, radiance_mode] = 1.0
     np.testing.assert_allclose(illumination, signal / divisor, rtol=1e-6)
-    np.testing.assert_array_equal(mode, radiance_mode.astype(np.uint8))
+    np.testing.assert_array_equal(mode, radiance_mode.astype(np.uint16))  # signal 0 writes
+    # A later signal sets only its own bit.
+    demodulate(signal, albedo, depth, *RULE, 3, illumination, mode, counts)
+    np.testing.assert_array_equal(mode, radiance_mode.astype(np.uint16) * 9)
     # Radiance-mode surface pixels (black and 128), of which one implausible.
     np.testing.assert_array_equal(counts.sum(axis=0), [0, 0, 0, 2, 1, 0])
     back = np.empty_like(signal)
@@ -77,9 +80,9 @@ def test_demodulate_applies_the_value_policy() -> None:
     signal[:, 2, 0] = 1e14
     depth = np.ones((h, w), dtype=F32)
     illumination = np.empty_like(signal)
-    mode = np.empty((h, w), dtype=np.uint8)
+    mode = np.empty((h, w), dtype=np.uint16)
     counts = np.zeros((h, 6), dtype=np.int64)
-    demodulate(signal, albedo, depth, *RULE, illumination, mode, counts)
+    demodulate(signal, albedo, depth, *RULE, 0, illumination, mode, counts)
     assert np.all(np.isfinite(illumination))
     assert illumination[0, 0, 0] == 0.0 and illumination[1, 0, 1] == 0.0
     assert illumination[2, 0, 2] == 0.0
@@ -130,8 +133,8 @@ def _reproject_pair(prev, cur, prev_illumination, mode=None, prev_mode=None):
     out_length = np.empty((1, h, w), dtype=F32)
     prev_moments = np.ones((1, 2, h, w), dtype=F32)
     prev_length = np.full((1, h, w), 7.0, dtype=F32)
-    mode = np.zeros((1, h, w), dtype=np.uint8) if mode is None else mode[None]
-    prev_mode = np.zeros((1, h, w), dtype=np.uint8) if prev_mode is None else prev_mode[None]
+    mode = np.zeros((h, w), dtype=np.uint16) if mode is None else mode
+    prev_mode = np.zeros((h, w), dtype=np.uint16) if prev_mode is None else prev_mode
     reproject(
         cur.motion, cur.depth, geometry["cur"][0], cur.mesh_id, mode, geometry["cur"][1],
         geometry["cur"][2], prev.depth, geometry["prev"][0], prev.mesh_id, prev_mode,
@@ -218,7 +221,7 @@ def test_spatial_variance_matches_true_noise_variance() -> None:
                  + 0.0722 * illumination[0, 2]).astype(F32)
     moments = np.stack([luminance, luminance * luminance])[None].astype(F32)
     history_length = np.ones((1, h, w), dtype=F32)
-    mode = np.zeros((1, h, w), dtype=np.uint8)
+    mode = np.zeros((h, w), dtype=np.uint16)
     ddx = np.zeros((h, w), dtype=F32)
     variance = np.full((1, h, w), -1.0, dtype=F32)
     spatial_variance(illumination, moments, history_length, mode, frame.depth, ddx, ddx,

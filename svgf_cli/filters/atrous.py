@@ -71,6 +71,7 @@ def luminance_stop_guides(
     illumination: np.ndarray,
     variance: np.ndarray,
     mode: np.ndarray,
+    first_signal: int,
     depth: np.ndarray,
     sigma_luminance: float,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
@@ -80,8 +81,9 @@ def luminance_stop_guides(
     """Per pixel and signal: the guide luminance and the inverse scale of eq. 5.
 
     ``l = max(0, luminance(c))`` with the frame's ``luminance_weights``; the guide is ``l``
-    where ``mode`` is 0 (demodulated) and ``-(l + 1e-30)`` where it is 1 (radiance), so the
-    a-trous reads the mode of a tap from the sign of the guide it loads anyway.
+    where the signal is demodulated and ``-(l + 1e-30)`` where it is filtered as radiance
+    (bit ``first_signal + s`` of the (H, W) uint16 ``mode`` mask), so the a-trous reads the
+    mode of a tap from the sign of the guide it loads anyway.
     ``1 / max(sigma_l sqrt(g3x3(Var) + (1e-5 l)^2), 1e-20)``: the floor on the deviation
     is relative to the luminance, so the stop does not depend on the brightness (the
     absolute 1e-20 only matters on black pixels and keeps every product finite). The 3x3
@@ -95,7 +97,8 @@ def luminance_stop_guides(
         {"out_luminance": out_luminance, "out_inverse_scale": out_inverse_scale},
         {"illumination": illumination, "variance": variance, "mode": mode, "depth": depth},
     )
-    _guide_rows(illumination, variance, mode, depth, F32(sigma_luminance),
+    _guide_rows(illumination, variance, mode, np.int64(first_signal), depth,
+                F32(sigma_luminance),
                 float32_weights(luminance_weights), out_luminance, out_inverse_scale,
                 np.int64(get_num_threads()))
 
@@ -105,6 +108,7 @@ def _guide_rows(
     illumination: np.ndarray,
     variance: np.ndarray,
     mode: np.ndarray,
+    first_signal: int,
     depth: np.ndarray,
     sigma_luminance: np.float32,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
@@ -120,7 +124,7 @@ def _guide_rows(
             continue
         # Surface weight, then the weighted variance sums of both signals.
         sums = np.empty((3, depth.shape[1]), dtype=np.float32)
-        _guide_row(y, sums, illumination, variance, mode, depth, sigma_luminance,
+        _guide_row(y, sums, illumination, variance, mode, first_signal, depth, sigma_luminance,
                    luminance_weights, out_luminance, out_inverse_scale)
 
 
@@ -131,6 +135,7 @@ def _guide_row(
     illumination: np.ndarray,
     variance: np.ndarray,
     mode: np.ndarray,
+    first_signal: int,
     depth: np.ndarray,
     sigma_luminance: np.float32,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
@@ -183,7 +188,7 @@ def _guide_row(
             x = U(i)
             lum = max(luminance(illumination[s, 0, uy, x], illumination[s, 1, uy, x],
                                 illumination[s, 2, uy, x], luminance_weights), _ZERO)
-            radiance_mode = mode[s, uy, x] != 0
+            radiance_mode = (mode[uy, x] >> (first_signal + s)) & 1 != 0
             out_luminance[s, uy, x] = -(lum + _MODE_OFFSET) if radiance_mode else lum
             weight = sums[0, x]
             own = variance[s, uy, x]

@@ -7,7 +7,7 @@ pre-accumulation hook (optional history clamp; anti-lag goes here) -> accumulate
 frame's colour history) -> history guard -> remodulate, sum the signals, add emission,
 restore background -> optional TAA.
 
-All buffers are float32 structure-of-arrays planes (modes uint8), allocated once per
+All buffers are float32 structure-of-arrays planes (the mode mask uint16), allocated once per
 resolution and signal count and reused, so memory does not grow with the sequence length.
 Scratch is shared between stages (names are roles; a buffer is taken on first use): the
 reprojected history is accumulated in place, the a-trous ping-pong reuses the demodulated
@@ -58,7 +58,7 @@ _HISTORY_SHAPES = {
     "history_illumination": (lambda s, h, w: (s, 3, h, w), F32),
     "history_moments": (lambda s, h, w: (s, 2, h, w), F32),
     "history_length": (lambda s, h, w: (s, h, w), F32),
-    "history_mode": (lambda s, h, w: (s, h, w), np.uint8),
+    "history_mode": (lambda s, h, w: (h, w), np.uint16),
     "prev_depth": (lambda s, h, w: (h, w), F32),
     "prev_normal": (lambda s, h, w: (3, h, w), F32),
     "prev_mesh_id": (lambda s, h, w: (h, w), np.int32),
@@ -89,7 +89,7 @@ class _Workspace:
             "normal": ((3, h, w), F32),
             "ddx": ((h, w), F32),
             "ddy": ((h, w), F32),
-            "mode": ((s, h, w), np.uint8),
+            "mode": ((h, w), np.uint16),
             # resampled and then (in place) accumulated moments and history length
             "moments": ((s, 2, h, w), F32),
             "history_length": ((s, h, w), F32),
@@ -118,11 +118,11 @@ class TemporalState:
     All arrays are the Denoiser's own buffers, (S, ...) with one entry per signal, in the
     order of ``names``. ``history_*`` are last frame's history resampled at this frame's
     pixels (``history_length`` 0 = no history); ``current`` is this frame's demodulated
-    illumination (after the optional firefly clamp) and ``mode`` its demodulation mode
-    (0 demodulated, 1 radiance). A stage here may change the history in place; lowering
-    ``history_length[s]`` at a pixel raises that signal's blend factor there, since
-    accumulation uses ``alpha = max(alpha, 1 / (h + 1))`` per signal (h = 0: the current
-    frame alone).
+    illumination (after the optional firefly clamp); ``mode`` is the (H, W) uint16 mask of
+    its demodulation modes (bit s set: signal s is filtered as radiance at that pixel).
+    A stage here may change the history in place; lowering ``history_length[s]`` at a
+    pixel raises that signal's blend factor there, since accumulation uses
+    ``alpha = max(alpha, 1 / (h + 1))`` per signal (h = 0: the current frame alone).
     """
 
     names: tuple[str, ...]
@@ -203,6 +203,8 @@ class Denoiser:
         frame.validate()
         frame = _writable(frame)
         names = frame.names
+        if len(names) > modulate.MAX_SIGNALS:
+            raise ValueError(f"at most {modulate.MAX_SIGNALS} signals, got {len(names)}")
         if self._signal_names is not None and self._signal_names != names:
             raise ValueError(
                 f"signals changed from {'+'.join(self._signal_names)} to {'+'.join(names)}"
@@ -324,7 +326,7 @@ class Denoiser:
             # Signals in pairs: the kernel is register-blocked for two, sharing the geometry.
             for pair in pairs:
                 luminance_stop_guides(
-                    filtered[pair], filtered_variance[pair], mode[pair], depth,
+                    filtered[pair], filtered_variance[pair], mode, pair.start, depth,
                     F32(p.sigma_luminance), weights, guide_luminance[pair],
                     guide_inverse_scale[pair],
                 )
@@ -341,7 +343,7 @@ class Denoiser:
         # Hand this frame's buffers to the history by swapping (no copies); the workspace
         # takes the stale history arrays and overwrites them next frame.
         self._store_history(frame, depth, history_name, counts)
-        lap("reproject")
+        lap("history")
 
         output, layers = self._compose(frame, filtered, variance, history_length, mode, depth,
                                        counts)
@@ -413,8 +415,10 @@ class Denoiser:
                     )
                 history[key] = np.array(array, dtype=dtype, copy=True, order="C")
             # A state file is input too: it must obey the value policy.
-            values.reset_nonfinite_history(history["history_illumination"],
-                                           history["history_moments"], history["history_length"])
+            values.reset_nonfinite_history(
+                history["history_illumination"], history["history_moments"],
+                history["history_length"], history["history_mode"],
+            )
         taa_previous = None
         if "taa_previous" in state:
             taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
@@ -434,9 +438,10 @@ class Denoiser:
         cleaners = (("depth", frame.depth, values.cleaned_depth),
                     ("normal", frame.normal, values.cleaned_normal),
                     ("motion", frame.motion, values.cleaned_motion))
+        found = values.count_geometry(frame.depth, frame.normal, frame.motion)
         planes = []
         for name, plane, cleaned in cleaners:
-            nonfinite, extreme = values.count_invalid(plane)
+            nonfinite, extreme = found[name]
             if name == "motion":
                 extreme = 0  # far-away motion only means "no history": nothing overflows
             _add(counts, "nonfinite", name, nonfinite)
@@ -449,7 +454,7 @@ class Denoiser:
         rows = np.zeros((depth.shape[0], modulate.DEMODULATE_COUNTERS), dtype=np.int64)
         for index, signal in enumerate(signals):
             modulate.demodulate(signal.radiance, signal.albedo, depth, *self._rule,
-                                out[index], mode[index], rows)
+                                index, out[index], mode, rows)
             total = rows.sum(axis=0)
             name = signal.name
             _add(counts, "nonfinite", f"radiance.{name}", int(total[modulate.NONFINITE_RADIANCE]))
@@ -499,7 +504,7 @@ class Denoiser:
                     layers[f"{name}.{channel}"] = alone[c]
                 layers[f"variance.{name}"] = variance[index].copy()
                 layers[f"history_length.{name}"] = history_length[index].copy()
-                layers[f"radiance_mode.{name}"] = mode[index].astype(F32)
+                layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
         return radiance, layers
 
     # ----------------------------------------------------------------- internals
@@ -550,7 +555,7 @@ class Denoiser:
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
         counts["history_resets"] += values.reset_nonfinite_history(
             history["history_illumination"], history["history_moments"],
-            history["history_length"],
+            history["history_length"], history["history_mode"],
         )
 
 

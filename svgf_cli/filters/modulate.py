@@ -10,6 +10,10 @@ Per signal and pixel a **mode** decides how the signal is filtered:
   huge values) and colours that are not reflectances (Cycles' ``Denoising Albedo`` reaches
   128 on mirror-like pixels): ``a' = 1``.
 
+The modes of all signals of a pixel are one ``uint16`` mask, bit ``s`` for signal ``s``
+(at most :data:`MAX_SIGNALS`; the top bit, :data:`NO_HISTORY`, marks a history pixel that
+must not be resampled), so the stages that compare modes load one value per pixel.
+
 Remodulation multiplies by the same ``a'`` (an exact inverse: a constant input stays
 constant). Why the floor is relative: remodulating pixel ``p`` scales a neighbour ``q``'s
 contribution by ``a'_p / a'_q`` per channel, so with an absolute floor of 1e-3 a
@@ -34,13 +38,18 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH
-from svgf_cli.filters.values import VALUE_LIMIT, is_nonfinite, is_usable
+from svgf_cli.filters.values import (  # noqa: F401 - NO_HISTORY belongs to the mode mask
+    NO_HISTORY,
+    VALUE_LIMIT,
+    is_extreme,
+    is_nonfinite,
+    is_usable,
+)
 
 F32 = np.float32
 _ONE = F32(1.0)
 _ZERO = F32(0.0)
-DEMODULATED = np.uint8(0)
-RADIANCE = np.uint8(1)
+MAX_SIGNALS = 15  # bits of the uint16 mode mask below NO_HISTORY
 # Counters written per row by demodulate (columns of ``counts``).
 NONFINITE_RADIANCE, EXTREME_RADIANCE, NONFINITE_ALBEDO, RADIANCE_MODE, IMPLAUSIBLE, CLAMPED = (
     range(6)
@@ -87,52 +96,65 @@ def demodulate(
     black: np.float32,
     max_reflectance: np.float32,
     relative_floor: np.float32,
+    signal_index: int,
     out_illumination: np.ndarray,
-    out_mode: np.ndarray,
+    mode: np.ndarray,
     counts: np.ndarray,
 ) -> None:
-    """One signal: ``out_illumination = clean(radiance) / a'`` (clamped to +-VALUE_LIMIT)
-    and ``out_mode`` (0 demodulated, 1 radiance), both (3, H, W) / (H, W).
+    """One signal: ``out_illumination = clean(radiance) / a'`` (clamped to +-VALUE_LIMIT),
+    and bit ``signal_index`` of the (H, W) uint16 ``mode`` mask (0 demodulated, 1 radiance;
+    signal 0 writes the mask, later signals add their bit).
 
     ``counts`` (H, DEMODULATE_COUNTERS) int64 receives per row: non-finite and extreme
     radiance values, non-finite albedo values, radiance-mode surface pixels, implausible
-    (above ``max_reflectance``) surface pixels and clamped illumination values.
+    (above ``max_reflectance``) surface pixels and clamped illumination values. Branch-free
+    over row slices, so it vectorizes.
     """
     height, width = depth.shape
     limit = VALUE_LIMIT
+    bit = np.uint16(1 << signal_index)
+    keep = np.uint16(0) if signal_index == 0 else ~bit
     for y in prange(height):
-        row = np.zeros(DEMODULATE_COUNTERS, dtype=np.int64)
+        a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
+        r_r, r_g, r_b = radiance[0, y], radiance[1, y], radiance[2, y]
+        o_r, o_g, o_b = out_illumination[0, y], out_illumination[1, y], out_illumination[2, y]
+        z = depth[y]
+        m = mode[y]
+        nonfinite_radiance = 0
+        extreme_radiance = 0
+        nonfinite_albedo = 0
+        radiance_mode = 0
+        implausible = 0
+        clamped = 0
         for x in range(width):
-            surface = depth[y, x] > _ZERO
-            ar = clean_albedo(albedo[0, y, x])
-            ag = clean_albedo(albedo[1, y, x])
-            ab = clean_albedo(albedo[2, y, x])
-            row[NONFINITE_ALBEDO] += (
-                is_nonfinite(albedo[0, y, x]) + is_nonfinite(albedo[1, y, x])
-                + is_nonfinite(albedo[2, y, x])
-            )
+            nonfinite_albedo += is_nonfinite(a_r[x]) + is_nonfinite(a_g[x]) + is_nonfinite(a_b[x])
+            ar = clean_albedo(a_r[x])
+            ag = clean_albedo(a_g[x])
+            ab = clean_albedo(a_b[x])
             demodulated, dr, dg, db = effective_albedo(ar, ag, ab, black, max_reflectance,
                                                        relative_floor)
-            out_mode[y, x] = DEMODULATED if demodulated else RADIANCE
-            if surface and not demodulated:
-                row[RADIANCE_MODE] += 1
-                if max(ar, max(ag, ab)) > max_reflectance:
-                    row[IMPLAUSIBLE] += 1
-            for c, divisor in ((0, dr), (1, dg), (2, db)):
-                v = radiance[c, y, x]
-                if not is_usable(v):
-                    if is_nonfinite(v):
-                        row[NONFINITE_RADIANCE] += 1
-                    else:
-                        row[EXTREME_RADIANCE] += 1
-                    v = _ZERO
-                illumination = v / divisor
-                if abs(illumination) > limit:
-                    row[CLAMPED] += 1
-                    illumination = min(max(illumination, -limit), limit)
-                out_illumination[c, y, x] = illumination
-        for k in range(DEMODULATE_COUNTERS):
-            counts[y, k] = row[k]
+            surface = z[x] > _ZERO
+            radiance_mode += surface and not demodulated
+            implausible += surface and max(ar, max(ag, ab)) > max_reflectance
+            m[x] = (m[x] & keep) | (np.uint16(0) if demodulated else bit)
+            vr = r_r[x]
+            vg = r_g[x]
+            vb = r_b[x]
+            nonfinite_radiance += is_nonfinite(vr) + is_nonfinite(vg) + is_nonfinite(vb)
+            extreme_radiance += is_extreme(vr) + is_extreme(vg) + is_extreme(vb)
+            ir = clean_value(vr) / dr
+            ig = clean_value(vg) / dg
+            ib = clean_value(vb) / db
+            clamped += (abs(ir) > limit) + (abs(ig) > limit) + (abs(ib) > limit)
+            o_r[x] = min(max(ir, -limit), limit)
+            o_g[x] = min(max(ig, -limit), limit)
+            o_b[x] = min(max(ib, -limit), limit)
+        counts[y, NONFINITE_RADIANCE] = nonfinite_radiance
+        counts[y, EXTREME_RADIANCE] = extreme_radiance
+        counts[y, NONFINITE_ALBEDO] = nonfinite_albedo
+        counts[y, RADIANCE_MODE] = radiance_mode
+        counts[y, IMPLAUSIBLE] = implausible
+        counts[y, CLAMPED] = clamped
 
 
 @njit(parallel=True, **_JIT)
@@ -180,30 +202,29 @@ def remodulate_add(
     for y in prange(height):
         nonfinite = 0
         extreme = 0
+        z = depth[y]
+        a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
+        f_r, f_g, f_b = illumination[0, y], illumination[1, y], illumination[2, y]
+        r_r, r_g, r_b = radiance[0, y], radiance[1, y], radiance[2, y]
+        e_r, e_g, e_b = emission[0, y], emission[1, y], emission[2, y]
+        o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
         for x in range(width):
-            er = eg = eb = _ZERO
-            if has_emission:
-                for c in range(3):
-                    v = emission[c, y, x]
-                    if not is_usable(v):
-                        if is_nonfinite(v):
-                            nonfinite += 1
-                        else:
-                            extreme += 1
-                er = clean_value(emission[0, y, x])
-                eg = clean_value(emission[1, y, x])
-                eb = clean_value(emission[2, y, x])
-            if depth[y, x] <= _ZERO:
-                out[0, y, x] += clean_value(radiance[0, y, x]) + er
-                out[1, y, x] += clean_value(radiance[1, y, x]) + eg
-                out[2, y, x] += clean_value(radiance[2, y, x]) + eb
-                continue
             _, ar, ag, ab = effective_albedo(
-                clean_albedo(albedo[0, y, x]), clean_albedo(albedo[1, y, x]),
-                clean_albedo(albedo[2, y, x]), black, max_reflectance, relative_floor,
+                clean_albedo(a_r[x]), clean_albedo(a_g[x]), clean_albedo(a_b[x]), black,
+                max_reflectance, relative_floor,
             )
-            out[0, y, x] += ar * illumination[0, y, x] + er
-            out[1, y, x] += ag * illumination[1, y, x] + eg
-            out[2, y, x] += ab * illumination[2, y, x] + eb
+            surface = z[x] > _ZERO
+            vr = ar * f_r[x] if surface else clean_value(r_r[x])
+            vg = ag * f_g[x] if surface else clean_value(r_g[x])
+            vb = ab * f_b[x] if surface else clean_value(r_b[x])
+            if has_emission:
+                nonfinite += is_nonfinite(e_r[x]) + is_nonfinite(e_g[x]) + is_nonfinite(e_b[x])
+                extreme += is_extreme(e_r[x]) + is_extreme(e_g[x]) + is_extreme(e_b[x])
+                vr += clean_value(e_r[x])
+                vg += clean_value(e_g[x])
+                vb += clean_value(e_b[x])
+            o_r[x] += vr
+            o_g[x] += vg
+            o_b[x] += vb
         counts[y, 0] = nonfinite
         counts[y, 1] = extreme

@@ -30,6 +30,7 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
+from svgf_cli.filters.modulate import NO_HISTORY
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
@@ -102,10 +103,12 @@ def reproject(
     """Resample the history of every signal at the backprojected position.
 
     ``prev_illumination`` is (S, 3, H, W), ``prev_moments`` (S, 2, H, W),
-    ``prev_history_length``, ``mode`` and ``prev_mode`` (S, H, W). The geometric tests are
-    shared by all signals; on top, signal ``s`` accepts a tap only if the tap's stored mode
-    equals the pixel's current mode for that signal (radiance and illumination history never
-    mix), so each signal has its own bilinear weights, fallback and history length. Writes
+    ``prev_history_length`` (S, H, W); ``mode`` and ``prev_mode`` are the (H, W) uint16 mode
+    masks (bit s: signal s; ``modulate.NO_HISTORY``: no usable history). The geometric tests
+    are shared by all signals; on top, signal ``s`` accepts a tap only if the tap's stored
+    mode equals the pixel's current mode for that signal (radiance and illumination history
+    never mix), so each signal has its own bilinear weights, fallback and history length
+    (one set of weights for all where every usable tap agrees, the common case). Writes
     the resampled history into the ``out_*`` arrays; ``out_history_length`` (S, H, W) is the
     resampled previous history length, 0 where the signal's history is rejected.
     """
@@ -223,43 +226,41 @@ def _reproject_rows(
             xb = U(min(max(x0 + 1, 0), width - 1))
             ya = U(min(max(y0, 0), height - 1))
             yb = U(min(max(y0 + 1, 0), height - 1))
-            # The 3x3 fallback's geometric tests, computed once if any signal needs them.
-            box_mask = -1
+            m = mode[uy, ux]
+            t00 = prev_mode[ya, xa]
+            t10 = prev_mode[ya, xb]
+            t01 = prev_mode[yb, xa]
+            t11 = prev_mode[yb, xb]
+            if (
+                (g00 == _ZERO or t00 == m) and (g10 == _ZERO or t10 == m)
+                and (g01 == _ZERO or t01 == m) and (g11 == _ZERO or t11 == m)
+            ):
+                # Every usable tap has the pixel's modes in every signal (the common case):
+                # one set of weights for all signals.
+                weight_sum = g00 + g10 + g01 + g11
+                if weight_sum >= _MIN_BILINEAR_WEIGHT:
+                    inv = _ONE / weight_sum
+                    for s in range(num_signals):
+                        _bilinear(s, uy, ux, ya, yb, xa, xb, g00 * inv, g10 * inv, g01 * inv,
+                                  g11 * inv, prev_illumination, prev_moments,
+                                  prev_history_length, out_illumination, out_moments,
+                                  out_history_length)
+                    continue
+            # Per signal: a tap counts only where its stored mode equals the pixel's (a
+            # history pixel marked NO_HISTORY matches no signal).
+            box_mask = -1  # the 3x3 fallback's geometric tests, once, if a signal needs them
             for s in range(num_signals):
-                m = mode[s, uy, ux]
-                w00 = g00 if prev_mode[s, ya, xa] == m else _ZERO
-                w10 = g10 if prev_mode[s, ya, xb] == m else _ZERO
-                w01 = g01 if prev_mode[s, yb, xa] == m else _ZERO
-                w11 = g11 if prev_mode[s, yb, xb] == m else _ZERO
+                relevant = np.uint16(1 << s) | NO_HISTORY
+                w00 = g00 if (t00 ^ m) & relevant == 0 else _ZERO
+                w10 = g10 if (t10 ^ m) & relevant == 0 else _ZERO
+                w01 = g01 if (t01 ^ m) & relevant == 0 else _ZERO
+                w11 = g11 if (t11 ^ m) & relevant == 0 else _ZERO
                 weight_sum = w00 + w10 + w01 + w11
                 if weight_sum >= _MIN_BILINEAR_WEIGHT:
                     inv = _ONE / weight_sum
-                    w00 *= inv
-                    w10 *= inv
-                    w01 *= inv
-                    w11 *= inv
-                    out_history_length[s, uy, ux] = (
-                        w00 * prev_history_length[s, ya, xa]
-                        + w10 * prev_history_length[s, ya, xb]
-                        + w01 * prev_history_length[s, yb, xa]
-                        + w11 * prev_history_length[s, yb, xb]
-                    )
-                    # Index the 4-D arrays directly: a per-pixel sub-array view would cost
-                    # an atomic reference-count update, contended between threads.
-                    for c in range(3):
-                        out_illumination[s, c, uy, ux] = (
-                            w00 * prev_illumination[s, c, ya, xa]
-                            + w10 * prev_illumination[s, c, ya, xb]
-                            + w01 * prev_illumination[s, c, yb, xa]
-                            + w11 * prev_illumination[s, c, yb, xb]
-                        )
-                    for c in range(2):
-                        out_moments[s, c, uy, ux] = (
-                            w00 * prev_moments[s, c, ya, xa]
-                            + w10 * prev_moments[s, c, ya, xb]
-                            + w01 * prev_moments[s, c, yb, xa]
-                            + w11 * prev_moments[s, c, yb, xb]
-                        )
+                    _bilinear(s, uy, ux, ya, yb, xa, xb, w00 * inv, w10 * inv, w01 * inv,
+                              w11 * inv, prev_illumination, prev_moments, prev_history_length,
+                              out_illumination, out_moments, out_history_length)
                     continue
 
                 # 3x3 box of consistent taps (of the same mode) around the rounded position.
@@ -279,7 +280,7 @@ def _reproject_rows(
                     if not (box_mask >> k) & 1:
                         continue
                     qy, qx = U(cy - 1 + k // 3), U(cx - 1 + k % 3)
-                    if prev_mode[s, qy, qx] != m:
+                    if (prev_mode[qy, qx] ^ m) & relevant != 0:
                         continue
                     count += 1
                     h_sum += prev_history_length[s, qy, qx]
@@ -295,6 +296,36 @@ def _reproject_rows(
                     out_illumination[s, c, uy, ux] *= inv
                 out_moments[s, 0, uy, ux] *= inv
                 out_moments[s, 1, uy, ux] *= inv
+
+
+@njit(
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
+)
+def _bilinear(
+    s: int, uy: np.uint64, ux: np.uint64, ya: np.uint64, yb: np.uint64, xa: np.uint64,
+    xb: np.uint64, w00: np.float32, w10: np.float32, w01: np.float32, w11: np.float32,
+    prev_illumination: np.ndarray, prev_moments: np.ndarray, prev_history_length: np.ndarray,
+    out_illumination: np.ndarray, out_moments: np.ndarray, out_history_length: np.ndarray,
+) -> None:
+    """Signal ``s``'s history at the pixel: the taps with the given (normalised) weights.
+
+    Indexes the 4-D arrays directly: a per-pixel sub-array view would cost an atomic
+    reference-count update, contended between threads."""
+    out_history_length[s, uy, ux] = (
+        w00 * prev_history_length[s, ya, xa] + w10 * prev_history_length[s, ya, xb]
+        + w01 * prev_history_length[s, yb, xa] + w11 * prev_history_length[s, yb, xb]
+    )
+    for c in range(3):
+        out_illumination[s, c, uy, ux] = (
+            w00 * prev_illumination[s, c, ya, xa] + w10 * prev_illumination[s, c, ya, xb]
+            + w01 * prev_illumination[s, c, yb, xa] + w11 * prev_illumination[s, c, yb, xb]
+        )
+    for c in range(2):
+        out_moments[s, c, uy, ux] = (
+            w00 * prev_moments[s, c, ya, xa] + w10 * prev_moments[s, c, ya, xb]
+            + w01 * prev_moments[s, c, yb, xa] + w11 * prev_moments[s, c, yb, xb]
+        )
 
 
 def accumulate(

@@ -84,7 +84,8 @@ def spatial_variance(
 ) -> None:
     """Unboosted edge-aware spatial variance of the signals with ``0 < h < threshold``.
 
-    Per signal ``s`` (own history length ``history_length[s]`` and ``mode[s]``), weights:
+    Per signal ``s`` (own history length ``history_length[s]`` and mode, bit ``s`` of the
+    (H, W) uint16 ``mode`` mask), weights:
     box kernel over (2*radius+1)^2 taps times ``w_n * exp(-depth term - |m1(p) - m1(q)| /
     (sigma_luminance * (|m1(p)| + |m1(q)|) / 2))``, and 0 between pixels of different modes.
     The luminance stop is relative to the pair's mean luminance, so it is as weak at every
@@ -188,8 +189,9 @@ def _spatial_variance_run(
                 m1_p = moments[s, 0, y, x0:x1]
                 m1_q = moments[s, 0, yy, x0 + ox:x1 + ox]
                 m2_q = moments[s, 1, yy, x0 + ox:x1 + ox]
-                mode_p = mode[s, y, x0:x1]
-                mode_q = mode[s, yy, x0 + ox:x1 + ox]
+                mode_p = mode[y, x0:x1]
+                mode_q = mode[yy, x0 + ox:x1 + ox]
+                bit = np.uint16(1 << s)
                 sum_w = acc[s, 0, a:a + count]
                 sum_w2 = acc[s, 1, a:a + count]
                 sum_m1 = acc[s, 2, a:a + count]
@@ -199,7 +201,7 @@ def _spatial_variance_run(
                     w = normal_weight[i] * fast_exp(
                         -(depth_exponent[i] + abs(m1_p[i] - m1_q[i]) / scale)
                     )
-                    w = w if mode_p[i] == mode_q[i] else _ZERO
+                    w = w if (mode_p[i] ^ mode_q[i]) & bit == 0 else _ZERO
                     tap_weight[i] = w
                     sum_w[i] += w
                     sum_w2[i] += w * w
@@ -279,10 +281,10 @@ def estimate_variance(
 ) -> None:
     """Paper 4.2 as a whole: temporal variance, spatial estimate + boost for short history.
 
-    ``history_length`` and ``mode`` are (S, H, W): each signal decides by its own history
-    length, and pixels of different modes never mix. With ``out_illumination`` (Falcor's
-    colour blur) it receives ``illumination`` with the short-history pixels replaced by
-    their spatially filtered colour.
+    ``history_length`` is (S, H, W) and ``mode`` the (H, W) mode mask: each signal decides by its
+    own history length, and pixels of different modes never mix. With ``out_illumination`` (Falcor's
+    colour blur) it receives ``illumination`` with the short-history pixels replaced by their
+    spatially filtered colour.
     """
     temporal_variance(moments, out_variance)
     blur_color = out_illumination is not None
