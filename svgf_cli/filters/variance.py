@@ -281,10 +281,10 @@ def estimate_variance(
 ) -> None:
     """Paper 4.2 as a whole: temporal variance, spatial estimate + boost for short history.
 
-    ``history_length`` is (S, H, W) and ``mode`` the (H, W) mode mask: each signal decides by its
-    own history length, and pixels of different modes never mix. With ``out_illumination`` (Falcor's
-    colour blur) it receives ``illumination`` with the short-history pixels replaced by their
-    spatially filtered colour.
+    ``history_length`` is (S, H, W) and ``mode`` the (H, W) mode mask: each signal
+    decides by its own history length, and pixels of different modes never mix. With
+    ``out_illumination`` (Falcor's colour blur) it receives ``illumination`` with the
+    short-history pixels replaced by their spatially filtered colour.
     """
     temporal_variance(moments, out_variance)
     blur_color = out_illumination is not None
