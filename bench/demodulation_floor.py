@@ -10,8 +10,8 @@ it costs accuracy only where a floored channel exchanges weight with other colou
 Scene (static camera, 10 frames, 1-spp-like exponential noise, paper preset): a checker of
 grey, saturated red, saturated blue and dark grey patches under smooth light, in two
 palettes: ``extreme`` (dark channels at 1e-3, dark grey 0.012) and ``typical`` (dark
-channels 0.03-0.05, dark grey 0.03, like real paints and fabrics). Two signals are scored against their noise-free
-reference:
+channels 0.03-0.05, dark grey 0.03, like real paints and fabrics). Two signals are scored
+against their noise-free reference:
 
 * ``consistent``: radiance = albedo x light (what ``svgf trace`` and Cycles' lobe passes
   give: the colour describes the signal exactly);

@@ -60,6 +60,27 @@ def _short(h: np.float32, history_threshold: np.float32) -> bool:
     return h > _ZERO and h < history_threshold
 
 
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _needed_row(
+    history_length: np.ndarray, y: int, history_threshold: np.float32, out: np.ndarray
+) -> bool:
+    """``out[x]`` = 1 where some signal has ``0 < h < threshold`` in row ``y``; whether any
+    pixel does (vectorized passes, one per signal, and a max)."""
+    num_signals = history_length.shape[0]
+    width = out.shape[0]
+    h_row = history_length[0, y]
+    for x in range(width):
+        out[x] = _short(h_row[x], history_threshold)
+    for s in range(1, num_signals):
+        h_row = history_length[s, y]
+        for x in range(width):
+            out[x] |= _short(h_row[x], history_threshold)
+    largest = np.uint8(0)
+    for x in range(width):
+        largest = max(largest, out[x])
+    return largest != 0
+
+
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
@@ -95,29 +116,25 @@ def spatial_variance(
     pixels of ``out_variance`` (S, H, W) are not touched. With ``blur_color`` the weighted
     mean illumination is written to ``out_illumination`` for the same pixels (Falcor).
     """
-    num_signals = history_length.shape[0]
     height, width = depth.shape
     for y in prange(height):
         # Runs of pixels where some signal needs the estimate (disocclusions: thin slivers
         # along silhouettes, ~0.3% of a moving 1080p frame). Runs closer than RUN_GAP merge,
         # so a sliver costs one short vector loop and the pixels between runs cost nothing.
+        needed = np.empty(width, dtype=np.uint8)
+        if not _needed_row(history_length, y, history_threshold, needed):
+            continue
         x = 0
         while x < width:
-            while x < width:
-                needed = False
-                for s in range(num_signals):
-                    needed = needed or _short(history_length[s, y, x], history_threshold)
-                if needed:
-                    break
+            while x < width and not needed[x]:
                 x += 1
             if x >= width:
                 break
             first = x
             last = x
             while x < width and x - last <= RUN_GAP:
-                for s in range(num_signals):
-                    if _short(history_length[s, y, x], history_threshold):
-                        last = x
+                if needed[x]:
+                    last = x
                 x += 1
             x = last + 1
             _spatial_variance_run(
