@@ -232,8 +232,8 @@ class DenoisedFrame:
 COUNT_KEYS = {
     "nonfinite": "non-finite input values (NaN/Inf) replaced: radiance, emission, albedo and"
     " normals by 0, depth by background, motion by 'no history'",
-    "extreme": "finite input values beyond +-VALUE_LIMIT (radiance, emission, normals)"
-    " replaced by 0",
+    "extreme": "finite input values beyond +-VALUE_LIMIT (1e15) replaced: radiance,"
+    " emission and normals by 0, depth by background",
     "clamped.<signal>": "demodulated values clamped to +-VALUE_LIMIT (large radiance over a"
     " small albedo)",
     "radiance_mode.<signal>": "surface pixels filtered as radiance, not demodulated (black or"
