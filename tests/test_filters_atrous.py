@@ -12,7 +12,7 @@ import pytest
 
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.edges import DEPTH_EPSILON
-from svgf_cli.filters.fastmath import fast_exp, fast_log2, fma
+from svgf_cli.filters.fastmath import REC709, fast_exp, fast_log2, fma
 
 F32 = np.float32
 B3 = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
@@ -38,16 +38,29 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     ddy = np.gradient(depth, axis=0)
     illumination = rng.gamma(1.5, 0.7, (num_signals, 3, height, width))
     variance = rng.gamma(1.0, 0.3, (num_signals, height, width))
+    # Radiance-mode pixels (mode mask bits): a block in signal 0, scattered pixels in the
+    # last signal, and a bit of an unrelated signal (2) that must not matter.
+    mode = np.zeros((height, width), dtype=np.uint16)
+    mode[2:6, 3:7] |= 1
+    mode |= ((rng.uniform(size=(height, width)) < 0.15) << (num_signals - 1)).astype(np.uint16)
+    mode[::3] |= 4
     return {
         "illumination": illumination.astype(F32), "variance": variance.astype(F32),
-        "depth": depth.astype(F32), "ddx": ddx.astype(F32), "ddy": ddy.astype(F32),
-        "normal": normal.astype(F32),
+        "mode": mode, "depth": depth.astype(F32), "ddx": ddx.astype(F32),
+        "ddy": ddy.astype(F32), "normal": normal.astype(F32),
     }
+
+
+def _luminance(illumination: np.ndarray, weights=REC709) -> np.ndarray:
+    c = illumination.astype(np.float64)
+    return np.maximum(weights[0] * c[:, 0] + weights[1] * c[:, 1] + weights[2] * c[:, 2], 0.0)
 
 
 def _reference(scene: dict[str, np.ndarray], luminance: np.ndarray, inverse_scale: np.ndarray,
                step: int, sigma_depth: float, sigma_normal: float) -> tuple[np.ndarray, ...]:
-    """Equations 1-5 for every pixel and signal, in float64, one tap at a time."""
+    """Equations 1-5 for every pixel and signal, in float64, one tap at a time; weight 0
+    between pixels of different modes."""
+    mode = np.stack([(scene["mode"] >> s) & 1 for s in range(scene["illumination"].shape[0])])
     c_in = scene["illumination"].astype(np.float64)
     v_in = scene["variance"].astype(np.float64)
     z, gx, gy = (scene[k].astype(np.float64) for k in ("depth", "ddx", "ddy"))
@@ -68,6 +81,8 @@ def _reference(scene: dict[str, np.ndarray], luminance: np.ndarray, inverse_scal
                         h = B3[i] * B3[j]
                         if (qy, qx) == (py, px):
                             w = h
+                        elif mode[s, qy, qx] != mode[s, py, px]:
+                            w = 0.0
                         else:
                             projected = abs(gx[py, px] * (qx - px) + gy[py, px] * (qy - py))
                             w_z = abs(z[py, px] - z[qy, qx]) / (
@@ -98,8 +113,8 @@ def test_atrous_iteration_matches_the_equations(
     scene = _scene(num_signals, height, width, seed=step + width)
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
-                          luminance, inverse_scale)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     out_c = np.full_like(scene["illumination"], np.nan)
     out_v = np.full_like(scene["variance"], np.nan)
     atrous_iteration(
@@ -107,7 +122,7 @@ def test_atrous_iteration_matches_the_equations(
         scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, sigma_normal, True, out_c,
         out_v,
     )
-    want_c, want_v = _reference(scene, luminance.astype(np.float64),
+    want_c, want_v = _reference(scene, _luminance(scene["illumination"]),
                                 inverse_scale.astype(np.float64), step, 1.0, sigma_normal)
     # fast_exp (4e-6) and fast_unit_pow (~1e-4 at sigma_n = 128) set the tolerance.
     np.testing.assert_allclose(out_c, want_c, rtol=2e-4, atol=1e-6)
@@ -129,11 +144,13 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     scene = {k: np.ascontiguousarray(v[..., :width]) for k, v in scene.items()}
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
-                          luminance, inverse_scale)
-    c = scene["illumination"].astype(np.float64)
-    want_luminance = 0.2126 * c[:, 0] + 0.7152 * c[:, 1] + 0.0722 * c[:, 2]
-    np.testing.assert_allclose(luminance, want_luminance, rtol=1e-6)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
+    lum = _luminance(scene["illumination"])
+    # The mode rides in the sign: radiance-mode guides are -(l + 1e-30).
+    radiance_mode = np.stack([(scene["mode"] >> s) & 1 for s in range(num_signals)]) == 1
+    assert np.all((luminance < 0) == radiance_mode)
+    np.testing.assert_allclose(np.abs(luminance), lum, rtol=1e-6)
     g = np.array([0.25, 0.5, 0.25])
     surface = scene["depth"] > 0
     v = scene["variance"].astype(np.float64)
@@ -148,7 +165,8 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
                             weight += g[i] * g[j]
                             total += g[i] * g[j] * v[s, qy, qx]
                 filtered = total / weight if weight > 0 else v[s, y, x]
-                want = 1.0 / (4.0 * np.sqrt(max(filtered, 0.0) + 1e-10))
+                floor = 1e-5 * lum[s, y, x]
+                want = 1.0 / max(4.0 * np.sqrt(max(filtered, 0.0) + floor**2), 1e-20)
                 np.testing.assert_allclose(inverse_scale[s, y, x], want, rtol=1e-5)
 
 
@@ -156,8 +174,8 @@ def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing(
     scene = _scene(2, 10, 12, seed=1)
     luminance = np.empty((2, 10, 12), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
-                          luminance, inverse_scale)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     args = (luminance, inverse_scale, scene["depth"], scene["ddx"], scene["ddy"],
             scene["normal"], 1, 1.0, 128.0)
     out_c = np.empty_like(scene["illumination"])

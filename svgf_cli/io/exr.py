@@ -544,17 +544,18 @@ def read_frame(
         alpha = np.ascontiguousarray(values["alpha"][0])
         _scrub("alpha", alpha, path, warnings, clamp_negative=False)
 
-    frame = Frame(
+    geometry = dict(
         albedo=values["albedo"],
         normal=normal,
         depth=np.ascontiguousarray(depth),
         motion=motion,
         mesh_id=mesh_id,
-        direct=values.get("direct"),
-        indirect=values.get("indirect"),
-        color=None if resolved.split else values.get("color"),
         emission=values.get("emission"),
     )
+    if resolved.split:
+        frame = Frame.direct_indirect(values["direct"], values["indirect"], **geometry)
+    else:
+        frame = Frame.combined(values["color"], **geometry)
     frame.validate()
     return ReadResult(frame=frame, alpha=alpha, info=info, resolved=resolved, warnings=warnings)
 
