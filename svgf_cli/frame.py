@@ -241,6 +241,8 @@ COUNT_KEYS = {
     "implausible_albedo.<signal>": "of those, pixels whose demodulation colour exceeds a"
     " reflectance (a channel above 1 + tolerance)",
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
+    "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
+    " matched them (information, not a problem)",
 }
 
 

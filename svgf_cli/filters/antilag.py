@@ -54,6 +54,11 @@ _TERMS = 6
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
+def scratch_planes() -> int:
+    """Cell planes of scratch :func:`antilag` needs."""
+    return 2 * _TERMS + 1
+
+
 def cell_shape(height: int, width: int) -> tuple[int, int]:
     """Cells covering an image: (ceil(H / 2), ceil(W / 2))."""
     return (height + CELL - 1) // CELL, (width + CELL - 1) // CELL

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgf_cli.filters import modulate, values
+from svgf_cli.filters.antilag import antilag, cell_shape, scratch_planes
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.edges import normal_squarings
@@ -99,6 +100,8 @@ class _Workspace:
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
+            "antilag_scratch": ((scratch_planes(), *cell_shape(h, w)), F32),
+            "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
         return shapes[name]
 
@@ -260,7 +263,7 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
-            self._before_accumulation(TemporalState(
+            counts["antilag"] = self._before_accumulation(TemporalState(
                 names, illumination, mode, accumulated, moments, history_length, depth, weights,
             ))
         else:
@@ -464,12 +467,23 @@ class Denoiser:
             counts[f"radiance_mode.{name}"] = int(total[modulate.RADIANCE_MODE])
             counts[f"implausible_albedo.{name}"] = int(total[modulate.IMPLAUSIBLE])
 
-    def _before_accumulation(self, temporal: TemporalState) -> None:
-        """Adjust the reprojected history before it is blended (the anti-lag hook)."""
+    def _before_accumulation(self, temporal: TemporalState) -> int:
+        """Adjust the reprojected history before it is blended: the optional history clamp,
+        then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
         p = self.params
         if p.history_clamp > 0.0:
             history_clamp(temporal.history_illumination, temporal.history_length,
                           temporal.current, temporal.depth, F32(p.history_clamp))
+        if not p.antilag:
+            return 0
+        work = self._work
+        assert work is not None
+        return antilag(
+            temporal.current, temporal.history_moments, temporal.history_length,
+            temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
+            p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
+            work["antilag_scratch"], work["antilag_lambda"],
+        )
 
     def _compose(
         self, frame: Frame, filtered: np.ndarray, variance: np.ndarray,
@@ -505,6 +519,9 @@ class Denoiser:
                 layers[f"variance.{name}"] = variance[index].copy()
                 layers[f"history_length.{name}"] = history_length[index].copy()
                 layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
+                if self.params.antilag and self._work is not None:
+                    layers[f"antilag.{name}"] = _cells_to_pixels(
+                        self._work["antilag_lambda"][index], height, width)
         return radiance, layers
 
     # ----------------------------------------------------------------- internals
@@ -564,6 +581,11 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
     counts[kind] = counts.get(kind, 0) + value
     if value:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
+
+
+def _cells_to_pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:
+    """A per-cell (2x2 pixels) plane at pixel resolution (for the debug layers)."""
+    return np.ascontiguousarray(np.repeat(np.repeat(cells, 2, 0), 2, 1)[:height, :width])
 
 
 def _writable(frame: Frame) -> Frame:
