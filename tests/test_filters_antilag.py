@@ -6,14 +6,37 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape
+from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape, scratch_planes
 
 F32 = np.float32
 REC709 = np.array([0.2126, 0.7152, 0.0722], dtype=F32)
 
 
+def _reference_gradient_change(mask, previous, current, radius, sigma):
+    """Relative change of the gradient samples per cell window (float64), 0 where the mean
+    delta is not significant."""
+    height, width = mask.shape
+    cells_y, cells_x = (height + 1) // 2, (width + 1) // 2
+    out = np.zeros((cells_y, cells_x))
+    has = mask > 0
+    delta = current.astype(np.float64) - previous.astype(np.float64)
+    level = np.maximum(current, previous).astype(np.float64)
+    for cy in range(cells_y):
+        for cx in range(cells_x):
+            window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
+                      slice(2 * max(cx - radius, 0), 2 * (cx + radius + 1)))
+            v = has[window]
+            n = v.sum()
+            if n < 2:
+                continue
+            d = delta[window][v]
+            if d.mean() ** 2 > sigma**2 * d.var(ddof=1) / n and level[window][v].sum() > 0:
+                out[cy, cx] = min(abs(d.sum()) / level[window][v].sum(), 1.0)
+    return out
+
+
 def _reference(current, moments, history_length, depth, weights, radius, sigma,
-               spatial_samples, tolerance, moments_alpha=0.2):
+               spatial_samples, tolerance, moments_alpha=0.2, gradients=None):
     """Cell sums, window statistics, blend weight, 3x3 cell dilation and the shortened
     history length, in float64, one cell and one window at a time."""
     w = weights.astype(np.float64)
@@ -29,6 +52,9 @@ def _reference(current, moments, history_length, depth, weights, radius, sigma,
         valid = (history_length[s] > 0) & (depth > 0)
         length = history_length[s].astype(np.float64)
         raw = np.zeros((cells_y, cells_x))
+        change = None
+        if gradients is not None and gradients[s] is not None:
+            change = _reference_gradient_change(*gradients[s], radius, sigma)
         for cy in range(cells_y):
             for cx in range(cells_x):
                 window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
@@ -47,6 +73,9 @@ def _reference(current, moments, history_length, depth, weights, radius, sigma,
                 if diff2 > sigma**2 * var / n * (1 + share) + (tolerance * level) ** 2:
                     bias2 = diff2 - var / n
                     raw[cy, cx] = bias2 / (bias2 + var / spatial_samples)
+                if change is not None:
+                    bias2 = (change[cy, cx] * mean_h) ** 2
+                    raw[cy, cx] = max(raw[cy, cx], bias2 / (bias2 + var / spatial_samples))
         for cy in range(cells_y):
             for cx in range(cells_x):
                 lam[s, cy, cx] = raw[max(cy - 1, 0):cy + 2, max(cx - 1, 0):cx + 2].max()
@@ -89,15 +118,16 @@ def _case(seed: int, height: int = 20, width: int = 28, num_signals: int = 2,
     return current.astype(F32), moments.astype(F32), length.astype(F32), depth.astype(F32)
 
 
-def _run(case, radius=2, sigma=3.0, spatial_samples=32.0, tolerance=0.02, weights=REC709):
+def _run(case, radius=2, sigma=3.0, spatial_samples=32.0, tolerance=0.02, weights=REC709,
+         gradients=None):
     current, moments, length, depth = case
     length = length.copy()
     num_signals, _, height, width = current.shape
     cells = cell_shape(height, width)
-    scratch = np.empty((13, *cells), F32)
+    scratch = np.empty((scratch_planes(), *cells), F32)
     lam = np.empty((num_signals, *cells), F32)
     count = antilag(current, moments, length, depth, weights, radius, sigma,
-                    spatial_samples, tolerance, 0.2, scratch, lam)
+                    spatial_samples, tolerance, 0.2, scratch, lam, gradients)
     return lam, length, count
 
 
@@ -113,6 +143,47 @@ def test_matches_float64_reference(step, shift, radius, weights):
     np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
     np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
     assert count == int(np.count_nonzero(ref_length < case[2] - 1e-3))
+
+
+def _gradient_samples(seed, height, width, num_signals, change, noise=0.0):
+    """One sample per 3x3 stratum; the shading changed by the factor ``change`` (plus some
+    re-shading noise)."""
+    rng = np.random.default_rng(seed)
+    samples = []
+    for _ in range(num_signals):
+        mask = np.zeros((height, width), F32)
+        mask[1::3, 1::3] = 1.0
+        previous = (mask * rng.uniform(0.5, 1.5, (height, width))).astype(F32)
+        current = previous * F32(change)
+        current = (current + mask * noise * rng.standard_normal((height, width))).astype(F32)
+        samples.append((mask, previous, np.maximum(current, 0).astype(F32)))
+    return samples
+
+
+@pytest.mark.parametrize(("change", "noise"), [(1.0, 0.0), (0.8, 0.0), (0.9, 0.4)])
+def test_gradient_samples_match_float64_reference(change, noise):
+    case = _case(5, height=21, width=27, step=0.95)
+    gradients = _gradient_samples(6, 21, 27, 2, change, noise)
+    gradients[1] = None  # a signal without samples
+    lam, length, count = _run(case, gradients=gradients)
+    ref_lam, ref_length = _reference(*case, REC709, 2, 3.0, 32.0, 0.02, gradients=gradients)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+
+
+def test_gradient_samples_see_what_the_noise_hides():
+    """A 20% dimming is lost in 1-spp noise for the window statistics but plain in the
+    re-shaded samples; unchanged samples change nothing."""
+    case = _case(7, height=32, width=48, step=0.8)
+    has_history = case[2] > 0
+    _, plain, _ = _run(case, sigma=3.5)
+    unchanged = _gradient_samples(8, 32, 48, 2, 1.0)
+    _, same, _ = _run(case, sigma=3.5, gradients=unchanged)
+    dimmed = _gradient_samples(8, 32, 48, 2, 0.8)
+    _, shortened, _ = _run(case, sigma=3.5, gradients=dimmed)
+    assert np.mean(plain[has_history] < case[2][has_history]) < 0.3
+    np.testing.assert_array_equal(same, plain)
+    assert np.mean(shortened[has_history] < case[2][has_history]) > 0.9
 
 
 def test_noise_alone_keeps_the_history():

@@ -33,6 +33,15 @@ pixels) and each pixel with history gets ``h <= 1/lambda - 1`` (``lambda = 1`` d
 history: the next accumulation restarts at ``h = 1`` and the variance falls back to the
 spatial estimate). Every term scales with the signal, so the test is the same at any
 exposure; where the difference is within the noise nothing changes.
+
+**Temporal gradient samples** (A-SVGF, Schied et al. 2018), when the renderer wrote them
+(``svgf trace --gradient-samples``): sparse samples of last frame's shading re-shaded in this
+frame with last frame's random numbers, so their difference ``delta = curr - prev`` measures
+the change of the signal nearly free of Monte Carlo noise. Per window, their relative change
+``r = |sum delta| / sum max(curr, prev)`` counts where the mean ``delta`` exceeds ``k``
+standard errors of the samples' own spread (re-shading does not cancel noise where the
+geometry moved), and gives a second bias estimate ``b_g = r m_h`` with weight
+``b_g^2 / (b_g^2 + var / N)``; a pixel takes the larger of the two weights.
 """
 
 from __future__ import annotations
@@ -50,13 +59,15 @@ CELL = 2  # pixels per cell side
 MIN_SAMPLES = 4
 # Sums per cell: count, sum l, sum l^2, sum m1, sum (m2 - m1^2), sum h.
 _TERMS = 6
+# Sums per cell of gradient samples: count, sum delta, sum delta^2, sum max(curr, prev).
+_GRADIENT_TERMS = 4
 
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
 def scratch_planes() -> int:
     """Cell planes of scratch :func:`antilag` needs."""
-    return 2 * _TERMS + 1
+    return 2 * _TERMS + 2 * _GRADIENT_TERMS + 2
 
 
 def cell_shape(height: int, width: int) -> tuple[int, int]:
@@ -77,25 +88,38 @@ def antilag(
     moments_alpha: float,
     scratch: np.ndarray,
     out_lambda: np.ndarray,
+    gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None,
 ) -> int:
     """Lower ``history_length`` (S, H, W) in place where the history disagrees with the frame.
 
     ``illumination`` is the current demodulated signal (S, 3, H, W), ``history_moments``
     the reprojected moments (S, 2, H, W), ``luminance_weights`` (3,) float32, ``radius`` in
-    cells. ``scratch`` is float32 (2 * 6 + 1, Hc, Wc) and ``out_lambda`` (S, Hc, Wc)
-    receives the dilated blend weight per cell (see :func:`cell_shape`). Returns how many
-    (signal, pixel) histories were shortened.
+    cells. ``scratch`` is float32 (:func:`scratch_planes`, Hc, Wc) and ``out_lambda``
+    (S, Hc, Wc) receives the dilated blend weight per cell (see :func:`cell_shape`).
+    ``gradients`` optionally holds, per signal, temporal gradient samples ``(mask, prev,
+    curr)`` as (H, W) float32 planes (``mask`` 1 where a sample sits), or None. Returns how
+    many (signal, pixel) histories were shortened.
     """
     terms = scratch[:_TERMS]
     row_sums = scratch[_TERMS:2 * _TERMS]
     spare = scratch[2 * _TERMS]
+    g_first = 2 * _TERMS + 1
+    g_terms = scratch[g_first:g_first + _GRADIENT_TERMS]
+    g_sums = scratch[g_first + _GRADIENT_TERMS:g_first + 2 * _GRADIENT_TERMS]
+    relative = scratch[g_first + 2 * _GRADIENT_TERMS]
     shortened = 0
     for s in range(illumination.shape[0]):
         _cell_terms(illumination[s], history_moments[s], history_length[s], depth,
                     luminance_weights, terms)
         _row_box(terms, np.int64(radius), row_sums)
+        samples = gradients[s] if gradients is not None else None
+        if samples is not None:
+            mask, previous, current = samples
+            _gradient_terms(mask, previous, current, g_terms)
+            _row_box(g_terms, np.int64(radius), g_sums)
+            _gradient_change(g_sums, np.int64(radius), F32(sigma), relative)
         _cell_lambda(row_sums, np.int64(radius), F32(sigma), F32(spatial_samples),
-                     F32(tolerance), F32(moments_alpha), spare)
+                     F32(tolerance), F32(moments_alpha), relative, samples is not None, spare)
         _dilate(spare, out_lambda[s])
         shortened += int(_shorten(history_length[s], out_lambda[s]))
     return shortened
@@ -142,10 +166,67 @@ def _cell_terms(
 
 
 @njit(parallel=True, **_JIT)
+def _gradient_terms(
+    mask: np.ndarray, previous: np.ndarray, current: np.ndarray, out: np.ndarray
+) -> None:
+    """Sums of the gradient samples' terms over each cell."""
+    height, width = mask.shape
+    cells_y, cells_x = out.shape[1], out.shape[2]
+    for cy in prange(cells_y):
+        pixel = np.zeros((_GRADIENT_TERMS, CELL * cells_x), dtype=np.float32)
+        for t in range(_GRADIENT_TERMS):
+            for cx in range(cells_x):
+                out[t, cy, cx] = _ZERO
+        for y in range(CELL * cy, min(CELL * cy + CELL, height)):
+            m_row, p_row, c_row = mask[y], previous[y], current[y]
+            for x in range(width):
+                v = _ONE if m_row[x] > _ZERO else _ZERO
+                delta = v * (c_row[x] - p_row[x])
+                pixel[0, x] = v
+                pixel[1, x] = delta
+                pixel[2, x] = delta * delta
+                pixel[3, x] = v * max(c_row[x], p_row[x])
+            for t in range(_GRADIENT_TERMS):
+                row = pixel[t]
+                acc = out[t, cy]
+                for cx in range(cells_x):
+                    acc[cx] += row[CELL * cx] + row[CELL * cx + 1]
+
+
+@njit(parallel=True, **_JIT)
+def _gradient_change(
+    row_sums: np.ndarray, radius: int, sigma: np.float32, out: np.ndarray
+) -> None:
+    """Relative change ``|sum delta| / sum max(curr, prev)`` per window where the mean
+    ``delta`` is significant (more than ``sigma`` standard errors of the samples), else 0."""
+    cells_y, cells_x = out.shape
+    k2 = sigma * sigma
+    for cy in prange(cells_y):
+        sums = np.zeros((_GRADIENT_TERMS, cells_x), dtype=np.float32)
+        for yy in range(max(cy - radius, 0), min(cy + radius + 1, cells_y)):
+            for t in range(_GRADIENT_TERMS):
+                row = row_sums[t, yy]
+                acc = sums[t]
+                for cx in range(cells_x):
+                    acc[cx] += row[cx]
+        o = out[cy]
+        for cx in range(cells_x):
+            n = sums[0, cx]
+            inv_n = _ONE / max(n, _ONE)
+            mean = sums[1, cx] * inv_n
+            spread = max(sums[2, cx] * inv_n - mean * mean, _ZERO) * n / max(n - _ONE, _ONE)
+            significant = n >= F32(2.0) and mean * mean > k2 * spread * inv_n
+            level = sums[3, cx]
+            change = min(abs(sums[1, cx]) / level, _ONE) if level > _ZERO else _ZERO
+            o[cx] = change if significant else _ZERO
+
+
+@njit(parallel=True, **_JIT)
 def _row_box(terms: np.ndarray, radius: int, out: np.ndarray) -> None:
     """Sum every term along x over ``2r+1`` cells (cells outside the image count 0)."""
+    num_terms = terms.shape[0]
     cells_y, cells_x = terms.shape[1], terms.shape[2]
-    for job in prange(_TERMS * cells_y):
+    for job in prange(num_terms * cells_y):
         t = job // cells_y
         cy = job % cells_y
         row = terms[t, cy]
@@ -172,9 +253,12 @@ def _cell_lambda(
     spatial_samples: np.float32,
     tolerance: np.float32,
     moments_alpha: np.float32,
+    gradient_change: np.ndarray,
+    use_gradients: bool,
     out: np.ndarray,
 ) -> None:
-    """Sum the row sums over ``2r+1`` cell rows and evaluate the blend weight per cell."""
+    """Sum the row sums over ``2r+1`` cell rows and evaluate the blend weight per cell
+    (the larger of the statistical and the gradient-sample weight with ``use_gradients``)."""
     cells_y, cells_x = out.shape
     k2 = sigma * sigma
     tol2 = tolerance * tolerance
@@ -203,8 +287,13 @@ def _cell_lambda(
             stale = diff2 > k2 * var * inv_n * (_ONE + share) + tol2 * level * level
             stale = stale and n >= F32(MIN_SAMPLES)
             bias2 = max(diff2 - var * inv_n, _ZERO)
-            # A limit of the history length, 1/lambda - 1, is what the pixels need.
-            o[cx] = bias2 / (bias2 + var * inv_spatial + F32(1e-30)) if stale else _ZERO
+            noise = var * inv_spatial + F32(1e-30)
+            weight = bias2 / (bias2 + noise) if stale else _ZERO
+            if use_gradients and n >= F32(MIN_SAMPLES):
+                gradient_bias = gradient_change[cy, cx] * mean_h
+                gradient_bias2 = gradient_bias * gradient_bias
+                weight = max(weight, gradient_bias2 / (gradient_bias2 + noise))
+            o[cx] = weight
 
 
 @njit(parallel=True, **_JIT)

@@ -136,6 +136,7 @@ class TemporalState:
     history_length: np.ndarray
     depth: np.ndarray
     luminance_weights: tuple[np.float32, np.float32, np.float32]
+    gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None
 
 
 class Denoiser:
@@ -265,6 +266,7 @@ class Denoiser:
             )
             counts["antilag"] = self._before_accumulation(TemporalState(
                 names, illumination, mode, accumulated, moments, history_length, depth, weights,
+                _gradient_samples(frame) if p.antilag_gradients else None,
             ))
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
@@ -482,7 +484,7 @@ class Denoiser:
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
             p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
-            work["antilag_scratch"], work["antilag_lambda"],
+            work["antilag_scratch"], work["antilag_lambda"], temporal.gradients,
         )
 
     def _compose(
@@ -581,6 +583,26 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
     counts[kind] = counts.get(kind, 0) + value
     if value:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
+
+
+def _gradient_samples(
+    frame: Frame,
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None:
+    """Per signal, its temporal gradient samples as (mask, previous, current), or None;
+    a sample with a non-finite value is no sample. None when no signal has any."""
+    if all(signal.gradient is None for signal in frame.signals):
+        return None
+    samples: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+    for signal in frame.signals:
+        gradient = signal.gradient
+        if gradient is None:
+            samples.append(None)
+            continue
+        finite = np.isfinite(gradient.previous) & np.isfinite(gradient.current)
+        mask = np.where(finite & (gradient.mask > 0), F32(1.0), F32(0.0))
+        samples.append((mask, np.where(finite, gradient.previous, F32(0.0)),
+                        np.where(finite, gradient.current, F32(0.0))))
+    return samples
 
 
 def _cells_to_pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:

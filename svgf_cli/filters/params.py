@@ -78,6 +78,11 @@ class SVGFParams:
     antilag_tolerance: float = _p(
         0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept."
     )
+    antilag_gradients: bool = _p(
+        True,
+        "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
+        " (svgf trace --gradient-samples).",
+    )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(5, "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none.")
     feedback_iteration: int = _p(
