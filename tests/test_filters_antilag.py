@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape, scratch_planes
+from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape, scratch_shape
 
 F32 = np.float32
 REC709 = np.array([0.2126, 0.7152, 0.0722], dtype=F32)
@@ -124,7 +124,7 @@ def _run(case, radius=2, sigma=3.0, spatial_samples=32.0, tolerance=0.02, weight
     length = length.copy()
     num_signals, _, height, width = current.shape
     cells = cell_shape(height, width)
-    scratch = np.empty((scratch_planes(), *cells), F32)
+    scratch = np.empty(scratch_shape(num_signals, height, width), F32)
     lam = np.empty((num_signals, *cells), F32)
     count = antilag(current, moments, length, depth, weights, radius, sigma,
                     spatial_samples, tolerance, 0.2, scratch, lam, gradients)

@@ -65,14 +65,15 @@ _GRADIENT_TERMS = 4
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
-def scratch_planes() -> int:
-    """Cell planes of scratch :func:`antilag` needs."""
-    return 2 * _TERMS + 2 * _GRADIENT_TERMS + 2
-
-
 def cell_shape(height: int, width: int) -> tuple[int, int]:
     """Cells covering an image: (ceil(H / 2), ceil(W / 2))."""
     return (height + CELL - 1) // CELL, (width + CELL - 1) // CELL
+
+
+def scratch_shape(num_signals: int, height: int, width: int) -> tuple[int, ...]:
+    """Shape of the float32 scratch :func:`antilag` needs: per signal the window row sums of
+    the statistics and of the gradient samples, and the undilated weight."""
+    return (num_signals, _TERMS + _GRADIENT_TERMS + 1, *cell_shape(height, width))
 
 
 def antilag(
@@ -94,59 +95,74 @@ def antilag(
 
     ``illumination`` is the current demodulated signal (S, 3, H, W), ``history_moments``
     the reprojected moments (S, 2, H, W), ``luminance_weights`` (3,) float32, ``radius`` in
-    cells. ``scratch`` is float32 (:func:`scratch_planes`, Hc, Wc) and ``out_lambda``
-    (S, Hc, Wc) receives the dilated blend weight per cell (see :func:`cell_shape`).
-    ``gradients`` optionally holds, per signal, temporal gradient samples ``(mask, prev,
-    curr)`` as (H, W) float32 planes (``mask`` 1 where a sample sits), or None. Returns how
-    many (signal, pixel) histories were shortened.
+    cells. ``scratch`` is float32 of :func:`scratch_shape` and ``out_lambda`` (S, Hc, Wc)
+    receives the dilated blend weight per cell (see :func:`cell_shape`). ``gradients``
+    optionally holds, per signal, temporal gradient samples ``(mask, prev, curr)`` as (H, W)
+    float32 planes (``mask`` 1 where a sample sits), or None. Returns how many (signal,
+    pixel) histories were shortened. Three parallel passes for all signals together (each
+    launch costs a thread wake-up, which dominates small kernels on a busy machine).
     """
-    terms = scratch[:_TERMS]
-    row_sums = scratch[_TERMS:2 * _TERMS]
-    spare = scratch[2 * _TERMS]
-    g_first = 2 * _TERMS + 1
-    g_terms = scratch[g_first:g_first + _GRADIENT_TERMS]
-    g_sums = scratch[g_first + _GRADIENT_TERMS:g_first + 2 * _GRADIENT_TERMS]
-    relative = scratch[g_first + 2 * _GRADIENT_TERMS]
-    shortened = 0
-    for s in range(illumination.shape[0]):
-        _cell_terms(illumination[s], history_moments[s], history_length[s], depth,
-                    luminance_weights, terms)
-        _row_box(terms, np.int64(radius), row_sums)
-        samples = gradients[s] if gradients is not None else None
-        if samples is not None:
-            mask, previous, current = samples
-            _gradient_terms(mask, previous, current, g_terms)
-            _row_box(g_terms, np.int64(radius), g_sums)
-            _gradient_change(g_sums, np.int64(radius), F32(sigma), relative)
-        _cell_lambda(row_sums, np.int64(radius), F32(sigma), F32(spatial_samples),
-                     F32(tolerance), F32(moments_alpha), relative, samples is not None, spare)
-        _dilate(spare, out_lambda[s])
-        shortened += int(_shorten(history_length[s], out_lambda[s]))
-    return shortened
+    num_signals = illumination.shape[0]
+    row_sums = scratch[:, :_TERMS]
+    gradient_sums = scratch[:, _TERMS:_TERMS + _GRADIENT_TERMS]
+    weight = scratch[:, _TERMS + _GRADIENT_TERMS]
+    radius = np.int64(radius)
+    _statistics_row_sums(illumination, history_moments, history_length, depth,
+                         luminance_weights, radius, row_sums)
+    has_gradients = np.zeros(num_signals, dtype=np.bool_)
+    if gradients is not None:
+        for s, samples in enumerate(gradients):
+            if samples is not None:
+                has_gradients[s] = True
+                _gradient_row_sums(*samples, radius, gradient_sums[s])
+    _window_weight(row_sums, gradient_sums, has_gradients, radius, F32(sigma),
+                   F32(spatial_samples), F32(tolerance), F32(moments_alpha), weight)
+    return int(_dilate_and_shorten(weight, history_length, out_lambda))
+
+
+@njit(inline="always", **_JIT)
+def _box_row(row: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """``out[x] = sum of row[x - r .. x + r]`` (cells outside the image count 0)."""
+    count = row.shape[0]
+    for x in range(count):
+        out[x] = _ZERO
+    for offset in range(-radius, radius + 1):
+        first = max(0, -offset)
+        last = min(count, count - offset)
+        if last <= first:
+            continue
+        # Slices, so that every index is provably non-negative and the loop vectorizes.
+        source = row[first + offset:last + offset]
+        target = out[first:last]
+        for i in range(last - first):
+            target[i] += source[i]
 
 
 @njit(parallel=True, **_JIT)
-def _cell_terms(
+def _statistics_row_sums(
     current: np.ndarray,
     moments: np.ndarray,
     history_length: np.ndarray,
     depth: np.ndarray,
     weights: np.ndarray,
+    radius: int,
     out: np.ndarray,
 ) -> None:
-    """Sums of the per-pixel terms over each cell's pixels that have history."""
+    """Per signal and cell row: sums of the per-pixel terms over each cell's pixels with
+    history, then summed along x over ``2r+1`` cells."""
+    num_signals = current.shape[0]
     height, width = depth.shape
-    cells_y, cells_x = out.shape[1], out.shape[2]
+    cells_y, cells_x = out.shape[2], out.shape[3]
     wr, wg, wb = weights[0], weights[1], weights[2]
-    for cy in prange(cells_y):
+    for job in prange(num_signals * cells_y):
+        s = job // cells_y
+        cy = job % cells_y
         pixel = np.zeros((_TERMS, CELL * cells_x), dtype=np.float32)
-        for t in range(_TERMS):
-            for cx in range(cells_x):
-                out[t, cy, cx] = _ZERO
+        cells = np.zeros((_TERMS, cells_x), dtype=np.float32)
         for y in range(CELL * cy, min(CELL * cy + CELL, height)):
-            r, g, b = current[0, y], current[1, y], current[2, y]
-            m1_row, m2_row = moments[0, y], moments[1, y]
-            h_row, z_row = history_length[y], depth[y]
+            r, g, b = current[s, 0, y], current[s, 1, y], current[s, 2, y]
+            m1_row, m2_row = moments[s, 0, y], moments[s, 1, y]
+            h_row, z_row = history_length[s, y], depth[y]
             for x in range(width):
                 h = h_row[x]
                 v = _ONE if (h > _ZERO and z_row[x] > _ZERO) else _ZERO
@@ -160,23 +176,23 @@ def _cell_terms(
                 pixel[5, x] = v * h
             for t in range(_TERMS):
                 row = pixel[t]
-                acc = out[t, cy]
+                acc = cells[t]
                 for cx in range(cells_x):
                     acc[cx] += row[CELL * cx] + row[CELL * cx + 1]
+        for t in range(_TERMS):
+            _box_row(cells[t], radius, out[s, t, cy])
 
 
 @njit(parallel=True, **_JIT)
-def _gradient_terms(
-    mask: np.ndarray, previous: np.ndarray, current: np.ndarray, out: np.ndarray
+def _gradient_row_sums(
+    mask: np.ndarray, previous: np.ndarray, current: np.ndarray, radius: int, out: np.ndarray
 ) -> None:
-    """Sums of the gradient samples' terms over each cell."""
+    """One signal's gradient-sample terms per cell, summed along x over ``2r+1`` cells."""
     height, width = mask.shape
     cells_y, cells_x = out.shape[1], out.shape[2]
     for cy in prange(cells_y):
         pixel = np.zeros((_GRADIENT_TERMS, CELL * cells_x), dtype=np.float32)
-        for t in range(_GRADIENT_TERMS):
-            for cx in range(cells_x):
-                out[t, cy, cx] = _ZERO
+        cells = np.zeros((_GRADIENT_TERMS, cells_x), dtype=np.float32)
         for y in range(CELL * cy, min(CELL * cy + CELL, height)):
             m_row, p_row, c_row = mask[y], previous[y], current[y]
             for x in range(width):
@@ -188,91 +204,52 @@ def _gradient_terms(
                 pixel[3, x] = v * max(c_row[x], p_row[x])
             for t in range(_GRADIENT_TERMS):
                 row = pixel[t]
-                acc = out[t, cy]
+                acc = cells[t]
                 for cx in range(cells_x):
                     acc[cx] += row[CELL * cx] + row[CELL * cx + 1]
+        for t in range(_GRADIENT_TERMS):
+            _box_row(cells[t], radius, out[t, cy])
 
 
 @njit(parallel=True, **_JIT)
-def _gradient_change(
-    row_sums: np.ndarray, radius: int, sigma: np.float32, out: np.ndarray
-) -> None:
-    """Relative change ``|sum delta| / sum max(curr, prev)`` per window where the mean
-    ``delta`` is significant (more than ``sigma`` standard errors of the samples), else 0."""
-    cells_y, cells_x = out.shape
-    k2 = sigma * sigma
-    for cy in prange(cells_y):
-        sums = np.zeros((_GRADIENT_TERMS, cells_x), dtype=np.float32)
-        for yy in range(max(cy - radius, 0), min(cy + radius + 1, cells_y)):
-            for t in range(_GRADIENT_TERMS):
-                row = row_sums[t, yy]
-                acc = sums[t]
-                for cx in range(cells_x):
-                    acc[cx] += row[cx]
-        o = out[cy]
-        for cx in range(cells_x):
-            n = sums[0, cx]
-            inv_n = _ONE / max(n, _ONE)
-            mean = sums[1, cx] * inv_n
-            spread = max(sums[2, cx] * inv_n - mean * mean, _ZERO) * n / max(n - _ONE, _ONE)
-            significant = n >= F32(2.0) and mean * mean > k2 * spread * inv_n
-            level = sums[3, cx]
-            change = min(abs(sums[1, cx]) / level, _ONE) if level > _ZERO else _ZERO
-            o[cx] = change if significant else _ZERO
-
-
-@njit(parallel=True, **_JIT)
-def _row_box(terms: np.ndarray, radius: int, out: np.ndarray) -> None:
-    """Sum every term along x over ``2r+1`` cells (cells outside the image count 0)."""
-    num_terms = terms.shape[0]
-    cells_y, cells_x = terms.shape[1], terms.shape[2]
-    for job in prange(num_terms * cells_y):
-        t = job // cells_y
-        cy = job % cells_y
-        row = terms[t, cy]
-        acc = out[t, cy]
-        for cx in range(cells_x):
-            acc[cx] = _ZERO
-        for offset in range(-radius, radius + 1):
-            first = max(0, -offset)
-            last = min(cells_x, cells_x - offset)
-            if last <= first:
-                continue
-            # Slices, so that every index is provably non-negative and the loop vectorizes.
-            source = row[first + offset:last + offset]
-            target = acc[first:last]
-            for i in range(last - first):
-                target[i] += source[i]
-
-
-@njit(parallel=True, **_JIT)
-def _cell_lambda(
+def _window_weight(
     row_sums: np.ndarray,
+    gradient_sums: np.ndarray,
+    has_gradients: np.ndarray,
     radius: int,
     sigma: np.float32,
     spatial_samples: np.float32,
     tolerance: np.float32,
     moments_alpha: np.float32,
-    gradient_change: np.ndarray,
-    use_gradients: bool,
     out: np.ndarray,
 ) -> None:
-    """Sum the row sums over ``2r+1`` cell rows and evaluate the blend weight per cell
-    (the larger of the statistical and the gradient-sample weight with ``use_gradients``)."""
-    cells_y, cells_x = out.shape
+    """Sum the row sums over ``2r+1`` cell rows and evaluate the blend weight per cell: the
+    statistical one and, for a signal with gradient samples, the larger of it and the
+    gradient samples' (module docstring)."""
+    num_signals, cells_y, cells_x = out.shape
     k2 = sigma * sigma
     tol2 = tolerance * tolerance
     inv_spatial = _ONE / spatial_samples
     stationary = moments_alpha / (F32(2.0) - moments_alpha)
-    for cy in prange(cells_y):
+    for job in prange(num_signals * cells_y):
+        s = job // cells_y
+        cy = job % cells_y
+        use_gradients = has_gradients[s]
         sums = np.zeros((_TERMS, cells_x), dtype=np.float32)
+        g = np.zeros((_GRADIENT_TERMS, cells_x), dtype=np.float32)
         for yy in range(max(cy - radius, 0), min(cy + radius + 1, cells_y)):
             for t in range(_TERMS):
-                row = row_sums[t, yy]
+                row = row_sums[s, t, yy]
                 acc = sums[t]
                 for cx in range(cells_x):
                     acc[cx] += row[cx]
-        o = out[cy]
+            if use_gradients:
+                for t in range(_GRADIENT_TERMS):
+                    row = gradient_sums[s, t, yy]
+                    acc = g[t]
+                    for cx in range(cells_x):
+                        acc[cx] += row[cx]
+        o = out[s, cy]
         for cx in range(cells_x):
             n = sums[0, cx]
             inv_n = _ONE / max(n, _ONE)
@@ -290,46 +267,57 @@ def _cell_lambda(
             noise = var * inv_spatial + F32(1e-30)
             weight = bias2 / (bias2 + noise) if stale else _ZERO
             if use_gradients and n >= F32(MIN_SAMPLES):
-                gradient_bias = gradient_change[cy, cx] * mean_h
+                # The samples' relative change, where their mean delta is significant.
+                g_n = g[0, cx]
+                g_inv = _ONE / max(g_n, _ONE)
+                g_mean = g[1, cx] * g_inv
+                g_spread = max(g[2, cx] * g_inv - g_mean * g_mean, _ZERO)
+                g_spread *= g_n / max(g_n - _ONE, _ONE)
+                significant = g_n >= F32(2.0) and g_mean * g_mean > k2 * g_spread * g_inv
+                g_level = g[3, cx]
+                change = min(abs(g[1, cx]) / g_level, _ONE) if g_level > _ZERO else _ZERO
+                gradient_bias = change * mean_h if significant else _ZERO
                 gradient_bias2 = gradient_bias * gradient_bias
                 weight = max(weight, gradient_bias2 / (gradient_bias2 + noise))
             o[cx] = weight
 
 
 @njit(parallel=True, **_JIT)
-def _dilate(cells: np.ndarray, out: np.ndarray) -> None:
-    """3x3 maximum over cells (separable: rows here, columns while writing)."""
-    cells_y, cells_x = cells.shape
-    for cy in prange(cells_y):
+def _dilate_and_shorten(
+    weight: np.ndarray, history_length: np.ndarray, out_lambda: np.ndarray
+) -> int:
+    """Per pixel row: the 3x3 cell maximum of the weight over the row's cells (written to
+    ``out_lambda`` once per cell row), then ``h = min(h, 1/lambda - 1)`` where lambda > 0."""
+    num_signals, cells_y, cells_x = weight.shape
+    height, width = history_length.shape[1], history_length.shape[2]
+    count = 0
+    for job in prange(num_signals * height):
+        s = job // height
+        y = job % height
+        cy = y // CELL
         best = np.zeros(cells_x, dtype=np.float32)
         for yy in range(max(cy - 1, 0), min(cy + 2, cells_y)):
-            row = cells[yy]
+            row = weight[s, yy]
             for cx in range(cells_x):
                 best[cx] = max(best[cx], row[cx])
-        o = out[cy]
+        dilated = np.empty(cells_x, dtype=np.float32)
         for cx in range(cells_x):
-            o[cx] = best[cx]
+            dilated[cx] = best[cx]
         for cx in range(1, cells_x):
-            o[cx] = max(o[cx], best[cx - 1])
+            dilated[cx] = max(dilated[cx], best[cx - 1])
         for cx in range(cells_x - 1):
-            o[cx] = max(o[cx], best[cx + 1])
-
-
-@njit(parallel=True, **_JIT)
-def _shorten(history_length: np.ndarray, cell_lambda: np.ndarray) -> int:
-    """``h = min(h, 1/lambda - 1)`` for every pixel with history under a cell with lambda."""
-    height, width = history_length.shape
-    cells_x = cell_lambda.shape[1]
-    count = 0
-    for y in prange(height):
+            dilated[cx] = max(dilated[cx], best[cx + 1])
+        if y % CELL == 0:
+            o = out_lambda[s, cy]
+            for cx in range(cells_x):
+                o[cx] = dilated[cx]
         limit = np.empty(CELL * cells_x, dtype=np.float32)
-        weights = cell_lambda[y // CELL]
         for cx in range(cells_x):
-            weight = weights[cx]
-            cap = _ONE / weight - _ONE if weight > _ZERO else F32(np.inf)
-            limit[CELL * cx] = max(cap, _ZERO)
-            limit[CELL * cx + 1] = max(cap, _ZERO)
-        h_row = history_length[y]
+            lam = dilated[cx]
+            cap = max(_ONE / lam - _ONE, _ZERO) if lam > _ZERO else F32(np.inf)
+            limit[CELL * cx] = cap
+            limit[CELL * cx + 1] = cap
+        h_row = history_length[s, y]
         row_count = 0
         for x in range(width):
             h = h_row[x]

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgf_cli.filters import modulate, values
-from svgf_cli.filters.antilag import antilag, cell_shape, scratch_planes
+from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.edges import normal_squarings
@@ -100,7 +100,7 @@ class _Workspace:
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
-            "antilag_scratch": ((scratch_planes(), *cell_shape(h, w)), F32),
+            "antilag_scratch": (scratch_shape(s, h, w), F32),
             "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
         return shapes[name]
