@@ -2,7 +2,7 @@
 
 Runs in its own virtual environment with Blender as a Python module (`bpy` 4.5 LTS):
 
-    .venv-blender/bin/python testdata/cycles/render.py [--scene roll|metal|all] [--what ...]
+    .venv-blender/bin/python testdata/cycles/render.py [--scene roll metal] [--what all]
 
 Both scenes are built in code from the factory-empty file (no .blend is stored), animated with
 keyframes (so Cycles can evaluate the neighbouring frames for the Vector pass), and rendered on
