@@ -15,8 +15,8 @@ import click
 from svgf_cli import __version__
 from svgf_cli.commands.options import describe_params, params_from_options, svgf_param_options
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.progress import PROGRESS_MODES, Progress
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS
+from svgf_cli.progress import PROGRESS_MODES, Progress
 
 DEBUG_CHANNEL_EXAMPLE = ("variance", "history_length")  # data layers, for the codec check
 
