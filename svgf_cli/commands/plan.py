@@ -9,8 +9,8 @@ import click
 
 from svgf_cli.commands.denoise import parse_warmup
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.plan import format_frame_spec, plan_chunks
-from svgf_cli.io.patterns import parse_frame_spec
+from svgf_cli.farm.plan import plan_chunks
+from svgf_cli.io.patterns import format_frame_spec, parse_frame_spec
 
 # Options `plan` sets on every chunk's command line; passing them after `--` would conflict.
 _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "--scheduler")
