@@ -7,9 +7,9 @@ import shlex
 
 import click
 
-from svgf_cli.commands.denoise import parse_warmup
+from svgf_cli.commands.options import WARMUP, warmup_label
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.plan import plan_chunks
+from svgf_cli.farm.plan import DEFAULT_WARMUP, plan_chunks
 from svgf_cli.io.patterns import format_frame_spec, parse_frame_spec
 
 # Options `plan` sets on every chunk's command line; passing them after `--` would conflict.
@@ -31,14 +31,15 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
 )
 @click.option(
     "--chunk-size",
-    type=int,
+    type=click.IntRange(min=1),
     required=True,
     metavar="N",
     help="Output frames per chunk (one farm task each).",
 )
 @click.option(
     "--warmup",
-    default="16",
+    type=WARMUP,
+    default=DEFAULT_WARMUP,
     show_default=True,
     metavar="N|all",
     help="Frames each chunk replays before its first output frame.",
@@ -63,7 +64,7 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
 def command(
     frames_spec: str,
     chunk_size: int,
-    warmup: str,
+    warmup: int | None,
     first_frame: int | None,
     output_format: str,
     denoise_args: tuple[str, ...],
@@ -74,8 +75,6 @@ def command(
     the arguments after `--` (inputs, -o, options) are put into one `svgf denoise` command
     per chunk.
     """
-    if chunk_size < 1:
-        raise UsageError(f"--chunk-size {chunk_size}: must be at least 1")
     try:
         frames = parse_frame_spec(frames_spec)
     except ValueError as exc:
@@ -86,7 +85,7 @@ def command(
     clashes = [a for a in denoise_args if a.split("=")[0] in _PLANNED_OPTIONS]
     if clashes:
         raise UsageError(f"{clashes[0]} is set by the plan; remove it from the denoise arguments")
-    warmup_frames = parse_warmup(warmup)
+    warmup_frames = warmup
     # The timeline is every frame from the sequence start; the plan does not look at disk.
     timeline = list(range(start, frames[-1] + 1))
     chunks = plan_chunks(frames, timeline, chunk_size=chunk_size, warmup=warmup_frames)
@@ -94,7 +93,7 @@ def command(
         click.echo(json.dumps([c.to_json() for c in chunks], indent=None))
         return
     for chunk in chunks:
-        warm = "all" if warmup_frames is None else str(warmup_frames)
+        warm = warmup_label(warmup_frames)
         words = [
             "svgf",
             "denoise",

@@ -51,8 +51,9 @@ def resolve_threads(threads: int) -> int:
               help="Frames to render: 1-48, 1,5,7-9, 1-10x2.")
 @click.option("--resolution", default="640x360", show_default=True, metavar="WxH",
               help="Image size in pixels.")
-@click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
-@click.option("--max-depth", type=int, default=5, show_default=True,
+@click.option("--spp", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Samples per pixel.")
+@click.option("--max-depth", type=click.IntRange(min=0), default=5, show_default=True,
               help="Maximum bounces (1 = direct lighting only; pbrt's convention).")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Base seed; each frame's seed derives from (seed, frame).")
@@ -60,12 +61,13 @@ def resolve_threads(threads: int) -> int:
               help="Camera/object keyframes (JSON); default: a static camera framing the scene.")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Also write converged reference frames (R,G,B + direct/indirect, float).")
-@click.option("--reference-spp", type=int, default=512, show_default=True,
+@click.option("--reference-spp", type=click.IntRange(min=1), default=512, show_default=True,
               help="Samples per pixel of the references (traced in memory-bounded batches).")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @click.option("--float", "float_radiance", is_flag=True,
               help="Write radiance layers as float instead of half.")
-@click.option("--threads", type=int, default=0, show_default=True, help="Threads (0 = all cores).")
+@click.option("--threads", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Threads (0 = all cores).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress output.")
 def command(
     scene: Path,
@@ -94,12 +96,6 @@ def command(
         frame_list = parse_frame_spec(frames)
     except ValueError as exc:
         raise UsageError(f"--frames: {exc}") from exc
-    if spp < 1:
-        raise UsageError(f"--spp {spp}: must be at least 1")
-    if max_depth < 0:
-        raise UsageError(f"--max-depth {max_depth}: must be >= 0")
-    if reference is not None and reference_spp < 1:
-        raise UsageError(f"--reference-spp {reference_spp}: must be at least 1")
 
     out_paths = _output_paths(output, frame_list, "--output")
     ref_paths = _output_paths(reference, frame_list, "--reference") if reference else []
