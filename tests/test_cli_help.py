@@ -74,7 +74,7 @@ def test_frame_ranges_get_a_bounded_default_warmup(
     defaulted = "the default with --frames" in out
     assert defaulted == (extra == ["--frames", "19-20"])
     if defaulted:
-        assert f"warm-up {DEFAULT_WARMUP} (the default with --frames; measured" in out
+        assert f"warm-up {DEFAULT_WARMUP} (the default with --frames; on a 48-frame" in out
 
 
 def test_warmup_value_errors_are_usage_errors(capsys: pytest.CaptureFixture[str]) -> None:
