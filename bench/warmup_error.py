@@ -48,7 +48,7 @@ def measure(pattern: str, warmups: list[int], preset: str) -> list[str]:
             max_abs = max(max_abs, float(diff.max()))
             rel.append(float(diff.mean() / max(np.abs(sequential[start]).mean(), 1e-12)))
         if not rel:
-            rows.append(f"| {warmup} | 0 (warm-up reaches the first frame: identical) | 0 | 0 | 0 |")
+            rows.append(f"| {warmup} | 0 (the warm-up reaches the first frame) | 0 | 0 | 0 |")
             continue
         rows.append(
             f"| {warmup} | {len(rel)} | {max_abs:.3g} | {100 * np.mean(rel):.3g} % "

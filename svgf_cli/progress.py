@@ -9,9 +9,11 @@ report through ``Progress``.
   warm-up frames print ``Warmup: 3/16`` and do not count towards the percentage.
 * ``json``: one JSON object per line (``{"event": "frame_done", ...}``) for scripts.
 
-``auto`` picks ``bar`` when stdout is a terminal and ``lines`` otherwise. Start-up information
-goes to stdout, except in ``json`` mode where stdout carries only JSON and information goes to
-stderr. Warnings always go to stderr prefixed ``WARNING:``.
+The ``lines`` and ``json`` formats are written here by hand: their exact text is a contract
+with farm parsers, which no progress library keeps. ``auto`` picks ``bar`` when stdout is a
+terminal and ``lines`` otherwise. Start-up information goes to stdout, except in ``json``
+mode where stdout carries only JSON and information goes to stderr. Warnings always go to
+stderr prefixed ``WARNING:``.
 """
 
 from __future__ import annotations
