@@ -26,8 +26,8 @@ import numpy as np
 
 from svgf_cli import __version__
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, SvgfError, UsageError
-from svgf_cli.farm.progress import Progress
 from svgf_cli.filters.params import SVGFParams
+from svgf_cli.progress import Progress
 
 # Header keys that describe the file's layout rather than its content: the writer sets its
 # own, so copying the input's would contradict the output (or confuse OpenImageIO).

@@ -13,46 +13,52 @@ from typing import Any
 import click
 
 from svgf_cli import __version__
-from svgf_cli.commands.options import describe_params, params_from_options, svgf_param_options
+from svgf_cli.commands.options import (
+    WARMUP,
+    SectionedCommand,
+    describe_params,
+    params_from_options,
+    svgf_param_options,
+    warmup_label,
+)
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.progress import PROGRESS_MODES, Progress
+from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS
+from svgf_cli.progress import PROGRESS_MODES, Progress
 
 DEBUG_CHANNEL_EXAMPLE = ("variance", "history_length")  # data layers, for the codec check
-
-
-def parse_warmup(text: str) -> int | None:
-    """``all`` -> None (replay from the first frame), else a frame count >= 0."""
-    if text.strip().lower() == "all":
-        return None
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"--warmup {text!r}: expected a number of frames or 'all'") from None
-    if value < 0:
-        raise UsageError(f"--warmup {value}: must be >= 0")
-    return value
 
 
 def _check_combinations(o: dict[str, Any]) -> None:
     if o["workers"] is not None and o["scheduler"] is not None:
         raise UsageError("--workers and --scheduler contradict each other; give one")
-    if o["workers"] is not None and o["workers"] < 1:
-        raise UsageError(f"--workers {o['workers']}: must be at least 1")
-    if o["chunk_size"] is not None and o["chunk_size"] < 1:
-        raise UsageError(f"--chunk-size {o['chunk_size']}: must be at least 1")
     distributed = o["workers"] is not None or o["scheduler"] is not None
     if (o["save_history"] or o["load_history"]) and (distributed or o["chunk_size"]):
         raise UsageError(
             "--save-history/--load-history continue one sequential run; they cannot be "
             "combined with --chunk-size, --workers or --scheduler"
         )
-    if o["threads"] is not None and o["threads"] < 0:
-        raise UsageError(f"--threads {o['threads']}: must be >= 0 (0 = all cores)")
+
+
+# --help sections, everyday options first; an option named nowhere lands in "Other options",
+# the SVGF parameters (and --preset) in the filter section at the end.
+SECTIONS = [
+    ("Input and output", ["output", "float_output", "compression", "debug_aovs"]),
+    (
+        "Frames, warm-up and resume",
+        ["frames_spec", "warmup", "skip_existing", "overwrite", "allow_gaps", "save_history",
+         "load_history"],
+    ),  # fmt: skip
+    ("Presets and layers", ["preset", "preset_aovs", "aovs", "motion_convention"]),
+    ("Run and progress", ["threads", "progress_mode", "quiet", "verbose", "dry_run"]),
+    ("Farm chunks and Dask", ["chunk_size", "workers", "scheduler"]),
+]
 
 
 @click.command(
     "denoise",
+    cls=SectionedCommand,
+    sections=SECTIONS,
     short_help="Denoise an EXR sequence with SVGF.",
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
@@ -94,11 +100,12 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option(
     "--warmup",
-    default="all",
-    show_default=True,
+    type=WARMUP,
+    default=None,
     metavar="N|all",
     help="Frames processed, not written, before the first output frame; 'all' replays from "
-    "the first frame (bit-identical to one sequential run).",
+    f"the first frame (bit-identical to one sequential run) [default: {DEFAULT_WARMUP} with "
+    "--frames, else all].",
 )
 @click.option("--allow-gaps", is_flag=True, help="A missing frame resets history (WARNING).")
 @click.option(
@@ -131,7 +138,7 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option(
     "--threads",
-    type=int,
+    type=click.IntRange(min=0),
     default=None,
     metavar="N",
     help="Compute and I/O threads (0 = all cores) [default: all].",
@@ -149,7 +156,7 @@ def _check_combinations(o: dict[str, Any]) -> None:
 @click.option("--dry-run", is_flag=True, help="Check everything, print the plan, write nothing.")
 @click.option(
     "--workers",
-    type=int,
+    type=click.IntRange(min=1),
     default=None,
     metavar="N",
     help="Run chunks on a local Dask cluster of N worker processes.",
@@ -161,7 +168,7 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option(
     "--chunk-size",
-    type=int,
+    type=click.IntRange(min=1),
     default=None,
     metavar="N",
     help="Output frames per chunk; each chunk replays its own warm-up.",
@@ -178,7 +185,7 @@ def command(**options: Any) -> None:
     from svgf_cli.runner import RunConfig, RunStats, load_history, run_sequence, stop_on_signals
 
     params = params_from_options(options["preset"], options)
-    warmup = parse_warmup(options["warmup"])
+    warmup, warmup_note = _resolve_warmup(options)
     _check_combinations(options)
     mapping = build_mapping(options["preset_aovs"], options["aovs"], options["motion_convention"])
     compression = options["compression"]
@@ -222,7 +229,7 @@ def command(**options: Any) -> None:
     selected = len(job.selected)
     progress.info(
         f"Frames: {job.frames_to_write} to write of {selected} selected, "
-        f"{len(job.timeline)} on disk; warm-up {options['warmup']}"
+        f"{len(job.timeline)} on disk; warm-up {warmup_label(warmup)}{warmup_note}"
         + (f"; {len(job.skipped_existing)} existing skipped" if job.skipped_existing else "")
         + (f"; history from {history.path} (frame {history.last_frame})" if history else "")
     )
@@ -247,7 +254,7 @@ def command(**options: Any) -> None:
         half=not options["float_output"],
         compression=compression,
         debug_aovs=options["debug_aovs"],
-        warmup_label=options["warmup"].strip().lower(),
+        warmup_label=warmup_label(warmup),
         # Dask workers set their own threads; a remote scheduler's workers keep theirs
         # unless --threads was given.
         threads=(threads if options["workers"] else options["threads"]) if distributed else None,
@@ -285,6 +292,17 @@ def command(**options: Any) -> None:
         f"{stats.read_seconds:.1f} s, compute {stats.compute_seconds:.1f} s, write "
         f"{stats.write_seconds:.1f} s)"
     )
+
+
+def _resolve_warmup(options: dict[str, Any]) -> tuple[int | None, str]:
+    """The warm-up and a note for the log: a frame range without --warmup gets the bounded
+    default (a farm task must not replay the whole shot); the whole sequence stays exact."""
+    source = click.get_current_context().get_parameter_source("warmup")
+    if source is not click.core.ParameterSource.DEFAULT:
+        return options["warmup"], ""
+    if options["frames_spec"] is None:
+        return None, ""
+    return DEFAULT_WARMUP, f" (the default with --frames; {WARMUP_ERROR_NOTE})"
 
 
 def _apply_threads(threads: int | None, workers: int | None) -> int:

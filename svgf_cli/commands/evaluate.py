@@ -11,7 +11,11 @@ from typing import Any
 
 import click
 
-from svgf_cli.commands.options import params_from_options, svgf_param_options
+from svgf_cli.commands.options import (
+    SectionedCommand,
+    params_from_options,
+    svgf_param_options,
+)
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.evaluate.baselines import BASELINES
 from svgf_cli.io.layers import AOV_PRESETS
@@ -39,7 +43,13 @@ def _write_text(path: str, text: str) -> None:
         raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from exc
 
 
-@click.command("evaluate", short_help="Score denoised frames against references and baselines.")
+@click.command(
+    "evaluate",
+    cls=SectionedCommand,
+    default_section="Options",
+    short_help="Score denoised frames against references and baselines.",
+    context_settings={"max_content_width": 100},
+)
 @click.argument("denoised", metavar="DENOISED_PATTERN")
 @click.option(
     "--reference", "-r", required=True, metavar="PATTERN", help="Converged reference frames."
