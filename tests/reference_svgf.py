@@ -63,6 +63,7 @@ DEPTH_EPSILON = 1e-3  # w_z's depth-relative epsilon: 1e-3 z(p) (README, edges.p
 VARIANCE_EPSILON = 1e-10  # inside the sqrt of w_l's scale (Falcor's hard-coded 1e-10)
 NORMAL_SLACK = 0.01  # reprojection normal test: tolerance * (fwidth_n + 0.01)
 MIN_BILINEAR_WEIGHT = 0.01  # bilinear taps whose renormalised sum is below this: rejected
+WHOLE_SNAP = 1e-3  # a resampled history length this close to a whole count is that count
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
@@ -364,7 +365,8 @@ def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray, prev: His
     passing taps are renormalised to sum to 1, unless their sum is below 0.01, which rejects
     them. Then: the plain average of the passing taps in the 3x3 around the rounded position
     ``floor(P + 0.5)``; with none, a disocclusion. Colour, moments and history length are
-    resampled with the same weights. Non-finite motion is a disocclusion.
+    resampled with the same weights; a history length within 1e-3 of a whole number of
+    frames is that number. Non-finite motion is a disocclusion.
     """
     z = geom.depth
     height, width = z.shape
@@ -408,6 +410,9 @@ def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray, prev: His
                 illumination[:, :, y, x] += w * prev.illumination[:, :, ty, tx]
                 moments[:, :, y, x] += w * prev.moments[:, :, ty, tx]
                 history_length[y, x] += w * prev.history_length[ty, tx]
+    whole = np.floor(history_length + 0.5)
+    history_length = np.where(np.abs(history_length - whole) < WHOLE_SNAP, whole,
+                              history_length)
     return Reprojected(illumination, moments, history_length, path)
 
 
