@@ -52,8 +52,13 @@ def _wall_albedo(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def scene_frame(t: int, *, seed: int = 0, split: bool = True, noise: bool = True,
-                width: int = WIDTH, height: int = HEIGHT) -> Frame:
-    """Frame ``t`` (0, 1, ...) of the scene. ``noise=False`` gives the noise-free frame."""
+                width: int = WIDTH, height: int = HEIGHT, wall_speed: float = 0.5,
+                object_velocity: tuple[float, float] = (2.5, 1.0)) -> Frame:
+    """Frame ``t`` (0, 1, ...) of the scene. ``noise=False`` gives the noise-free frame.
+
+    ``wall_speed`` (px per frame, rightwards) and ``object_velocity`` change the motion;
+    other than the defaults they give inexact bilinear weights (see the module docstring).
+    """
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
     cx, cy = xs + 0.5, ys + 0.5  # pixel centres
     depth = np.zeros((height, width))
@@ -77,11 +82,11 @@ def scene_frame(t: int, *, seed: int = 0, split: bool = True, noise: bool = True
         indirect[:, mask] = light_indirect[mask]
         emission[:, mask] = 0.0
 
-    # Wall: world coordinate u = cx - 0.5 t (panning right by half a pixel per frame).
-    u = cx - 0.5 * t
+    # Wall: world coordinate u = cx - wall_speed t (panning right).
+    u = cx - wall_speed * t
     wall = cy >= 2.0
     wall_depth = 6.0 + 0.04 * u + 0.03 * cy
-    paint(wall, wall_depth, WALL_NORMAL, 1, (-0.5, 0.0), _wall_albedo(u, cy),
+    paint(wall, wall_depth, WALL_NORMAL, 1, (-wall_speed, 0.0), _wall_albedo(u, cy),
           1.2 + 0.6 * np.sin(0.35 * u + 0.25 * cy), 0.35 + 0.1 * np.cos(0.2 * u))
     black[wall] = np.all(albedo[:, wall] == 0.0, axis=0)
 
@@ -93,8 +98,9 @@ def scene_frame(t: int, *, seed: int = 0, split: bool = True, noise: bool = True
           np.full((height, width), 1.0), np.full((height, width), 0.5))
     black[sticker] = False
 
-    # Object: own coordinates (a, b) = (cx - 2.5 t, cy - t), in front of everything.
-    a, b = cx - 2.5 * t, cy - t
+    # Object: own coordinates (a, b) = (cx - vx t, cy - vy t), in front of everything.
+    vx, vy = object_velocity
+    a, b = cx - vx * t, cy - vy * t
     body = (a >= 2.0) & (a < 9.0) & (b >= 3.0) & (b < 9.0)
     object_depth = np.where(a < 5.5, 3.0, 3.5) + 0.02 * b  # a depth step inside one mesh
     grazing = a >= 3.5  # a crease across the direction of motion, like the depth step
@@ -102,7 +108,7 @@ def scene_frame(t: int, *, seed: int = 0, split: bool = True, noise: bool = True
                              np.array([0.0, 0.0, 1.0])[:, None, None])
     stripes = 0.75 + 0.25 * np.sin(1.3 * a)
     object_albedo = np.array([0.7, 0.5, 0.3])[:, None, None] * stripes[None]
-    paint(body, object_depth, object_normal, 2, (-2.5, -1.0), object_albedo,
+    paint(body, object_depth, object_normal, 2, (-vx, -vy), object_albedo,
           np.where(grazing, 0.8, 2.0), np.full((height, width), 0.3))
     black[body] = False
     lamp = body & (a >= 3.0) & (a < 5.0) & (b >= 4.0) & (b < 6.0)

@@ -331,6 +331,29 @@ def test_reprojection_fallback_and_rejection_cases() -> None:
     np.testing.assert_allclose(out[2][5, 0], history["length"][5, 0], rtol=1e-6)
 
 
+def test_resampled_history_length_keeps_whole_counts() -> None:
+    """A footprint of equal history lengths resamples to exactly that length at any
+    sub-pixel position. (Float32 renormalised weights used to give 2.9999998 for 3 at about
+    9 % of positions, so a pixel with four frames of history fell below the variance
+    threshold of 4 and got the spatial estimate.) Mixed lengths stay fractional."""
+    height, width = 24, 32
+    rng = np.random.default_rng(12)
+    prev = _flat(width, height)
+    motion = rng.uniform(-0.99, 0.99, (2, height, width)).astype(F32)
+    cur = _flat(width, height, motion=motion)
+    history = _history_for(prev, seed=2)
+    history["length"][:] = 3.0
+    history["length"][:, width // 2:] = 2.0
+    out, want = _run_reproject(prev, cur, history)
+    _assert_reprojection_matches(out, want)
+    length = out[2]
+    inside = (slice(2, -2), slice(2, width // 2 - 2))
+    assert np.all(length[inside] == 3.0)
+    assert np.all(length[inside] + 1.0 >= 4.0)  # the next frame's h reaches the threshold
+    mixed = length[2:-2, width // 2 - 1:width // 2 + 1]
+    assert np.any((mixed > 2.0) & (mixed < 3.0))
+
+
 # --------------------------------------------------------------------------- 2 accumulation
 @pytest.mark.parametrize(("alpha", "moments_alpha", "cap"), [(0.2, 0.2, 32.0), (0.05, 0.2, 8.0)])
 def test_accumulation_matches_reference(alpha: float, moments_alpha: float, cap: float) -> None:
