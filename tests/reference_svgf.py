@@ -62,7 +62,7 @@ G3 = np.array([0.25, 0.5, 0.25])  # 1-D factor of the 3x3 Gaussian that prefilte
 DEPTH_EPSILON = 1e-3  # w_z's depth-relative epsilon: 1e-3 z(p) (README, edges.py)
 VARIANCE_EPSILON = 1e-10  # inside the sqrt of w_l's scale (Falcor's hard-coded 1e-10)
 NORMAL_SLACK = 0.01  # reprojection normal test: tolerance * (fwidth_n + 0.01)
-MIN_BILINEAR_WEIGHT = 0.01  # bilinear taps whose renormalised sum is below this: rejected
+MIN_BILINEAR_WEIGHT = 0.01  # passing bilinear weights summing below this are rejected
 WHOLE_SNAP = 1e-3  # a resampled history length this close to a whole count is that count
 
 
