@@ -10,7 +10,9 @@ Two kernels, so each step can be tested alone:
   renormalised over the taps that pass and the pixel is rejected when their sum is < 0.01.
   Failing that, a plain average over the passing taps of the 3x3 around the rounded position;
   failing that, a disocclusion (history length 0). The history length of the taps is combined
-  with the *same* weights as the colour (never ``max``, which ghosts at disocclusions).
+  with the *same* weights as the colour (never ``max``, which ghosts at disocclusions); a
+  result within 1e-3 of a whole number of frames is that number (float rounding of the
+  weights must not move a count across the variance threshold).
 * :func:`accumulate` blends: ``h = min(cap, h_prev + 1)`` on success else 1,
   ``c = lerp(c_hist, c, max(alpha, 1/h))`` and the luminance moments
   ``(l, l^2)`` likewise with ``max(moments_alpha, 1/h)`` (paper equation 6).
@@ -35,6 +37,18 @@ _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _NORMAL_SLACK = F32(0.01)
 _MIN_BILINEAR_WEIGHT = F32(0.01)
+# History lengths are frame counts; resampling makes them fractional only where histories of
+# different lengths mix. Float32 rounding of the renormalised weights leaves a footprint of
+# equal counts up to a few ulps below them (3 -> 2.9999998 for ~9 % of sub-pixel positions),
+# which moved such pixels below the variance threshold (h < 4) on their fourth frame.
+_WHOLE_SNAP = F32(1e-3)
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
+def _whole_if_close(h: np.float32) -> np.float32:
+    """``h`` rounded to the nearest whole number when it lies within 1e-3 of it."""
+    whole = np.floor(h + F32(0.5))
+    return whole if abs(h - whole) < _WHOLE_SNAP else h
 
 
 @njit(
@@ -206,7 +220,7 @@ def _reproject_rows(
                 xb = U(min(max(x0 + 1, 0), width - 1))
                 ya = U(min(max(y0, 0), height - 1))
                 yb = U(min(max(y0 + 1, 0), height - 1))
-                out_history_length[uy, ux] = (
+                out_history_length[uy, ux] = _whole_if_close(
                     w00 * prev_history_length[ya, xa]
                     + w10 * prev_history_length[ya, xb]
                     + w01 * prev_history_length[yb, xa]
@@ -259,7 +273,7 @@ def _reproject_rows(
                 out_history_length[uy, ux] = _ZERO
                 continue
             inv = _ONE / F32(count)
-            out_history_length[uy, ux] = h_sum * inv
+            out_history_length[uy, ux] = _whole_if_close(h_sum * inv)
             for s in range(num_signals):
                 for c in range(3):
                     out_illumination[s, c, uy, ux] *= inv
