@@ -509,6 +509,11 @@ def run_sequence(
             stats.compute_seconds += compute_seconds
             stats.frames_processed += 1
             stats.last_frame = task.frame
+            # The filter has what it keeps: let this frame's planes go now rather than
+            # while the next frame is read (memory holds fewer frames at once).
+            frame = None
+            with contextlib.suppress(AttributeError):
+                result.frame = None
             for message in _denoiser_warnings(denoised):
                 progress.warning(f"{task.input}: {message}")
 

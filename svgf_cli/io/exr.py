@@ -499,6 +499,18 @@ class _Planes:
             stacked[index] = self.located[name].channels[name].pixels
         return stacked
 
+    def share(self, names: tuple[str, ...], stacked: np.ndarray) -> None:
+        """The source's float32 channels ``names`` become views of ``stacked`` (which holds
+        the same values), so a frame's planes are not held twice while it is written.
+
+        The frame's planes are then also the bytes passed through to the output: consumers
+        must not modify a Frame in place (the Denoiser copies what it keeps).
+        """
+        for index, name in enumerate(names):
+            channel = self.located[name].channels[name]
+            if channel.pixels is not None and channel.pixels.dtype == np.float32:
+                channel.pixels = stacked[index]
+
 
 def _read_channels(
     info: ExrInfo, names: Iterable[str], also_in_window: Iterable[str] = ()
@@ -553,22 +565,26 @@ def _read_channels(
 
 def _scrub(
     role: str, data: np.ndarray, path: Path, warnings: list[str], clamp_negative: bool
-) -> None:
-    """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem."""
+) -> int:
+    """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem.
+    Returns how many values were changed."""
     bad = ~np.isfinite(data)
     count = int(np.count_nonzero(bad))
     if count:
         data[bad] = 0.0
         warnings.append(f"{path}: {count} NaN/Inf values in {role} scrubbed to 0")
+    changed = count
     if clamp_negative:
         negative = data < 0
         count = int(np.count_nonzero(negative))
         if count:
             data[negative] = 0.0
             warnings.append(f"{path}: {count} negative values in {role} clamped to 0")
+        changed += count
+    return changed
 
 
-def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> None:
+def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> int:
     """In place: depth that marks background becomes 0 (Frame convention).
 
     Background conventions are silent: +-Inf, <= 0, or >= FAR_DEPTH (Cycles writes 1e10).
@@ -579,7 +595,10 @@ def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> None:
     if count:
         warnings.append(f"{path}: {count} NaN values in depth treated as background")
     with np.errstate(invalid="ignore"):
-        depth[~((depth > 0) & (depth < FAR_DEPTH))] = 0.0  # NaN compares False: included
+        background = ~((depth > 0) & (depth < FAR_DEPTH))  # NaN compares False: included
+    changed = int(np.count_nonzero(background & (depth != 0)))
+    depth[background] = 0.0
+    return changed
 
 
 def read_frame(
@@ -614,30 +633,36 @@ def read_frame(
     colour_channels = resolve_output_colour(mapping, info.channels)
     planes = _read_channels(info, names, also_in_window=colour_channels or ())
 
+    # Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
+    # the source reference the copy instead of holding the same values twice.
     warnings: list[str] = []
     values: dict[str, np.ndarray] = {}
     for role in roles:
         channel_names = resolved[role]
         assert channel_names is not None
-        values[role] = planes.gather(channel_names)
+        data = values[role] = planes.gather(channel_names)
+        if role in (*_RADIANCE_ROLES, "albedo"):
+            changed = _scrub(role, data, path, warnings, clamp_negative=True)
+        elif role == "depth":
+            changed = _clean_depth(data[0], path, warnings)
+        elif role == "normal":
+            _scrub("normal", data, path, warnings, clamp_negative=False)
+            length = np.sqrt(np.einsum("chw,chw->hw", data, data))
+            nonzero = length > 0
+            data[:, nonzero] /= length[nonzero]
+            changed = 1  # renormalised: not the stored bits
+        elif role in ("motion", "alpha"):
+            changed = _scrub(role, data, path, warnings, clamp_negative=False)
+        else:  # id: read as is (the mesh id is derived from it below)
+            changed = 0
+        if not changed:
+            planes.share(channel_names, data)
+    # The output replaces the colour channels: the writer never needs their input values.
+    for name in colour_channels or ():
+        planes.source.release(name)
     height, width = values["depth"].shape[1:]
-
-    for role in (*_RADIANCE_ROLES, "albedo"):
-        if role in values:
-            _scrub(role, values[role], path, warnings, clamp_negative=True)
-
     depth = values["depth"][0]
-    _clean_depth(depth, path, warnings)
-
-    normal = values["normal"]
-    _scrub("normal", normal, path, warnings, clamp_negative=False)
-    length = np.sqrt(np.einsum("chw,chw->hw", normal, normal))
-    nonzero = length > 0
-    normal[:, nonzero] /= length[nonzero]
-
-    motion = values["motion"]
-    _scrub("motion", motion, path, warnings, clamp_negative=False)
-    motion = to_backward_pixels(motion, convention)
+    motion = to_backward_pixels(values["motion"], convention)
 
     if "id" in values:
         raw_id = values["id"][0]
@@ -650,14 +675,11 @@ def read_frame(
     else:
         mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
 
-    alpha = None
-    if "alpha" in values:
-        alpha = np.ascontiguousarray(values["alpha"][0])
-        _scrub("alpha", alpha, path, warnings, clamp_negative=False)
+    alpha = values["alpha"][0] if "alpha" in values else None
 
     frame = Frame(
         albedo=values["albedo"],
-        normal=normal,
+        normal=values["normal"],
         depth=np.ascontiguousarray(depth),
         motion=motion,
         mesh_id=mesh_id,

@@ -229,6 +229,10 @@ def _output_part(
             "through; --colour-only writes the colour alone",
             str(source.path),
         )
+    released = [n for n, c in kept.items() if c.pixels is None]
+    if released:
+        raise ExrWriteError(f"{label}: no pixels for channel(s) {', '.join(released)}",
+                            str(source.path))
     names = [*kept, *replace]
     codec = part_compression(codec_name(part.header), names, explicit_codec)
     _apply_codec(header, codec)

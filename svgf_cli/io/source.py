@@ -23,22 +23,27 @@ import OpenEXR
 
 from svgf_cli.errors import InputError
 
+PIXEL_TYPE_NAMES = {"f2": "half", "f4": "float", "u4": "uint"}
+
 
 @dataclass
 class SourceChannel:
-    """One channel's pixels in their stored type, and its sampling."""
+    """One channel's pixels in their stored type, and its sampling.
 
-    pixels: np.ndarray
+    ``pixels`` is None once released (`SourceFile.release`): a channel the writer replaces
+    (the colour) need not be held until the frame is written.
+    """
+
+    pixels: np.ndarray | None
     x_sampling: int = 1
     y_sampling: int = 1
     p_linear: bool = False
+    type_name: str = ""
 
-    @property
-    def type_name(self) -> str:
-        return PIXEL_TYPE_NAMES.get(self.pixels.dtype.str[1:], str(self.pixels.dtype))
-
-
-PIXEL_TYPE_NAMES = {"f2": "half", "f4": "float", "u4": "uint"}
+    def __post_init__(self) -> None:
+        if not self.type_name and self.pixels is not None:
+            dtype = self.pixels.dtype.str[1:]
+            self.type_name = PIXEL_TYPE_NAMES.get(dtype, str(self.pixels.dtype))
 
 
 @dataclass
@@ -80,11 +85,11 @@ class SourceFile:
             if channel.x_sampling != 1 or channel.y_sampling != 1
         ]
 
-    def drop_channels_except(self, part_index: int, keep: set[str]) -> None:
-        """Keep only part ``part_index`` and, in it, only ``keep`` (frees the rest)."""
-        part = self.parts[part_index]
-        part.channels = {n: c for n, c in part.channels.items() if n in keep}
-        self.parts = [part]
+    def release(self, channel: str) -> None:
+        """Drop the pixels of ``channel`` (its name, part and type stay known)."""
+        part = self.part_holding(channel)
+        if part is not None:
+            part.channels[channel].pixels = None
 
 
 # -- capturing the bindings' printed warnings ------------------------------------------------
