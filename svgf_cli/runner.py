@@ -169,10 +169,10 @@ def _default_denoiser(params: SVGFParams, debug_layers: bool) -> DenoiserLike:
     return Denoiser(params, debug_layers=debug_layers)
 
 
-def _default_reader(path: Path, mapping: Any) -> Any:
+def _default_reader(path: Path, mapping: Any, *, passthrough: bool = True) -> Any:
     from svgf_cli.io.exr import read_frame
 
-    return read_frame(path, mapping, mapping.motion_convention)
+    return read_frame(path, mapping, mapping.motion_convention, passthrough=passthrough)
 
 
 # -- history files ------------------------------------------------------------------------
@@ -412,7 +412,10 @@ def run_sequence(
     def timed_read(task: FrameTask) -> tuple[Any, float]:
         t0 = time.perf_counter()
         try:
-            result = read(task.input, config.mapping)
+            if read is _default_reader:
+                result = read(task.input, config.mapping, passthrough=not config.colour_only)
+            else:
+                result = read(task.input, config.mapping)
         except SvgfError:
             raise
         except FileNotFoundError:

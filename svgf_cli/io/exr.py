@@ -46,6 +46,17 @@ def temporary_path(path: Path) -> Path:
     return atomic.temporary_path(path)
 
 
+def check_output_path(path: Path) -> None:
+    """Refuse, with the real reason, an output path that cannot be written as a file."""
+    if path.is_dir():
+        raise ExrWriteError("cannot write: is a directory", str(path))
+    parent = path.parent
+    if not parent.exists():
+        raise ExrWriteError(f"cannot write: folder {parent} does not exist", str(path))
+    if not parent.is_dir():
+        raise ExrWriteError(f"cannot write: {parent} is not a directory", str(path))
+
+
 def output_error(exc: OSError, path: Path) -> ExrWriteError:
     """An OSError while writing ``path`` as a one-line ExrWriteError naming the real cause."""
     reason = exc.strerror or str(exc)
@@ -109,8 +120,7 @@ def write_exr(
     for key, value in (attributes or {}).items():
         _set_attribute(spec, key, value)
 
-    if path.is_dir():
-        raise ExrWriteError("cannot write: is a directory", str(path))
+    check_output_path(path)
 
     def write(tmp: Path) -> None:
         out = oiio.ImageOutput.create(str(tmp))
@@ -601,10 +611,37 @@ def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> int:
     return changed
 
 
+def _keep_colour_part_only(
+    source: SourceFile, colour: tuple[str, str, str] | None, resolved: ResolvedLayers
+) -> None:
+    """--colour-only: free every channel the writer will not write (all but the colour
+    layer's alpha, in the colour's part) as soon as the frame is read."""
+    anchor = colour[0] if colour else (resolved[resolved.signal_roles[0]] or ("",))[0]
+    part = source.part_holding(anchor) or source.parts[0]
+    layer, dot, _ = anchor.rpartition(".")
+    keep = {f"{layer}{dot}A", *(colour or ())}
+    part.channels = {n: c for n, c in part.channels.items() if n in keep}
+    source.parts = [p if p is part else SourcePart(p.index, p.name, p.header) for p in source.parts]
+
+
+def _renormalise(normal: np.ndarray) -> int:
+    """In place: non-zero normals to unit length. Normals already unit to 1e-5 (what
+    renderers store) are left as stored, so their bits can be shared with the output.
+    Returns how many normals were changed."""
+    length = np.sqrt(np.einsum("chw,chw->hw", normal, normal))
+    off = (length > 0) & (np.abs(length - 1.0) > 1e-5)
+    count = int(np.count_nonzero(off))
+    if count:
+        normal[:, off] /= length[off]
+    return count
+
+
 def read_frame(
     path: str | os.PathLike[str],
     mapping: LayerMapping,
     motion_convention: str | None = None,
+    *,
+    passthrough: bool = True,
 ) -> ReadResult:
     """Read the channels ``mapping`` resolves to and return them as a clean `Frame`.
 
@@ -614,8 +651,9 @@ def read_frame(
     renormalised; NaN/Inf in radiance, albedo, emission, motion -> 0 with a counted
     warning; negative radiance/albedo -> 0 with a counted warning; mesh id rounded to int32,
     NaN -> -1, absent -> -1 on background and 0 elsewhere. The whole file is decoded and kept
-    in ``source`` (unchanged) for the writer. Raises InputError (one line, naming the file)
-    for anything unreadable, for deep parts and for multi-view files.
+    in ``source`` (unchanged) for the writer; ``passthrough`` False keeps only what a
+    ``--colour-only`` output needs. Raises InputError (one line, naming the file) for
+    anything unreadable, for deep parts and for multi-view files.
     """
     path = Path(path)
     convention = motion_convention or mapping.motion_convention
@@ -646,11 +684,8 @@ def read_frame(
         elif role == "depth":
             changed = _clean_depth(data[0], path, warnings)
         elif role == "normal":
-            _scrub("normal", data, path, warnings, clamp_negative=False)
-            length = np.sqrt(np.einsum("chw,chw->hw", data, data))
-            nonzero = length > 0
-            data[:, nonzero] /= length[nonzero]
-            changed = 1  # renormalised: not the stored bits
+            changed = _scrub("normal", data, path, warnings, clamp_negative=False)
+            changed += _renormalise(data)
         elif role in ("motion", "alpha"):
             changed = _scrub(role, data, path, warnings, clamp_negative=False)
         else:  # id: read as is (the mesh id is derived from it below)
@@ -660,6 +695,8 @@ def read_frame(
     # The output replaces the colour channels: the writer never needs their input values.
     for name in colour_channels or ():
         planes.source.release(name)
+    if not passthrough:
+        _keep_colour_part_only(planes.source, colour_channels, resolved)
     height, width = values["depth"].shape[1:]
     depth = values["depth"][0]
     motion = to_backward_pixels(values["motion"], convention)

@@ -389,6 +389,8 @@ def resolve_layers(
 def to_backward_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
     """Convert a ``(2, H, W)`` motion field to the canonical backward, pixel, y-down form.
 
+    Already canonical float32 input is returned as is (not copied).
+
     * ``backward-pixels``: already canonical (previous position = current + v);
     * ``forward-pixels``: v points from the previous to the current position
       (previous = current - v), so backward = -v;
@@ -399,7 +401,7 @@ def to_backward_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
     if xy.ndim != 3 or xy.shape[0] != 2:
         raise ValueError(f"motion must be (2, H, W), got {xy.shape}")
     if convention == "backward-pixels":
-        return np.ascontiguousarray(xy, dtype=np.float32).copy()
+        return np.ascontiguousarray(xy, dtype=np.float32)
     if convention == "forward-pixels":
         return np.ascontiguousarray(-xy, dtype=np.float32)
     if convention == "cycles":

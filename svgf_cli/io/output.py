@@ -28,6 +28,7 @@ from svgf_cli.io.exr import (
     LOSSY_COMPRESSIONS,
     ExrWriteError,
     check_compression,
+    check_output_path,
     compression_name,
     is_colour_channel,
     output_error,
@@ -181,8 +182,7 @@ def write_output(
                 notes,
             )
         )
-    if path.is_dir():
-        raise ExrWriteError("cannot write: is a directory", str(path))
+    check_output_path(path)
     exr = OpenEXR.File(parts, num_threads=threads)
 
     def write(tmp: Path) -> None:
