@@ -14,7 +14,7 @@ import click
 
 from svgf_cli import __version__
 from svgf_cli.commands.options import describe_params, params_from_options, svgf_param_options
-from svgf_cli.errors import InputError, UsageError
+from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.farm.progress import PROGRESS_MODES, Progress
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS
 
@@ -262,14 +262,20 @@ def command(**options: Any) -> None:
         for line in job.describe():
             click.echo(line)
         return
-    if not job.chunks:
-        progress.finish(f"Nothing to do: all {selected} outputs exist")
-        return
-    for path in {p.parent for p in job.outputs.values()}:
-        path.mkdir(parents=True, exist_ok=True)
+    # Temporaries of these outputs left by dead runs (a SIGKILL inside a write); never
+    # a live writer's, here or on another host (see svgf_cli.io.atomic).
     removed = remove_stale_temporaries(job.outputs.values())
     if removed:
         progress.info(f"Removed {len(removed)} temporary file(s) left by dead runs")
+    if not job.chunks:
+        progress.finish(f"Nothing to do: all {selected} outputs exist")
+        return
+    for path in sorted({p.parent for p in job.outputs.values()}):
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            reason = "a file is in the way" if isinstance(exc, FileExistsError) else exc.strerror
+            raise SvgfError(f"cannot create the output folder: {reason}", str(path)) from None
     for line in job.describe():
         progress.detail(line)
 
@@ -325,7 +331,6 @@ def _check_inputs(job: Any, mapping: Any, progress: Progress) -> None:
     """--check-only: read every input frame the job would read, in full, as the run would
     (header, channels, resolution, every pixel chunk). Each bad frame is one ``ERROR:``
     line; any bad frame makes the command exit 3 after all were checked."""
-    from svgf_cli.errors import SvgfError
     from svgf_cli.io.exr import read_frame
 
     frames = sorted({(t.frame, t.input) for tasks in job.chunk_tasks for t in tasks})

@@ -344,6 +344,16 @@ def _one_line(message: str) -> str:
     return one_line(message)
 
 
+def _oiio_error(source: Any = None) -> str:
+    """OpenImageIO's last error as one line; its bindings raise on undecodable bytes (a
+    corrupt header quoted in the message), which must not hide the error itself."""
+    try:
+        text = (source or oiio).geterror()
+    except UnicodeDecodeError:
+        return "corrupt header (its text is not UTF-8)"
+    return _one_line(text)
+
+
 def _open(path: Path) -> oiio.ImageInput:
     """Open ``path`` for reading or raise InputError naming the file and the reason."""
     if not path.exists():
@@ -359,7 +369,7 @@ def _open(path: Path) -> oiio.ImageInput:
         raise InputError("not an OpenEXR file (bad magic number)", str(path))
     image = oiio.ImageInput.open(str(path))
     if image is None:
-        raise InputError(f"cannot open EXR: {_one_line(oiio.geterror())}", str(path))
+        raise InputError(f"cannot open EXR: {_oiio_error()}", str(path))
     return image
 
 
@@ -442,7 +452,7 @@ def _read_header(image: oiio.ImageInput, path: Path) -> ExrInfo:
         )
         index += 1
     if not specs:
-        raise InputError(f"no readable part: {_one_line(image.geterror())}", str(path))
+        raise InputError(f"no readable part: {_oiio_error(image)}", str(path))
     first_spec = specs[0]
     chromaticities = first_spec.getattribute("chromaticities")
     channels = [name for part in parts for name in part.channels]

@@ -12,6 +12,7 @@ import contextlib
 import os
 import re
 import sys
+import tempfile
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -140,6 +141,36 @@ def capture_library_output() -> Iterator[list[str]]:
                 sys.stdout = router.target
 
 
+_fd_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def capture_c_stderr() -> Iterator[list[str]]:
+    """Collect what C code writes to file descriptor 2 meanwhile (OpenEXR's core library
+    prints its own error lines there), then hand back every other line written in the
+    window (another thread's warning) to the real stderr, in order."""
+    captured: list[str] = []
+    with _fd_lock, tempfile.TemporaryFile() as sink:
+        with contextlib.suppress(Exception):
+            sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield captured
+        finally:
+            with contextlib.suppress(Exception):
+                sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read().decode("utf-8", "replace")
+            for line in text.splitlines(keepends=True):
+                if "(EXR_ERR_" in line:
+                    captured.append(line.strip())
+                else:
+                    os.write(2, line.encode("utf-8", "replace"))
+
+
 # -- decoding -------------------------------------------------------------------------------
 
 
@@ -174,13 +205,15 @@ def decode_source(
     """
     path = Path(path)
     try:
-        with capture_library_output() as printed:
+        with capture_c_stderr() as library_lines, capture_library_output() as printed:
             exr = OpenEXR.File(str(path), separate_channels=True, num_threads=threads)
         with exr:
             if expected_parts is None:
                 expected_parts = _part_count(path)
-            if printed or len(exr.parts) != expected_parts:
+            if printed or library_lines or len(exr.parts) != expected_parts:
                 reason = _reason(printed) if printed else "a part could not be decoded"
+                if library_lines:  # the core library's own, more precise words
+                    reason = one_line(library_lines[0].split(": ", 1)[-1])
                 raise InputError(f"cannot read pixels: {reason}", str(path))
             parts = []
             for index, part in enumerate(exr.parts):
