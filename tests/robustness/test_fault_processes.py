@@ -45,9 +45,12 @@ def test_sigkill_then_resume_is_identical_and_cleans_dead_temporaries(
     alive = out / f".o.0002.exr.{here}.{os.getpid()}.0badf00d.tmp.exr"
     alive.write_bytes(b"being written")
 
+    # The kill may also have landed inside a write, leaving the killed run's own temporary.
+    stale = atomic.stale_temporaries([out / f"o.{f:04d}.exr" for f in FRAMES])
+    assert dead in stale and alive not in stale
     code, stdout, err = run_cli([*args, "--skip-existing"], capsys)
     assert code == 0, err
-    assert "Removed 1 temporary file(s) left by dead runs" in stdout
+    assert f"Removed {len(stale)} temporary file(s) left by dead runs" in stdout
     assert not dead.exists() and alive.exists()
     alive.unlink()
     assert {p.name: p.read_bytes() for p in outputs(out, "o")} == clean_outputs

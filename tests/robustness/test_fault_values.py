@@ -14,11 +14,11 @@ from test_cli_support import frame_channels
 
 from svgf_cli.io.exr import write_exr
 
-FRAMES = range(1, 7)
+FRAMES = range(1, 5)
 
 
 def write_frames(folder: Path, edit, *, half_colour: bool = False) -> Path:
-    """Six frames of the shared scene; ``edit(frame, channels)`` plants the fault."""
+    """Four frames of the shared scene; ``edit(frame, channels)`` plants the fault."""
     folder.mkdir(parents=True, exist_ok=True)
     for frame in FRAMES:
         channels = frame_channels(frame, 16, 12)
@@ -110,7 +110,7 @@ def test_one_extreme_frame_does_not_blacken_the_shot(
     code, _, err = denoise([seq / "in.####.exr", "-o", tmp_path / "o.####.exr", "-q"], capsys)
     assert code == 0, err
     code, _, _ = denoise([clean / "in.####.exr", "-o", tmp_path / "c.####.exr", "-q"], capsys)
-    for frame in (4, 5, 6):
+    for frame in (3, 4):
         hit, reference = colour(tmp_path / f"o.{frame:04d}.exr"), colour(
             tmp_path / f"c.{frame:04d}.exr"
         )
