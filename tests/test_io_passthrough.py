@@ -326,3 +326,18 @@ def test_input_without_colour_layer_gets_rgb_in_the_signals_part(
     check_all(folder, out, added={"light": RGB})
     (_, _, depth_part), (_, _, light_part) = read_parts(out / "o.0001.exr")
     assert light_part["R"].dtype == np.float16 and "R" not in depth_part
+
+
+@pytest.mark.parametrize("codec", ["ZSTD_COMPRESSION", "HTJ2K256_COMPRESSION", "RLE_COMPRESSION"])
+def test_codecs_without_an_option_name_are_kept(
+    codec: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    header = {"compression": getattr(OpenEXR, codec)}
+    try:
+        folder = sequence(tmp_path, lambda f: [PartSpec(gbuffer(f), header=header)])
+    except Exception as exc:  # an OpenEXR build without this codec
+        pytest.skip(f"{codec} not available: {exc}")
+    out = denoise(folder, capsys)
+    check_all(folder, out, changed={"": RGB})
+    (_, header_out, _), = read_parts(out / "o.0001.exr")
+    assert header_out["compression"] == getattr(OpenEXR, codec)

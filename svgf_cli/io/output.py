@@ -234,8 +234,11 @@ def _output_part(
         raise ExrWriteError(f"{label}: no pixels for channel(s) {', '.join(released)}",
                             str(source.path))
     names = [*kept, *replace]
-    codec = part_compression(codec_name(part.header), names, explicit_codec)
-    _apply_codec(header, codec)
+    own = codec_name(part.header)
+    codec = part_compression(own, names, explicit_codec)
+    if codec != own or explicit_codec:
+        _apply_codec(header, codec)
+    # else: the part's own codec value as read (also codecs we have no name for: HTJ2K...)
     _tiles_one_level(header, notes, label)
     header.update(attributes)
     if software:

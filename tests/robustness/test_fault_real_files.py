@@ -52,6 +52,18 @@ def test_real_structures_are_written_back_as_read(name: str, tmp_path: Path) -> 
     assert_passthrough(path, out, changed={part.name: {"R", "G", "B"}})
 
 
+def test_real_mipmapped_tiles_keep_level_zero(tmp_path: Path) -> None:
+    """Mip-mapped tiled input (not a render output): level 0 is written, one level, noted."""
+    path = ROOT / "MultiResolution/ColorCodedLevels.exr"
+    source = decode_source(path)
+    part = source.parts[0]
+    colour = {c: part.channels[c].pixels.copy() for c in "RGB"}
+    notes = write_output(tmp_path / "o.exr", source, part_index=0, channels=colour,
+                         attributes={})
+    assert notes == ["part 0: mip/rip-map levels are not written (level 0 only)"]
+    assert_passthrough(path, tmp_path / "o.exr", header_changes=("tiles",))
+
+
 def test_real_wide_gamut_weights() -> None:
     weights = read_info(ROOT / "TestImages/WideColorGamut.exr").luminance_weights
     assert "from chromaticities" in weights.source
