@@ -533,6 +533,8 @@ def run_sequence(
                 # One write in flight: wait for the previous one before queueing this one.
                 finish_pending()
                 pending = (task, writer.submit(timed_write, task, output), frame_started)
+                # Only the writer holds this frame now: memory is freed when it is done.
+                output = denoised = result = None
                 frame_started = time.perf_counter()
             progress.detail(
                 f"frame {task.frame}: read {read_seconds:.3f} s, compute {compute_seconds:.3f} s"

@@ -681,6 +681,10 @@ def read_frame(
     colour_channels = resolve_output_colour(mapping, info.channels)
     planes = _read_channels(info, names, also_in_window=colour_channels or ())
 
+    # The output replaces the colour channels: the writer never needs their input values.
+    colour_is_read = set(colour_channels or ()) & set(names)
+    for name in (colour_channels or ()) if not colour_is_read else ():
+        planes.source.release(name)
     # Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
     # the source reference the copy instead of holding the same values twice.
     warnings: list[str] = []
