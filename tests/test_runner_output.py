@@ -14,12 +14,11 @@ from types import SimpleNamespace
 import numpy as np
 from exr_fixtures import PartSpec, gbuffer, write_parts
 
-from svgf_cli.farm.progress import Progress
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame
 from svgf_cli.io.exr import read_frame
 from svgf_cli.io.layers import build_mapping
-from svgf_cli.runner import FrameTask, RunConfig, build_output, run_sequence
+from svgf_cli.runner import FrameTask, Progress, RunConfig, build_output, run_sequence
 
 
 class CountingDenoiser:
