@@ -153,7 +153,11 @@ def capture_c_stderr() -> Iterator[list[str]]:
     with _fd_lock, tempfile.TemporaryFile() as sink:
         with contextlib.suppress(Exception):
             sys.stderr.flush()
-        saved = os.dup(2)
+        try:
+            saved = os.dup(2)
+        except OSError:  # no stderr at all (a daemon): nothing to keep clean
+            yield captured
+            return
         os.dup2(sink.fileno(), 2)
         try:
             yield captured
