@@ -5,7 +5,6 @@ Wiring only: options -> EvaluationRequest -> run_evaluation -> table / JSON / pl
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -33,14 +32,13 @@ def _frames(spec: str | None, option: str) -> list[int] | None:
 
 
 def _write_text(path: str, text: str) -> None:
-    target = Path(path)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    """Atomically (hidden unique temporary, then rename; see svgf_cli.io.atomic)."""
+    from svgf_cli.io.atomic import write_atomically
+
     try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, target)
+        write_atomically(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from exc
+        raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from None
 
 
 @click.command(
