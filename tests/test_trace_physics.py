@@ -40,7 +40,7 @@ def per_sample_radiance(scene_path: Path, anim: Animation, size: tuple[int, int]
     geo = prepare_frame(scene, anim, 0, size[0], size[1])
     try:
         hits = trace_primary(geo)
-        direct, indirect = trace_batch(geo, hits, 0, spp, max_depth, frame_key(seed, 0, 0))
+        direct, indirect, _ = trace_batch(geo, hits, 0, spp, max_depth, frame_key(seed, 0, 0))
     finally:
         geo.tracer.close()
     return direct + indirect, direct, indirect, hits
