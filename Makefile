@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 SVGF   := $(VENV)/bin/svgf
 
-.PHONY: venv demo test lint bench results clean
+.PHONY: venv demo test lint bench results clean lag-fixtures
 
 venv: $(STAMP)
 
@@ -30,6 +30,11 @@ bench: $(STAMP)
 
 results: $(STAMP)
 	$(PY) -m svgf_cli.results
+
+# Regenerates testdata/lag/ (scenes, animations, 5 x 16 frames + references; nice'd,
+# about 15 CPU-minutes). See testdata/lag/README.md.
+lag-fixtures: $(STAMP)
+	$(PY) testdata/make_lag.py --render
 
 clean:
 	rm -rf $(VENV) demo bench/out results .pytest_cache .ruff_cache

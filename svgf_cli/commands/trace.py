@@ -80,7 +80,8 @@ def resolve_threads(threads: int) -> int:
 @click.option("--compression", default="piz", show_default=True,
               type=click.Choice(["piz", "zip", "zips", "rle", "none"]),
               help="EXR compression of all written files (lossless codecs only).")
-@click.option("--reference-channels", type=click.Choice(["full", "rgb"]), default="full",
+@click.option("--reference-channels", "reference_layers", type=click.Choice(["full", "rgb"]),
+              default="full",
               show_default=True,
               help="Reference layers: R,G,B + direct.* + indirect.* (full) or R,G,B only.")
 @click.option("--reference-half", is_flag=True, help="Write references as half instead of float.")
@@ -104,7 +105,7 @@ def command(
     gradient_samples: bool,
     skip_layers: tuple[str, ...],
     compression: str,
-    reference_channels: str,
+    reference_layers: str,
     reference_half: bool,
     threads: int,
     quiet: bool,
@@ -127,6 +128,8 @@ def command(
         raise UsageError(f"--max-depth {max_depth}: must be >= 0")
     if reference is not None and reference_spp < 1:
         raise UsageError(f"--reference-spp {reference_spp}: must be at least 1")
+    if reference is None and (reference_half or reference_layers != "full"):
+        raise UsageError("--reference-half and --reference-channels need --reference")
 
     out_paths = _output_paths(output, frame_list, "--output")
     ref_paths = _output_paths(reference, frame_list, "--reference") if reference else []
@@ -197,7 +200,7 @@ def command(
                     kind="reference",
                 )
                 write_exr(ref_paths[done - 1],
-                          reference_channels(ref, rgb_only=reference_channels == "rgb"),
+                          reference_channels(ref, rgb_only=reference_layers == "rgb"),
                           attributes=ref_attrs, half=reference_half,
                           compression=compression)  # fmt: skip
             if bar is not None:
