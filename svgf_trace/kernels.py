@@ -1,4 +1,5 @@
-"""Numba kernels of the wavefront path tracer: G-buffer, shading, next-event estimation.
+"""Numba kernels of the wavefront path tracer: G-buffer, lobe colours, motion, shading with
+next-event estimation and MIS (Lambertian and glossy materials, ``bsdf``), lobe passes.
 
 Every kernel works on a batch of rays (structure of arrays) between two Embree calls. Each
 iteration touches only its own rows (and its own path's accumulator row), so the caller can

@@ -8,8 +8,9 @@ temporal filtering where lighting changes and where it does not (the control):
   1-16 and dims to 45% at frame 10 (keys 1.0 at 9, 0.45 at 10).
 * ``light_step``: static scene and camera; the light steps down to 30% at frame 6 and back
   to 100% at frame 11 (frames 6-10 are dimmed).
-* ``shadow``: static camera and light; the sphere rolls 140 mm left to right across the
-  floor in front of the tall block, its shadow moving with it.
+* ``shadow``: static camera and light; the sphere (scaled to radius 65 mm) rolls 120 mm
+  left to right across the floor in front of the tall block by frame 8.5 and back by frame
+  16 (about 16 mm, 2 pixels, per frame), its shadow moving with it.
 * ``camera``: static lighting and objects, the camera moves 200 mm right, 40 mm up and
   150 mm closer while looking at the box centre (the control sequence).
 * ``glossy``: a glossy floor (dielectric coat, roughness 0.25), a gold sphere (metal,
@@ -51,7 +52,9 @@ LIGHT_DROP = 1.0  # mm below the ceiling
 SPHERE_RADIUS = 50.0
 # In front of the tall block, left of the short one: it rolls without touching either.
 SPHERE_START = np.array([75.0, SPHERE_RADIUS, 410.0])
-SPHERE_ROLL = 140.0  # mm along +x over the sequence
+# The shadow sequence scales the sphere to radius 65 mm and rolls it 120 mm right and back.
+SHADOW_SPHERE_SCALE = 1.3
+SHADOW_ROLL = 120.0
 SPHERE_SUBDIVISIONS = 2  # icosphere: 320 triangles, smooth vertex normals
 LIGHT_SLIDE = 120.0  # the light goes from +120 to -120 mm in x
 GOLD = (0.95, 0.72, 0.35)
@@ -148,13 +151,16 @@ def light_slide() -> list[dict]:
 
 
 def sphere_roll() -> list[dict]:
-    """Rolling without slipping along +x: a turn of -distance / radius about z. Three keys
-    keep each slerp under 180 degrees."""
+    """The shadow sequence's sphere, scaled up to radius ``SHADOW_SPHERE_SCALE`` x 50 mm (and
+    lifted to keep it on the floor), rolls without slipping ``SHADOW_ROLL`` mm along +x by
+    frame 8.5 and back by frame 16: a turn of -distance / radius about z, each slerp under
+    180 degrees."""
+    radius = SPHERE_RADIUS * SHADOW_SPHERE_SCALE
+    lift = radius - SPHERE_RADIUS
     keys = []
-    for frame in (1.0, 8.5, 16.0):
-        distance = SPHERE_ROLL * (frame - 1.0) / 15.0
-        angle = -math.degrees(distance / SPHERE_RADIUS)
-        keys.append({"frame": frame, "translate": [distance, 0, 0],
+    for frame, distance in ((1.0, 0.0), (8.5, SHADOW_ROLL), (16.0, 0.0)):
+        angle = math.degrees(-distance / radius) + 0.0  # no -0.0 in the file
+        keys.append({"frame": frame, "translate": [distance, lift, 0], "scale": SHADOW_SPHERE_SCALE,
                      "rotate": {"axis": [0, 0, 1], "angle": angle}})  # fmt: skip
     return keys
 
@@ -178,7 +184,7 @@ SEQUENCES: dict[str, dict] = {
     },
     "shadow": {
         "scene": "cornell_lag.obj",
-        "comment": "Static camera and light; the sphere rolls 140 mm along +x.",
+        "comment": "Static camera and light; the sphere rolls 120 mm along +x and back.",
         "camera": camera_keys(False),
         "objects": {"sphere": sphere_roll()},
     },
