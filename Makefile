@@ -11,7 +11,7 @@ PYTHON_BLENDER ?= python3.11
 BLENDER_VENV   := .venv-blender
 BLENDER_STAMP  := $(BLENDER_VENV)/.installed
 
-.PHONY: venv demo test lint bench results clean cycles-fixtures
+.PHONY: venv demo test lint bench results clean cycles-fixtures lag-fixtures
 
 venv: $(STAMP)
 
@@ -45,6 +45,11 @@ $(BLENDER_STAMP):
 # Re-renders testdata/cycles (about 20 minutes on two cores); see testdata/cycles/README.md.
 cycles-fixtures: $(BLENDER_STAMP)
 	nice -n 10 $(BLENDER_VENV)/bin/python testdata/cycles/render.py
+
+# Regenerates testdata/lag/ (scenes, animations, 5 x 16 frames + references; nice'd,
+# about 15 CPU-minutes). See testdata/lag/README.md.
+lag-fixtures: $(STAMP)
+	$(PY) testdata/make_lag.py --render
 
 clean:
 	rm -rf $(VENV) demo bench/out results .pytest_cache .ruff_cache

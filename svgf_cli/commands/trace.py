@@ -66,6 +66,26 @@ def resolve_threads(threads: int) -> int:
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @click.option("--float", "float_radiance", is_flag=True,
               help="Write radiance layers as float instead of half.")
+@click.option("--lobes", is_flag=True,
+              help="Also write Cycles-style light passes: DiffDir/DiffInd/DiffCol, "
+                   "GlossDir/GlossInd/GlossCol.")
+@click.option("--motion-next", is_flag=True,
+              help="Also write motion_next.X/Y: forward motion to the next frame, pixels.")
+@click.option("--gradient-samples", is_flag=True,
+              help="Also write A-SVGF temporal gradient samples against the previous frame "
+                   "(gradient.*).")
+@click.option("--skip-layer", "skip_layers", multiple=True,
+              type=click.Choice(["P", "emission", "id"]),
+              help="Leave this layer out of the input frames (repeatable); none is read by "
+                   "svgf denoise.")
+@click.option("--compression", default="piz", show_default=True,
+              type=click.Choice(["piz", "zip", "zips", "rle", "none"]),
+              help="EXR compression of all written files (lossless codecs only).")
+@click.option("--reference-channels", "reference_layers", type=click.Choice(["full", "rgb"]),
+              default="full",
+              show_default=True,
+              help="Reference layers: R,G,B + direct.* + indirect.* (full) or R,G,B only.")
+@click.option("--reference-half", is_flag=True, help="Write references as half instead of float.")
 @click.option("--threads", type=click.IntRange(min=0), default=0, show_default=True,
               help="Threads (0 = all cores).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress output.")
@@ -82,6 +102,13 @@ def command(
     reference_spp: int,
     overwrite: bool,
     float_radiance: bool,
+    lobes: bool,
+    motion_next: bool,
+    gradient_samples: bool,
+    skip_layers: tuple[str, ...],
+    compression: str,
+    reference_layers: str,
+    reference_half: bool,
     threads: int,
     quiet: bool,
 ) -> None:
@@ -89,13 +116,16 @@ def command(
 
     Each frame holds R,G,B = direct + indirect, direct.*, indirect.*, emission.*, albedo.*,
     N.*, Z, P.*, motion.X/Y (backward, pixels) and id; primary rays go through pixel centres
-    so the G-buffer is noise-free.
+    so the G-buffer is noise-free. Optional: lobe passes (--lobes), motion to the next
+    frame (--motion-next), A-SVGF gradient samples (--gradient-samples). See docs/trace.md.
     """
     width, height = parse_resolution(resolution)
     try:
         frame_list = parse_frame_spec(frames)
     except ValueError as exc:
         raise UsageError(f"--frames: {exc}") from exc
+    if reference is None and (reference_half or reference_layers != "full"):
+        raise UsageError("--reference-half and --reference-channels need --reference")
 
     out_paths = _output_paths(output, frame_list, "--output")
     ref_paths = _output_paths(reference, frame_list, "--reference") if reference else []
@@ -110,7 +140,12 @@ def command(
     # Heavy imports only once the arguments are known to be good.
     from svgf_cli.io.exr import write_exr
     from svgf_trace.animation import Animation, load_animation
-    from svgf_trace.output import frame_attributes, input_channels, reference_channels
+    from svgf_trace.output import (
+        frame_attributes,
+        input_attributes,
+        input_channels,
+        reference_channels,
+    )
     from svgf_trace.render import TraceStats, render_frame
     from svgf_trace.scene import load_obj
 
@@ -127,8 +162,12 @@ def command(
         f"Tracing {scene} ({loaded.triangle_count} triangles, {len(loaded.objects)} objects) "
         f"at {width}x{height}, {spp} spp, max depth {max_depth}, seed {seed}"
         + (f", reference {reference_spp} spp" if reference else "")
+        + "".join(f", {name}" for name, on in (("lobe passes", lobes),
+                  ("motion_next", motion_next), ("gradient samples", gradient_samples)) if on)
         + f"; using {n_threads} threads on cpu"
-    )
+    )  # fmt: skip
+    extra = input_attributes(lobes=lobes, motion_next=motion_next,
+                             gradient_samples=gradient_samples)  # fmt: skip
     stats = TraceStats()
     started = time.perf_counter()
     for index, frame in enumerate(frame_list):
@@ -136,20 +175,26 @@ def command(
         result, ref = render_frame(
             loaded, anim, frame, width, height, spp, max_depth, seed,
             reference_spp=reference_spp if reference else 0,
-            threads=n_threads, stats=stats,
+            threads=n_threads, stats=stats, lobes=lobes, motion_next=motion_next,
+            gradient_samples=gradient_samples,
         )  # fmt: skip
-        channels, half = input_channels(result, half_radiance=not float_radiance)
+        channels, half = input_channels(result, half_radiance=not float_radiance,
+                                        skip=skip_layers)  # fmt: skip
         attrs = frame_attributes(
-            result, frame=frame, spp=spp, seed=seed, max_depth=max_depth, kind="input"
+            result, frame=frame, spp=spp, seed=seed, max_depth=max_depth, kind="input",
+            extra=extra,
         )
-        write_exr(out_paths[index], channels, attributes=attrs, half=half, compression="piz")
+        write_exr(out_paths[index], channels, attributes=attrs, half=half,
+                  compression=compression)
         if ref is not None:
             ref_attrs = frame_attributes(
                 ref, frame=frame, spp=reference_spp, seed=seed, max_depth=max_depth,
                 kind="reference",
-            )  # fmt: skip
-            write_exr(ref_paths[index], reference_channels(ref), attributes=ref_attrs,
-                      half=False, compression="piz")  # fmt: skip
+            )
+            write_exr(ref_paths[index],
+                      reference_channels(ref, rgb_only=reference_layers == "rgb"),
+                      attributes=ref_attrs, half=reference_half,
+                      compression=compression)  # fmt: skip
         progress.frame_done(frame, time.perf_counter() - frame_started)
     elapsed = time.perf_counter() - started
     progress.finish(
