@@ -1,10 +1,18 @@
 """The sequential driver shared by local runs, local chunks and Dask tasks.
 
 Given the ordered frames of one chunk (``FrameTask``: frame number, input path, output path
-or None for a history-only frame), it runs the Denoiser frame by frame. The next frame's read
-runs in a reader thread while the current frame is filtered, and the previous frame's write
-runs in a writer thread, each at most one deep: memory holds about three frames whatever the
-sequence length. SIGINT/SIGTERM finish the frame in flight and then stop (exit 130/143).
+or None for a history-only frame), `run_sequence` runs the Denoiser frame by frame. Its parts,
+each owning what it says:
+
+* `ReadAhead`: one reader thread, one frame ahead of the filter, in the order given;
+* `FrameFilter`: the Denoiser and the checks each frame passes (resolution, a loaded history
+  file, the reader's and the Denoiser's warnings);
+* `WriteBehind`: one writer thread, one write in flight, and the report of each written frame;
+* resume bookkeeping: `RunStats`, `WarmupCount`, history files (`load_history`,
+  `save_history`), `pending_tasks` and `trim_tail`.
+
+Memory holds about three frames whatever the sequence length. SIGINT/SIGTERM finish the frame
+in flight and then stop (exit 130/143); the I/O threads never receive them.
 """
 
 from __future__ import annotations
@@ -60,7 +68,11 @@ class RunConfig:
 
 @dataclass
 class RunStats:
-    """What a run did and where its time went (seconds, summed over frames)."""
+    """What a run did and where its time went (seconds, summed over frames).
+
+    Each part of the driver adds its own fields: `ReadAhead` the read seconds, `FrameFilter`
+    the frames processed and compute seconds, `WriteBehind` the frames written.
+    """
 
     frames_processed: int = 0
     frames_written: int = 0
@@ -175,7 +187,7 @@ def _default_reader(path: Path, mapping: Any, *, passthrough: bool = True) -> An
     return read_frame(path, mapping, mapping.motion_convention, passthrough=passthrough)
 
 
-# -- history files ------------------------------------------------------------------------
+# -- resume bookkeeping: history files, retries, warm-up ------------------------------------
 
 _STATE_PREFIX = "state__"
 
@@ -260,7 +272,42 @@ def check_history_params(history: HistoryFile, params: SVGFParams) -> None:
     )
 
 
-# -- the driver -----------------------------------------------------------------------------
+def pending_tasks(tasks: Sequence[FrameTask], overwrite: bool) -> list[FrameTask]:
+    """Retry-safe view of a chunk: outputs that already exist are not written again.
+
+    Writes are atomic, so an existing output is a complete one; with ``overwrite`` every
+    output is written (deterministic, so a retry rewrites identical bytes).
+    """
+    if overwrite:
+        return list(tasks)
+    return [
+        t
+        if t.output is None or not t.output.exists()
+        else FrameTask(t.frame, t.input, None, t.reset_history)
+        for t in tasks
+    ]
+
+
+def trim_tail(tasks: Sequence[FrameTask]) -> list[FrameTask]:
+    """Drop history-only frames after the last written one (nothing depends on them)."""
+    last = max((i for i, t in enumerate(tasks) if t.output is not None), default=-1)
+    return list(tasks[: last + 1])
+
+
+class WarmupCount:
+    """Warm-up frames processed so far, reported as ``Warmup: n/total``."""
+
+    def __init__(self, progress: Progress, total: int) -> None:
+        self._progress = progress
+        self.total = total
+        self.seen = 0
+
+    def frame_done(self, frame: int) -> None:
+        self.seen += 1
+        self._progress.warmup(frame, self.seen, self.total)
+
+
+# -- the output of one frame ----------------------------------------------------------------
 
 
 def output_attributes(config: RunConfig, task: FrameTask) -> dict[str, Any]:
@@ -363,12 +410,295 @@ def build_output(
     )
 
 
+# -- read-ahead -----------------------------------------------------------------------------
+
+
+def frame_reader(
+    config: RunConfig, read: Callable[..., Any] = _default_reader
+) -> Callable[[FrameTask], Any]:
+    """``read`` of one task's input with the run's options; any failure becomes one
+    InputError (exit 3) naming the file."""
+
+    def read_task(task: FrameTask) -> Any:
+        try:
+            if read is _default_reader:
+                return read(task.input, config.mapping, passthrough=not config.colour_only)
+            return read(task.input, config.mapping)
+        except SvgfError:
+            raise
+        except FileNotFoundError:
+            raise InputError("input file not found", str(task.input)) from None
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise InputError(f"cannot read: {exc}", str(task.input)) from None
+
+    return read_task
+
+
+class ReadAhead:
+    """The frames of ``tasks``, read in the given order by one thread, one frame ahead.
+
+    Iterating yields ``(task, result, read_seconds)``. While the caller works on one frame
+    the next one is read, never more, so memory holds at most two read frames; the order is
+    the caller's (a backward pass reads the tasks reversed). Read and wait seconds are added
+    to ``stats``. Owns its thread: leaving the ``with`` block cancels a read not yet started
+    and waits for one under way.
+    """
+
+    def __init__(
+        self, tasks: Sequence[FrameTask], read: Callable[[FrameTask], Any], stats: RunStats
+    ) -> None:
+        self._tasks = tasks
+        self._read = read
+        self._stats = stats
+        self._position = 0
+        self._executor = ThreadPoolExecutor(
+            1, thread_name_prefix="svgf-read", initializer=_block_signals
+        )
+        self._upcoming = self._submit(0)
+
+    def _submit(self, position: int) -> Future[tuple[Any, float]] | None:
+        if position >= len(self._tasks):
+            return None
+        return self._executor.submit(self._timed_read, self._tasks[position])
+
+    def _timed_read(self, task: FrameTask) -> tuple[Any, float]:
+        started = time.perf_counter()
+        result = self._read(task)
+        return result, time.perf_counter() - started
+
+    def __iter__(self) -> ReadAhead:
+        return self
+
+    def __next__(self) -> tuple[FrameTask, Any, float]:
+        # No generator: its suspended frame would hold the previous result a frame longer.
+        if self._upcoming is None:
+            raise StopIteration
+        task = self._tasks[self._position]
+        wait_started = time.perf_counter()
+        result, seconds = self._upcoming.result()
+        self._stats.wait_read_seconds += time.perf_counter() - wait_started
+        self._stats.read_seconds += seconds
+        self._position += 1
+        # Prefetch the next frame while this one is filtered (queue depth one).
+        self._upcoming = self._submit(self._position)
+        return task, result, seconds
+
+    def close(self) -> None:
+        self._upcoming = None
+        self._executor.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> ReadAhead:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+# -- filter ---------------------------------------------------------------------------------
+
+
 def _denoiser_warnings(denoised: Any) -> list[str]:
     """What the Denoiser counted in this frame (``DenoisedFrame.warnings()``), if it says."""
     warnings = getattr(denoised, "warnings", None)
     if callable(warnings):
         warnings = warnings()
     return [str(w) for w in warnings or ()]
+
+
+class FrameFilter:
+    """The Denoiser of one pass, and the checks a frame passes before it is filtered.
+
+    The first frame fixes the resolution, is checked against a loaded history file and then
+    gets that history; every later frame must have the same resolution (InputError, exit 3,
+    naming both sizes). Warnings of the reader and of the Denoiser are reported against the
+    frame's input. Frames processed, the last frame and compute seconds go to ``stats``.
+    """
+
+    def __init__(
+        self,
+        config: RunConfig,
+        progress: Progress,
+        stats: RunStats,
+        make_denoiser: Callable[[SVGFParams, bool], DenoiserLike],
+        *,
+        history: HistoryFile | None = None,
+        on_first_frame: Callable[[Any], None] | None = None,
+    ) -> None:
+        try:
+            self.denoiser = make_denoiser(config.params, config.debug_aovs)
+        except ValueError as exc:
+            raise UsageError(f"invalid SVGF parameters: {exc}") from None
+        if history is not None:
+            check_history_params(history, config.params)
+        self._params = config.params
+        self._progress = progress
+        self._stats = stats
+        self._history = history
+        self._on_first_frame = on_first_frame
+        self.size: tuple[int, int] | None = None  # (width, height) of the first frame
+        self._size_source: Path | None = None
+
+    def admit(self, task: FrameTask, result: Any) -> None:
+        """Report the read's warnings and check the frame's resolution."""
+        for message in result.warnings:
+            text = str(message)
+            self._progress.warning(text if str(task.input) in text else f"{task.input}: {text}")
+        frame_size = (result.frame.width, result.frame.height)
+        if self.size is None:
+            self._first_frame(task, result, frame_size)
+        elif frame_size != self.size:
+            raise InputError(
+                f"resolution changed from {self.size[0]}x{self.size[1]} ({self._size_source}) "
+                f"to {frame_size[0]}x{frame_size[1]}",
+                str(task.input),
+            )
+
+    def _first_frame(self, task: FrameTask, result: Any, frame_size: tuple[int, int]) -> None:
+        self.size, self._size_source = frame_size, task.input
+        if self._on_first_frame is not None:
+            self._on_first_frame(result)
+        history = self._history
+        if history is None:
+            return
+        if (history.width, history.height) != frame_size:
+            raise InputError(
+                f"resolution {frame_size[0]}x{frame_size[1]} does not match the "
+                f"history in {history.path} ({history.width}x{history.height})",
+                str(task.input),
+            )
+        try:
+            self.denoiser.load_state(history.state)
+        except ValueError as exc:
+            raise InputError(f"cannot use history: {exc}", str(history.path)) from None
+
+    def process(self, task: FrameTask, result: Any) -> tuple[Any, float]:
+        """Filter an admitted frame (after a history reset when ``task`` asks for one), let
+        go of its input planes, report the Denoiser's warnings. Returns the denoised frame
+        and the seconds the filter took."""
+        if task.reset_history:
+            self.denoiser.reset()
+        started = time.perf_counter()
+        try:
+            denoised = self.denoiser.process(result.frame)
+        except ValueError as exc:
+            raise InputError(str(exc), str(task.input)) from None
+        seconds = time.perf_counter() - started
+        self._stats.compute_seconds += seconds
+        self._stats.frames_processed += 1
+        self._stats.last_frame = task.frame
+        # The filter has what it keeps: let this frame's planes go now rather than
+        # while the next frame is read (memory holds fewer frames at once).
+        with contextlib.suppress(AttributeError):
+            result.frame = None
+        for message in _denoiser_warnings(denoised):
+            self._progress.warning(f"{task.input}: {message}")
+        return denoised, seconds
+
+    def save_history(self, path: Path, last_input: Path) -> None:
+        """Save the Denoiser's state after the last frame processed (none: nothing)."""
+        if self.size is None or self._stats.last_frame is None:
+            return
+        width, height = self.size
+        state = self.denoiser.state()
+        save_history(path, state, self._stats.last_frame, self._params, (height, width), last_input)
+
+
+# -- write-behind ---------------------------------------------------------------------------
+
+
+def frame_writer(config: RunConfig) -> Callable[[FrameTask, OutputFrame], list[str]]:
+    """Write one task's output file with the run's options (atomically: `write_output`);
+    returns the writer's notes."""
+    from svgf_cli.io.exr import io_threads
+    from svgf_cli.io.output import write_output
+
+    def write_task(task: FrameTask, output: OutputFrame) -> list[str]:
+        assert task.output is not None
+        return write_output(
+            task.output,
+            output.source,
+            part_index=output.part_index,
+            channels=output.channels,
+            attributes=output.attributes,
+            software=f"svgf {__version__}",
+            compression=config.compression,
+            keep_only=output.keep_only,
+            threads=io_threads(),
+        )
+
+    return write_task
+
+
+class WriteBehind:
+    """Output frames written by one thread, at most one write in flight.
+
+    ``submit`` first waits for the write in flight, so the caller filters the next frame
+    while this one is written. A finished write is reported once, in order: its notes as
+    warnings, ``Progress.frame_done`` with the frame's wall time (from ``started`` to the
+    end of its write), its seconds and frame number in ``stats``. Owns its thread: leaving
+    the ``with`` block waits for a write in flight even when an error unwinds (never a
+    half-done write), without reporting it (the error is the one to report).
+    """
+
+    def __init__(
+        self,
+        write: Callable[[FrameTask, OutputFrame], list[str]],
+        progress: Progress,
+        stats: RunStats,
+    ) -> None:
+        self._write = write
+        self._progress = progress
+        self._stats = stats
+        self._executor = ThreadPoolExecutor(
+            1, thread_name_prefix="svgf-write", initializer=_block_signals
+        )
+        self._pending: tuple[FrameTask, Future[tuple[float, list[str]]], float] | None = None
+
+    def _timed_write(self, task: FrameTask, output: OutputFrame) -> tuple[float, list[str]]:
+        started = time.perf_counter()
+        notes = self._write(task, output)
+        return time.perf_counter() - started, notes
+
+    def submit(self, task: FrameTask, output: OutputFrame, started: float) -> None:
+        """Queue ``output`` to ``task.output`` once the write in flight is finished."""
+        self.finish()
+        self._pending = (task, self._executor.submit(self._timed_write, task, output), started)
+
+    def poll(self) -> None:
+        """Report the write in flight if it is done (now rather than a frame later)."""
+        if self._pending is not None and self._pending[1].done():
+            self.finish()
+
+    def finish(self) -> None:
+        """Wait for the write in flight and report it; its error propagates."""
+        if self._pending is None:
+            return
+        task, future, started = self._pending
+        self._pending = None
+        seconds, notes = future.result()
+        self._stats.write_seconds += seconds
+        for note in notes:
+            self._progress.warning(f"{task.output}: {note}")
+        self._stats.frames_written += 1
+        self._stats.written.append(task.frame)
+        self._progress.frame_done(task.frame, time.perf_counter() - started)
+
+    def close(self) -> None:
+        if self._pending is not None:
+            # Never leave a write half-done; the error being unwound is the one to report.
+            with contextlib.suppress(Exception):
+                self._pending[1].result()
+            self._pending = None
+        self._executor.shutdown(wait=True)
+
+    def __enter__(self) -> WriteBehind:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+# -- the driver -----------------------------------------------------------------------------
 
 
 def run_sequence(
@@ -390,202 +720,53 @@ def run_sequence(
     before it are written, nothing for it), UsageError for a history file from other
     parameters, Interrupted after a SIGINT/SIGTERM once the frame in flight is written.
     """
-    from svgf_cli.io.exr import io_threads
-    from svgf_cli.io.output import write_output
-
     stats = RunStats()
     if not tasks:
         return stats
     started = time.perf_counter()
-    try:
-        denoiser = make_denoiser(config.params, config.debug_aovs)
-    except ValueError as exc:
-        raise UsageError(f"invalid SVGF parameters: {exc}") from None
+    frames = FrameFilter(
+        config, progress, stats, make_denoiser, history=history, on_first_frame=on_first_frame
+    )
     if warmup_total is None:
         warmup_total = sum(1 for t in tasks if t.output is None)
-    warmup_seen = 0
-    size: tuple[int, int] | None = None
-    size_source: Path | None = None
-    if history is not None:
-        check_history_params(history, config.params)
-
-    def timed_read(task: FrameTask) -> tuple[Any, float]:
-        t0 = time.perf_counter()
-        try:
-            if read is _default_reader:
-                result = read(task.input, config.mapping, passthrough=not config.colour_only)
-            else:
-                result = read(task.input, config.mapping)
-        except SvgfError:
-            raise
-        except FileNotFoundError:
-            raise InputError("input file not found", str(task.input)) from None
-        except (OSError, RuntimeError, ValueError) as exc:
-            raise InputError(f"cannot read: {exc}", str(task.input)) from None
-        return result, time.perf_counter() - t0
-
-    def timed_write(task: FrameTask, output: OutputFrame) -> tuple[float, list[str]]:
-        t0 = time.perf_counter()
-        assert task.output is not None
-        notes = write_output(
-            task.output,
-            output.source,
-            part_index=output.part_index,
-            channels=output.channels,
-            attributes=output.attributes,
-            software=f"svgf {__version__}",
-            compression=config.compression,
-            keep_only=output.keep_only,
-            threads=io_threads(),
-        )
-        return time.perf_counter() - t0, notes
-
-    reader = ThreadPoolExecutor(1, thread_name_prefix="svgf-read", initializer=_block_signals)
-    writer = ThreadPoolExecutor(1, thread_name_prefix="svgf-write", initializer=_block_signals)
-    pending: tuple[FrameTask, Future[tuple[float, list[str]]], float] | None = None
-
-    def finish_pending() -> None:
-        nonlocal pending
-        if pending is None:
-            return
-        task, future, frame_started = pending
-        pending = None
-        seconds, notes = future.result()
-        stats.write_seconds += seconds
-        for note in notes:
-            progress.warning(f"{task.output}: {note}")
-        stats.frames_written += 1
-        stats.written.append(task.frame)
-        progress.frame_done(task.frame, time.perf_counter() - frame_started)
-
-    try:
-        next_read: Future[tuple[Any, float]] | None = reader.submit(timed_read, tasks[0])
+    warmup = WarmupCount(progress, warmup_total)
+    with (
+        ReadAhead(tasks, frame_reader(config, read), stats) as reads,
+        WriteBehind(frame_writer(config), progress, stats) as writes,
+    ):
         frame_started = time.perf_counter()
-        for position, task in enumerate(tasks):
-            assert next_read is not None
-            t_wait = time.perf_counter()
-            result, read_seconds = next_read.result()
-            stats.wait_read_seconds += time.perf_counter() - t_wait
-            stats.read_seconds += read_seconds
-            # Prefetch the next frame while this one is filtered (queue depth one).
-            next_read = (
-                reader.submit(timed_read, tasks[position + 1])
-                if position + 1 < len(tasks)
-                else None
-            )
-            frame = result.frame
-            for message in result.warnings:
-                text = str(message)
-                progress.warning(text if str(task.input) in text else f"{task.input}: {text}")
-            frame_size = (frame.width, frame.height)
-            if size is None:
-                size, size_source = frame_size, task.input
-                if on_first_frame is not None:
-                    on_first_frame(result)
-                if history is not None:
-                    if (history.width, history.height) != frame_size:
-                        raise InputError(
-                            f"resolution {frame_size[0]}x{frame_size[1]} does not match the "
-                            f"history in {history.path} ({history.width}x{history.height})",
-                            str(task.input),
-                        )
-                    try:
-                        denoiser.load_state(history.state)
-                    except ValueError as exc:
-                        raise InputError(f"cannot use history: {exc}", str(history.path)) from None
-            elif frame_size != size:
-                raise InputError(
-                    f"resolution changed from {size[0]}x{size[1]} ({size_source}) to "
-                    f"{frame_size[0]}x{frame_size[1]}",
-                    str(task.input),
-                )
-            if pending is not None and pending[1].done():
-                finish_pending()  # report a finished write now rather than a frame later
-            if task.reset_history:
-                denoiser.reset()
-            t0 = time.perf_counter()
-            try:
-                denoised = denoiser.process(frame)
-            except ValueError as exc:
-                raise InputError(str(exc), str(task.input)) from None
-            compute_seconds = time.perf_counter() - t0
-            stats.compute_seconds += compute_seconds
-            stats.frames_processed += 1
-            stats.last_frame = task.frame
-            # The filter has what it keeps: let this frame's planes go now rather than
-            # while the next frame is read (memory holds fewer frames at once).
-            frame = None
-            with contextlib.suppress(AttributeError):
-                result.frame = None
-            for message in _denoiser_warnings(denoised):
-                progress.warning(f"{task.input}: {message}")
-
+        for task, result, read_seconds in reads:
+            frames.admit(task, result)
+            writes.poll()  # report a finished write now rather than a frame later
+            denoised, compute_seconds = frames.process(task, result)
             if task.output is None:
-                warmup_seen += 1
-                progress.warmup(task.frame, warmup_seen, warmup_total)
-                frame_started = time.perf_counter()
+                warmup.frame_done(task.frame)
             else:
                 # The writer thread reads these planes while the next frame is filtered: safe
                 # because DenoisedFrame arrays are fresh per frame, not the denoiser's buffers.
                 output = build_output(result, denoised, config, task)
                 for message in output.warnings:
                     progress.warning(f"{task.input}: {message}")
-                # One write in flight: wait for the previous one before queueing this one.
-                finish_pending()
-                pending = (task, writer.submit(timed_write, task, output), frame_started)
+                writes.submit(task, output, frame_started)
                 # Only the writer holds this frame now: memory is freed when it is done.
                 output = denoised = result = None
-                frame_started = time.perf_counter()
+            frame_started = time.perf_counter()
             progress.detail(
                 f"frame {task.frame}: read {read_seconds:.3f} s, compute {compute_seconds:.3f} s"
             )
             if stop:
-                finish_pending()
-                assert stop.signum is not None
-                raise Interrupted(
-                    stop.signum,
-                    f"frame {task.frame} was the last one finished; "
-                    "rerun with --skip-existing to resume",
-                )
-        finish_pending()
-    finally:
-        # Never leave a write half-done: wait for it even when unwinding an error.
-        if pending is not None:
-            # The original error is the one to report.
-            with contextlib.suppress(Exception):
-                pending[1].result()
-        reader.shutdown(wait=True, cancel_futures=True)
-        writer.shutdown(wait=True)
-    if save_history_to is not None and size is not None and stats.last_frame is not None:
-        save_history(
-            save_history_to,
-            denoiser.state(),
-            stats.last_frame,
-            config.params,
-            (size[1], size[0]),
-            tasks[-1].input,
-        )
+                writes.finish()
+                raise _interrupted(stop, task)
+        writes.finish()
+    if save_history_to is not None:
+        frames.save_history(save_history_to, tasks[-1].input)
     stats.wall_seconds = time.perf_counter() - started
     return stats
 
 
-def pending_tasks(tasks: Sequence[FrameTask], overwrite: bool) -> list[FrameTask]:
-    """Retry-safe view of a chunk: outputs that already exist are not written again.
-
-    Writes are atomic, so an existing output is a complete one; with ``overwrite`` every
-    output is written (deterministic, so a retry rewrites identical bytes).
-    """
-    if overwrite:
-        return list(tasks)
-    return [
-        t
-        if t.output is None or not t.output.exists()
-        else FrameTask(t.frame, t.input, None, t.reset_history)
-        for t in tasks
-    ]
-
-
-def trim_tail(tasks: Sequence[FrameTask]) -> list[FrameTask]:
-    """Drop history-only frames after the last written one (nothing depends on them)."""
-    last = max((i for i, t in enumerate(tasks) if t.output is not None), default=-1)
-    return list(tasks[: last + 1])
+def _interrupted(stop: StopFlag, last: FrameTask) -> Interrupted:
+    assert stop.signum is not None
+    return Interrupted(
+        stop.signum,
+        f"frame {last.frame} was the last one finished; rerun with --skip-existing to resume",
+    )

@@ -1,8 +1,9 @@
-"""Tiny EXR files with real-world structure, written with the OpenEXR bindings, and a
-channel-by-channel, attribute-by-attribute comparison of two files.
+"""Tiny EXR files with real-world structure, written with the OpenEXR bindings; reading a
+file's channels by name (`read_exr`); a channel-by-channel, attribute-by-attribute comparison
+of two files.
 
-Used by the passthrough tests and the fault suite (import as ``from exr_fixtures import ...``;
-``tests/`` is on sys.path).
+Used by the CLI, passthrough and ground-truth tests and the fault suite (import as
+``from exr_fixtures import ...``; ``tests/`` is on sys.path).
 """
 
 from __future__ import annotations
@@ -93,6 +94,41 @@ def read_parts(path: Path) -> list[tuple[str, dict[str, Any], dict[str, np.ndarr
             )
             for part in exr.parts
         ]
+
+
+@dataclass
+class ExrImage:
+    """A file's channels by name, across its parts, with pixels as stored (half, float,
+    uint), and the header of its first part."""
+
+    channels: dict[str, np.ndarray]
+    header: dict[str, Any]
+
+    def planes(self, *names: str) -> np.ndarray:
+        """The named channels as one (len(names), H, W) float32 array."""
+        return np.stack([self.channels[name].astype(np.float32) for name in names])
+
+    def rgb(self, layer: str = "") -> np.ndarray:
+        """``layer.R/G/B`` (or ``R,G,B``) as (3, H, W) float32."""
+        prefix = f"{layer}." if layer else ""
+        return self.planes(*(f"{prefix}{c}" for c in "RGB"))
+
+    def same_pixels(self, other: ExrImage) -> bool:
+        """The same channel names, types and bits (NaN payloads included)."""
+        return self.channels.keys() == other.channels.keys() and all(
+            bits_equal(plane, other.channels[name]) for name, plane in self.channels.items()
+        )
+
+
+def read_exr(path: Path) -> ExrImage:
+    """Every channel of ``path`` by name (a name in two parts is refused: ambiguous here)."""
+    parts = read_parts(path)
+    channels: dict[str, np.ndarray] = {}
+    for part_name, _, pixels in parts:
+        twice = channels.keys() & pixels.keys()
+        assert not twice, f"{path}: channel(s) {sorted(twice)} in two parts ({part_name!r})"
+        channels.update(pixels)
+    return ExrImage(channels, parts[0][1])
 
 
 def same_value(a: Any, b: Any) -> bool:

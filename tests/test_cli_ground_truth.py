@@ -17,8 +17,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from exr_fixtures import read_exr
 from moving_scene import scene_frame
-from test_cli_support import read_pixels, run_cli, write_sequence
+from test_cli_support import run_cli, write_sequence
 
 from svgf_cli.frame import Frame
 from svgf_cli.io.exr import read_frame, write_exr
@@ -120,15 +121,13 @@ def test_static_scene_converges_to_the_noise_free_image(
     # variance albedo^2 (L_d^2 + L_i^2).
     albedo = _static_albedo()
     noise_variance = albedo[:, surface] ** 2 * (LIGHT_DIRECT**2 + LIGHT_INDIRECT**2)
-    last = read_pixels(folder / f"in.{FRAMES:04d}.exr")[0]
-    names = read_pixels(folder / f"in.{FRAMES:04d}.exr")[1].channelnames
-    noisy = sum(np.moveaxis(last[..., [names.index(f"{s}.{c}") for c in "RGB"]], -1, 0)
-                for s in ("direct", "indirect"))
+    last = read_exr(folder / f"in.{FRAMES:04d}.exr")
+    noisy = last.rgb("direct") + last.rgb("indirect")
     input_mse = float(np.mean((noisy - truth)[:, surface] ** 2))
     assert 0.8 < input_mse / float(np.mean(noise_variance)) < 1.2  # one frame: N_eff = 1
 
     def error(out: Path) -> tuple[np.ndarray, float, float]:
-        image = np.moveaxis(read_pixels(out / f"o.{FRAMES:04d}.exr")[0][..., :3], -1, 0)
+        image = read_exr(out / f"o.{FRAMES:04d}.exr").rgb()
         difference = (image - truth)[:, surface]
         return image, float(np.mean(difference**2)), float(np.mean(difference))
 
@@ -209,8 +208,7 @@ def test_moving_scene_written_by_cycles_converges_only_with_the_right_motion(
         _denoise(folder, tmp_path / name, capsys, "--preset-aovs", "cycles", *args)
         whole, on_object = [], []
         for f in frames[-3:]:
-            image = np.moveaxis(read_pixels(tmp_path / name / f"o.{f:04d}.exr")[0][..., :3],
-                                -1, 0)
+            image = read_exr(tmp_path / name / f"o.{f:04d}.exr").rgb("ViewLayer.Combined")
             whole.append(relative_mse(image, f))
             on_object.append(relative_mse(image, f, objects[f]))
         return float(np.mean(whole)), float(np.mean(on_object))

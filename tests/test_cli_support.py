@@ -1,5 +1,7 @@
-"""Helpers for the CLI and farm tests: tiny synthetic EXR sequences and in-process CLI runs.
+"""Helpers for the CLI and farm tests: tiny synthetic EXR sequences, in-process CLI runs, the
+uninterrupted reference run, and `svgf` as a real process (signal and kill tests).
 
+Outputs are read by channel name with ``exr_fixtures.read_exr``.
 (Named test_cli_* so it sits with the CLI tests; it defines no tests itself.)
 """
 
@@ -12,13 +14,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
 from svgf_cli.cli import main
 from svgf_cli.io.exr import write_exr
 
-REPO = Path(__file__).resolve().parents[1]
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
 INPUT_ATTRIBUTES = {"shot/name": "sq010_sh020", "framesPerSecond_note": "24"}
 
 
@@ -87,20 +89,55 @@ def write_sequence(
     return paths
 
 
-def run_cli(args: Sequence[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """Run `svgf ARGS` in-process; return (exit code, stdout, stderr)."""
+def exit_code(args: Sequence[object]) -> int:
+    """Run `svgf ARGS` in-process and return its exit code (its output goes to pytest's
+    capture, shown when a test fails)."""
     with pytest.raises(SystemExit) as exited:
         main([str(a) for a in args])
-    captured = capsys.readouterr()
     code = exited.value.code
-    return (code if isinstance(code, int) else 1), captured.out, captured.err
+    return code if isinstance(code, int) else 1
 
 
-def svgf_subprocess(args: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
-    """Start `python -m svgf_cli ARGS` as a real process (for signal and kill tests)."""
+def run_cli(args: Sequence[object], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Run `svgf ARGS` in-process; return (exit code, stdout, stderr)."""
+    code = exit_code(args)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def sequence_folder(
+    tmp_path_factory: pytest.TempPathFactory, frames: Sequence[int], width: int = 32,
+    height: int = 24,
+) -> Path:
+    """A fresh folder holding `write_sequence` (``in.####.exr``): a module fixture's input."""
+    folder = tmp_path_factory.mktemp("seq")
+    write_sequence(folder, frames, width=width, height=height)
+    return folder
+
+
+def reference_run(
+    tmp_path_factory: pytest.TempPathFactory, sequence: Path, *options: object
+) -> dict[int, Path]:
+    """One uninterrupted `svgf denoise -q` of every frame of ``sequence`` (``in.####.exr``)
+    into ``o.####.exr`` in a fresh folder: what chunked, resumed, interrupted and retried runs
+    must reproduce. Returns frame -> output."""
+    out = tmp_path_factory.mktemp("reference")
+    args = ["denoise", sequence / "in.####.exr", "-o", out / "o.####.exr", "-q", *options]
+    assert exit_code(args) == 0
+    frames = sorted(int(p.name.split(".")[1]) for p in sequence.glob("in.*.exr"))
+    return {f: out / f"o.{f:04d}.exr" for f in frames}
+
+
+def svgf_subprocess(
+    args: Sequence[object], *, pause_before: int | None = None, **kwargs: object
+) -> subprocess.Popen[str]:
+    """Start `python -m svgf_cli ARGS` as a real process (for signal and kill tests), with
+    default SIGINT/SIGTERM dispositions; ``pause_before`` N stops it before it filters its
+    frame N (0-based) until it is signalled (see ``svgf_child.py``)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    pause = [] if pause_before is None else ["--pause-before", str(pause_before)]
     return subprocess.Popen(  # noqa: S603 - our own interpreter and module
-        [sys.executable, "-m", "svgf_cli", *map(str, args)],
+        [sys.executable, str(TESTS / "svgf_child.py"), *pause, *map(str, args)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -108,18 +145,6 @@ def svgf_subprocess(args: Sequence[str], **kwargs: object) -> subprocess.Popen[s
         env=env,
         **kwargs,  # type: ignore[arg-type]
     )
-
-
-def read_pixels(path: Path) -> tuple[np.ndarray, oiio.ImageSpec]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    try:
-        spec = image.spec().copy()
-        pixels = image.read_image("float")
-        assert pixels is not None, image.geterror()
-    finally:
-        image.close()
-    return np.asarray(pixels), spec
 
 
 def outputs(folder: Path, name: str = "out") -> list[Path]:

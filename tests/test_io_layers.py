@@ -25,11 +25,9 @@ SVGF_CHANNELS = [
 
 
 def test_every_preset_covers_every_role() -> None:
+    # (What describe() prints per role is tested in test_io_presets.py.)
     for preset, table in AOV_PRESETS.items():
         assert set(table) == set(ROLES), preset
-        mapping = build_mapping(preset)
-        for role in ROLES:
-            assert role in mapping.describe()
 
 
 def test_resolution_is_by_name_not_order() -> None:

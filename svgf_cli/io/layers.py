@@ -137,7 +137,7 @@ OUTPUT_COLOUR: dict[str, Candidates] = {
 
 # The motion convention each preset implies unless --motion-convention says otherwise.
 # Arnold and Karma write shutter-interval motion-blur vectors (towards the next frame);
-# this mapping is our best reading of their docs and marked [verify] in the README.
+# this mapping is our best reading of their docs, marked [verify] in docs/inputs.md.
 PRESET_MOTION_CONVENTION = {
     "svgf": "backward-pixels",
     "cycles": "cycles",
