@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import signal
 import threading
 import time
@@ -26,36 +25,12 @@ import numpy as np
 
 from svgf_cli import __version__
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, SvgfError, UsageError
-from svgf_cli.farm.progress import Progress
 from svgf_cli.filters.params import SVGFParams
+from svgf_cli.progress import Progress
 
-# Header keys that describe the file's layout rather than its content: the writer sets its
-# own, so copying the input's would contradict the output (or confuse OpenImageIO).
-_STRUCTURAL_ATTRIBUTES = {
-    "compression",
-    "channelnames",
-    "dataWindow",
-    "displayWindow",
-    "lineOrder",
-    "tiles",
-    "chunkCount",
-    "version",
-    "type",
-    "name",
-    "oiio:subimages",
-    "oiio:subimagename",
-    "oiio:BitsPerSample",
-    "oiio:ColorSpace",
-    "openexr:chunkCount",
-    "openexr:lineOrder",
-    "openexr:dwaCompressionLevel",
-    "openexr:zipCompressionLevel",
-    "tile_width",
-    "tile_height",
-    "tiled",
-}
-
-COLOR_CHANNELS = ("R", "G", "B", "A")
+# Prefix of the debug channels (--debug-aovs): a layer name no renderer writes, so they
+# never collide with an input layer that is passed through.
+DEBUG_PREFIX = "svgf."
 
 
 @dataclass(frozen=True)
@@ -75,11 +50,12 @@ class RunConfig:
     params: SVGFParams
     preset: str
     mapping: Any  # svgf_cli.io.layers.LayerMapping
-    half: bool = True
-    compression: str | None = None  # None: the input's compression
+    float_colour: bool = False  # --float; else the colour keeps the input's pixel type
+    compression: str | None = None  # None: each part keeps the input's compression
     debug_aovs: bool = False
     warmup_label: str = "all"
     threads: int | None = None
+    colour_only: bool = False  # --colour-only: only the colour layer and its alpha
 
 
 @dataclass
@@ -193,10 +169,10 @@ def _default_denoiser(params: SVGFParams, debug_layers: bool) -> DenoiserLike:
     return Denoiser(params, debug_layers=debug_layers)
 
 
-def _default_reader(path: Path, mapping: Any) -> Any:
+def _default_reader(path: Path, mapping: Any, *, passthrough: bool = True) -> Any:
     from svgf_cli.io.exr import read_frame
 
-    return read_frame(path, mapping, mapping.motion_convention)
+    return read_frame(path, mapping, mapping.motion_convention, passthrough=passthrough)
 
 
 # -- history files ------------------------------------------------------------------------
@@ -254,15 +230,14 @@ def save_history(
     payload["svgf_shape"] = np.array(shape, dtype=np.int64)
     payload["svgf_version"] = np.array(__version__)
     payload["svgf_input"] = np.array(str(last_input))
+    from svgf_cli.io.atomic import atomic_target
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        with open(tmp, "wb") as handle:
+        with atomic_target(path) as tmp, open(tmp, "wb") as handle:
             np.savez(handle, **payload)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    except OSError as exc:
+        raise SvgfError(f"cannot write history file: {exc.strerror or exc}", str(path)) from None
 
 
 def check_history_params(history: HistoryFile, params: SVGFParams) -> None:
@@ -288,77 +263,112 @@ def check_history_params(history: HistoryFile, params: SVGFParams) -> None:
 # -- the driver -----------------------------------------------------------------------------
 
 
-def output_attributes(
-    input_attributes: Mapping[str, Any], config: RunConfig, task: FrameTask
-) -> dict[str, Any]:
-    """Input header attributes passed through, plus ``svgf/*`` provenance.
+def output_attributes(config: RunConfig, task: FrameTask) -> dict[str, Any]:
+    """The ``svgf/*`` provenance added to the colour's part (every input attribute is kept
+    by the writer as it is).
 
     Everything here is a function of the options and the frame, never of the run (no
     timestamps, no host names), so a resumed or retried frame is byte-identical.
     """
-    attributes = {k: v for k, v in input_attributes.items() if k not in _STRUCTURAL_ATTRIBUTES}
-    attributes.update(
-        {
-            "svgf/version": __version__,
-            "svgf/preset": config.preset,
-            "svgf/params": config.params.to_json(),
-            "svgf/frame": int(task.frame),
-            "svgf/input": str(task.input),
-            "svgf/warmup": config.warmup_label,
-            "svgf/kind": "denoised",  # an input's svgf/kind ("input") would mislabel it
-        }
-    )
-    software = str(input_attributes.get("Software", "")).strip()
-    tag = f"svgf {__version__}"
-    attributes["Software"] = (
-        f"{software}; {tag}" if software and tag not in software else (software or tag)
-    )
-    return attributes
-
-
-def build_output_channels(
-    denoised: Any, alpha: np.ndarray | None, debug_aovs: bool
-) -> dict[str, np.ndarray]:
-    color = denoised.color
-    height, width = color.shape[1:]
-    channels: dict[str, np.ndarray] = {
-        "R": color[0],
-        "G": color[1],
-        "B": color[2],
-        "A": alpha if alpha is not None else np.ones((height, width), np.float32),
+    return {
+        "svgf/version": __version__,
+        "svgf/preset": config.preset,
+        "svgf/params": config.params.to_json(),
+        "svgf/frame": int(task.frame),
+        "svgf/input": str(task.input),
+        "svgf/warmup": config.warmup_label,
+        "svgf/kind": "denoised",  # an input's svgf/kind ("input") would mislabel it
     }
-    if debug_aovs:
+
+
+@dataclass
+class OutputFrame:
+    """One frame ready for the writer thread: the file layout and the new planes."""
+
+    source: Any  # svgf_cli.io.source.SourceFile
+    part_index: int
+    channels: dict[str, np.ndarray]
+    attributes: dict[str, Any]
+    keep_only: set[str] | None
+    warnings: list[str]
+
+
+def _colour_layout(
+    result: Any, frame_shape: tuple[int, int], input_path: Path
+) -> tuple[Any, int, tuple[str, ...]]:
+    """(source, part index, channel names) the denoised colour is written to.
+
+    The input's colour layer when it has one (``colour_channels``), else ``R,G,B`` added to
+    the part holding the filtered signals. A reader without a decoded file (stand-ins in
+    tests) gets a one-part layout with its alpha.
+    """
+    from svgf_cli.io.output import synthetic_source
+
+    source = getattr(result, "source", None)
+    if source is None:
+        info = result.info
+        source = synthetic_source(
+            input_path,
+            frame_shape,
+            getattr(info, "attributes", None),
+            getattr(info, "compression", None) or "zip",
+            getattr(result, "alpha", None),
+        )
+    names = getattr(result, "colour_channels", None)
+    anchor: str | None = names[0] if names else None
+    if anchor is None:
+        resolved = getattr(result, "resolved", None)
+        signal = resolved[resolved.signal_roles[0]] if resolved is not None else None
+        anchor = signal[0] if signal else None
+    part = source.part_holding(anchor) if anchor else None
+    return source, (part.index if part is not None else 0), tuple(names or ("R", "G", "B"))
+
+
+def _layer_alpha(name: str) -> str:
+    """``ViewLayer.Combined.R`` -> ``ViewLayer.Combined.A``; ``R`` -> ``A``."""
+    layer, dot, _ = name.rpartition(".")
+    return f"{layer}{dot}A"
+
+
+def build_output(
+    result: Any, denoised: Any, config: RunConfig, task: FrameTask
+) -> OutputFrame:
+    """Everything the writer needs for one frame, converted by the output value policy
+    (non-finite -> 0, then half clamped to +-65504; each counted for a warning)."""
+    from svgf_cli.io.output import prepare_colour
+
+    color = denoised.color
+    source, part_index, names = _colour_layout(result, color.shape[1:], task.input)
+    part = source.parts[part_index]
+    stored = part.channels.get(names[0])
+    half = not config.float_colour and (stored is None or stored.type_name == "half")
+    prepared = prepare_colour(color, half)
+    warnings = []
+    if prepared.nonfinite:
+        warnings.append(f"{prepared.nonfinite} non-finite output value(s) set to 0")
+    if prepared.clamped:
+        warnings.append(
+            f"{prepared.clamped} output value(s) beyond the half-float range clamped to "
+            "+-65504 (--float keeps them)"
+        )
+    channels = dict(zip(names, prepared.planes, strict=True))
+    if config.debug_aovs:
         for name, plane in denoised.layers.items():
-            if name in channels:
-                raise ValueError(f"debug layer {name!r} clashes with an output channel")
-            channels[name] = plane
-    return channels
+            channels[f"{DEBUG_PREFIX}{name}"] = np.ascontiguousarray(plane, dtype=np.float32)
+    keep_only = None
+    if config.colour_only:
+        keep_only = {_layer_alpha(names[0])} & set(part.channels)
+    return OutputFrame(
+        source, part_index, channels, output_attributes(config, task), keep_only, warnings
+    )
 
 
-def choose_compression(
-    config: RunConfig, input_compression: str | None, channels: Mapping[str, np.ndarray]
-) -> str:
-    """The explicit --compression, else the input's; a lossy input codec falls back to zip
-    when data layers (debug AOVs) are written, since they must stay exact."""
-    from svgf_cli.io.exr import check_compression
-
-    if config.compression:
-        return config.compression
-    inherited = input_compression or "zip"
-    try:
-        check_compression(inherited, list(channels))
-    except SvgfError:
-        return "zip"
-    return inherited
-
-
-def _scrub_output(color: np.ndarray) -> int:
-    """Last line of defence: no NaN/Inf may reach an output. Returns how many were fixed."""
-    bad = ~np.isfinite(color)
-    count = int(np.count_nonzero(bad))
-    if count:
-        color[bad] = 0.0
-    return count
+def _denoiser_warnings(denoised: Any) -> list[str]:
+    """What the Denoiser counted in this frame (``DenoisedFrame.warnings()``), if it says."""
+    warnings = getattr(denoised, "warnings", None)
+    if callable(warnings):
+        warnings = warnings()
+    return [str(w) for w in warnings or ()]
 
 
 def run_sequence(
@@ -380,7 +390,8 @@ def run_sequence(
     before it are written, nothing for it), UsageError for a history file from other
     parameters, Interrupted after a SIGINT/SIGTERM once the frame in flight is written.
     """
-    from svgf_cli.io.exr import write_exr
+    from svgf_cli.io.exr import io_threads
+    from svgf_cli.io.output import write_output
 
     stats = RunStats()
     if not tasks:
@@ -401,7 +412,10 @@ def run_sequence(
     def timed_read(task: FrameTask) -> tuple[Any, float]:
         t0 = time.perf_counter()
         try:
-            result = read(task.input, config.mapping)
+            if read is _default_reader:
+                result = read(task.input, config.mapping, passthrough=not config.colour_only)
+            else:
+                result = read(task.input, config.mapping)
         except SvgfError:
             raise
         except FileNotFoundError:
@@ -410,21 +424,25 @@ def run_sequence(
             raise InputError(f"cannot read: {exc}", str(task.input)) from None
         return result, time.perf_counter() - t0
 
-    def timed_write(
-        task: FrameTask,
-        channels: dict[str, np.ndarray],
-        attributes: dict[str, Any],
-        compression: str,
-    ) -> float:
+    def timed_write(task: FrameTask, output: OutputFrame) -> tuple[float, list[str]]:
         t0 = time.perf_counter()
         assert task.output is not None
-        half = dict.fromkeys(COLOR_CHANNELS, config.half)
-        write_exr(task.output, channels, attributes=attributes, half=half, compression=compression)
-        return time.perf_counter() - t0
+        notes = write_output(
+            task.output,
+            output.source,
+            part_index=output.part_index,
+            channels=output.channels,
+            attributes=output.attributes,
+            software=f"svgf {__version__}",
+            compression=config.compression,
+            keep_only=output.keep_only,
+            threads=io_threads(),
+        )
+        return time.perf_counter() - t0, notes
 
     reader = ThreadPoolExecutor(1, thread_name_prefix="svgf-read", initializer=_block_signals)
     writer = ThreadPoolExecutor(1, thread_name_prefix="svgf-write", initializer=_block_signals)
-    pending: tuple[FrameTask, Future[float], float] | None = None
+    pending: tuple[FrameTask, Future[tuple[float, list[str]]], float] | None = None
 
     def finish_pending() -> None:
         nonlocal pending
@@ -432,7 +450,10 @@ def run_sequence(
             return
         task, future, frame_started = pending
         pending = None
-        stats.write_seconds += future.result()
+        seconds, notes = future.result()
+        stats.write_seconds += seconds
+        for note in notes:
+            progress.warning(f"{task.output}: {note}")
         stats.frames_written += 1
         stats.written.append(task.frame)
         progress.frame_done(task.frame, time.perf_counter() - frame_started)
@@ -491,9 +512,13 @@ def run_sequence(
             stats.compute_seconds += compute_seconds
             stats.frames_processed += 1
             stats.last_frame = task.frame
-            fixed = _scrub_output(denoised.color)
-            if fixed:
-                progress.warning(f"{task.input}: {fixed} non-finite output value(s) set to 0")
+            # The filter has what it keeps: let this frame's planes go now rather than
+            # while the next frame is read (memory holds fewer frames at once).
+            frame = None
+            with contextlib.suppress(AttributeError):
+                result.frame = None
+            for message in _denoiser_warnings(denoised):
+                progress.warning(f"{task.input}: {message}")
 
             if task.output is None:
                 warmup_seen += 1
@@ -502,16 +527,14 @@ def run_sequence(
             else:
                 # The writer thread reads these planes while the next frame is filtered: safe
                 # because DenoisedFrame arrays are fresh per frame, not the denoiser's buffers.
-                channels = build_output_channels(denoised, result.alpha, config.debug_aovs)
-                attributes = output_attributes(result.info.attributes, config, task)
-                compression = choose_compression(config, result.info.compression, channels)
+                output = build_output(result, denoised, config, task)
+                for message in output.warnings:
+                    progress.warning(f"{task.input}: {message}")
                 # One write in flight: wait for the previous one before queueing this one.
                 finish_pending()
-                pending = (
-                    task,
-                    writer.submit(timed_write, task, channels, attributes, compression),
-                    frame_started,
-                )
+                pending = (task, writer.submit(timed_write, task, output), frame_started)
+                # Only the writer holds this frame now: memory is freed when it is done.
+                output = denoised = result = None
                 frame_started = time.perf_counter()
             progress.detail(
                 f"frame {task.frame}: read {read_seconds:.3f} s, compute {compute_seconds:.3f} s"

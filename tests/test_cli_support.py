@@ -23,12 +23,17 @@ INPUT_ATTRIBUTES = {"shot/name": "sq010_sh020", "framesPerSecond_note": "24"}
 
 
 def frame_channels(
-    frame: int, width: int = 32, height: int = 24, *, seed: int = 7
+    frame: int, width: int = 32, height: int = 24, *, seed: int = 7, noise: bool = True
 ) -> dict[str, np.ndarray]:
     """One frame of a small scene: two depth planes, a slowly moving camera, 1-spp noise.
 
-    The camera pans one pixel per frame to the right, so the backward motion is -1 px in x
-    everywhere (static scene, moving camera).
+    The camera pans one pixel per frame to the right: pixel x of frame f shows scene point
+    ``x + f``, so the scene slides left on screen and the point seen at x was at x + 1 in the
+    previous frame. The backward motion (``svgf_cli.frame``: previous position minus
+    current) is therefore +1 px in x everywhere, in every frame (the scene before frame 1
+    moved the same way). Depth, albedo, light and ids are functions of the scene point, so
+    the whole G-buffer moves with the motion (``test_cli_ground_truth`` checks it).
+    ``noise=False`` gives the noise-free frame (every Exp(1) draw replaced by its mean, 1).
     """
     rng = np.random.default_rng(seed * 100_003 + frame)
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
@@ -38,8 +43,11 @@ def frame_channels(
     albedo_base = 0.5 + 0.3 * np.sin(world_x * 0.4)[None] * np.array([1.0, 0.7, 0.4])[:, None, None]
     albedo = np.broadcast_to(albedo_base, (3, height, width)).astype(np.float32)
     light = np.where(left, 1.0, 0.4).astype(np.float32)
-    direct = light[None] * albedo * rng.exponential(1.0, (3, height, width)).astype(np.float32)
-    indirect = 0.3 * albedo * rng.exponential(1.0, (3, height, width)).astype(np.float32)
+    draws = rng.exponential(1.0, (2, 3, height, width)).astype(np.float32)
+    if not noise:
+        draws[:] = 1.0
+    direct = light[None] * albedo * draws[0]
+    indirect = 0.3 * albedo * draws[1]
     channels: dict[str, np.ndarray] = {}
     for i, c in enumerate("RGB"):
         channels[f"direct.{c}"] = direct[i]
@@ -49,7 +57,7 @@ def frame_channels(
     channels["N.Y"] = np.zeros((height, width), np.float32)
     channels["N.Z"] = np.ones((height, width), np.float32)
     channels["Z"] = depth
-    channels["motion.X"] = np.full((height, width), -1.0 if frame > 1 else 0.0, np.float32)
+    channels["motion.X"] = np.full((height, width), 1.0, np.float32)
     channels["motion.Y"] = np.zeros((height, width), np.float32)
     channels["id"] = np.where(left, 1.0, 2.0).astype(np.float32)
     channels["A"] = np.ones((height, width), np.float32)

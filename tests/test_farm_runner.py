@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, UsageError
-from svgf_cli.farm.progress import Progress
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame, Frame
+from svgf_cli.progress import Progress
 from svgf_cli.runner import (
     FrameTask,
     Interrupted,

@@ -97,3 +97,29 @@ def test_bad_override_is_a_usage_error(tmp_path: Path, capsys: pytest.CaptureFix
     path = _write(tmp_path / "f.exr", SVGF)
     code, _, err = run(["inspect", str(path), "--aov", "wobble=a"], capsys)
     assert code == 2 and "unknown role" in err
+
+
+def test_luminance_weights_windows_and_views_are_reported(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from exr_fixtures import PartSpec, box, gbuffer, write_parts
+
+    acescg = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+    header = {"chromaticities": acescg, "dataWindow": box(-2, -1, 12, 8),
+              "displayWindow": box(0, 0, 8, 6)}
+    path = write_parts(tmp_path / "aces.exr", [PartSpec(gbuffer(), header=header)])
+    code, out, _ = run(["inspect", str(path)], capsys)
+    assert code == 0
+    assert "luminance weights R 0.2722, G 0.6741, B 0.0537 (from chromaticities ACEScg" in out
+    assert "display window 8x6+0+0" in out and "data window 12x8+-2+-1" in out
+    assert "denoised colour written as: R, G, B" in out
+    code, out, _ = run(["inspect", str(path), "--json"], capsys)
+    report = json.loads(out)["files"][0]
+    assert np.allclose(report["luminance_weights"], (0.2722, 0.6741, 0.0537), atol=1e-4)
+    assert report["views"] == [] and report["display_window"] == [0, 0, 8, 6]
+
+    stereo = write_parts(
+        tmp_path / "stereo.exr", [PartSpec(gbuffer(), header={"multiView": ["left", "right"]})]
+    )
+    code, out, _ = run(["inspect", str(stereo)], capsys)
+    assert code == 0 and "views: left, right (multi-view: svgf denoise refuses it)" in out

@@ -151,7 +151,9 @@ def test_bad_preset_and_convention() -> None:
 def test_motion_conventions() -> None:
     xy = np.stack([np.full((2, 3), 1.5), np.full((2, 3), -2.0)]).astype(np.float32)
     backward = to_backward_pixels(xy, "backward-pixels")
-    assert np.array_equal(backward, xy) and backward is not xy
+    assert np.array_equal(backward, xy) and backward is xy  # canonical float32: no copy
+    as_float64 = to_backward_pixels(xy.astype(np.float64), "backward-pixels")
+    assert as_float64.dtype == np.float32 and np.array_equal(as_float64, xy)
     # forward: previous = current - v
     assert np.array_equal(to_backward_pixels(xy, "forward-pixels"), -xy)
     # Cycles: XY = prev - cur with +Y up; our rows run down, so only Y flips

@@ -150,8 +150,8 @@ def test_existing_output_needs_overwrite(
         (["missing.obj", "-o", "x.####.exr"], 3, "missing.obj: scene file not found"),
         ([SCENE, "-o", "x.####.exr", "--resolution", "big"], 2, "WIDTHxHEIGHT"),
         ([SCENE, "-o", "x.exr", "--frames", "1-2"], 2, "no frame token"),
-        ([SCENE, "-o", "x.####.exr", "--frames", "3-1"], 2, "--frames"),
-        ([SCENE, "-o", "x.####.exr", "--spp", "0"], 2, "--spp 0"),
+        ([SCENE, "-o", "x.####.exr", "--frames", "1-3x0"], 2, "--frames"),
+        ([SCENE, "-o", "x.####.exr", "--spp", "0"], 2, "'--spp': 0 is not in the range x>=1"),
         ([SCENE, "-o", "x.####.exr", "--animation", "nope.json"], 3, "nope.json"),
     ],
 )
