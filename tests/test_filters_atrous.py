@@ -39,6 +39,8 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     ddy = np.gradient(depth, axis=0)
     illumination = rng.gamma(1.5, 0.7, (num_signals, 3, height, width))
     variance = rng.gamma(1.0, 0.3, (num_signals, height, width))
+    # A noise-free patch: zero variance, so the luminance stop's floor (1e-5 l) decides.
+    variance[:, 3:7, 2:6] = 0.0
     # Radiance-mode pixels (mode mask bits): a block in signal 0, scattered pixels in the
     # last signal, and a bit of an unrelated signal (2) that must not matter.
     mode = np.zeros((height, width), dtype=np.uint16)
@@ -132,6 +134,13 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
                 for j in range(3) for i in range(3))
     unnormalised = 1.0 / (4.0 * np.sqrt(plain + (1e-5 * want_luminance) ** 2))
     assert np.mean(np.abs(unnormalised / want_inverse_scale - 1.0) > 0.01) > 0.2
+    # Where the variance is 0 the floor is relative to l (1e-5 l, so scaling the input
+    # scales the output), not absolute: 1 / (4e-5 l), far from 1 / 4e-5 unless l = 1.
+    flat = (slice(None), slice(4, 6), slice(3, 5))
+    if width >= 5:
+        np.testing.assert_allclose(want_inverse_scale[flat],
+                                   1.0 / (4e-5 * want_luminance[flat]), rtol=1e-9)
+        assert np.all(np.abs(want_luminance[flat] - 1.0) > 0.01)
 
 
 def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing() -> None:
