@@ -3,10 +3,14 @@
 Synthetic but realistic input: a textured ground plane and spheres (depth, normals, mesh ids
 from the analytic geometry), heavy-tailed 1-spp-like noise on direct and indirect, emission
 on one object, a background strip, and a camera pan of one pixel per frame with exact
-backward motion. A warm-up sequence excludes JIT compilation and the cold first frames; the
-timed frames are in steady state (most pixels have history >= 4).
+backward motion. ``--signals 3`` filters a Cycles-like lobe set instead of direct +
+indirect: diffuse (the checker colour), glossy (a grey specular colour) and transmission
+(black colour except on one sphere, so mostly radiance mode). A warm-up sequence excludes
+JIT compilation and the cold first frames; the timed frames are in steady state (most
+pixels have history >= 4).
 
-Run: ``.venv/bin/python bench/bench_filters.py [--frames N] [--sizes 1280x720,1920x1080]``
+Run: ``.venv/bin/python bench/bench_filters.py [--frames N] [--sizes 1280x720,1920x1080]
+[--signals 2|3]``
 """
 
 from __future__ import annotations
@@ -20,17 +24,20 @@ import numpy as np
 
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
-from svgf_cli.frame import Frame
+from svgf_cli.frame import Frame, Signal
 
 F32 = np.float32
-STAGES = ("gradients", "demodulate", "reproject", "variance", "atrous", "modulate")
+STAGES = (
+    "values", "gradients", "demodulate", "reproject", "variance", "atrous", "history", "modulate",
+)
 
 
 class SceneCanvas:
     """An analytic scene rendered once on a canvas wider than the frame; frames are crops."""
 
-    def __init__(self, width: int, height: int, pan: int, seed: int = 0) -> None:
-        self.width, self.height, self.pan = width, height, pan
+    def __init__(self, width: int, height: int, pan: int, seed: int = 0,
+                 signals: int = 2) -> None:
+        self.width, self.height, self.pan, self.signals = width, height, pan, signals
         cw = width + pan
         y, x = np.mgrid[0:height, 0:cw].astype(np.float64)
         horizon = 0.3 * height
@@ -67,6 +74,9 @@ class SceneCanvas:
         self.indirect = (0.3 * self.direct[::-1]).astype(F32)
         self.emission = np.zeros((3, height, cw), dtype=F32)
         self.emission[:, mesh == 1] = 2.0
+        self.gloss_colour = np.full((3, height, cw), 0.5, dtype=F32)
+        self.trans_colour = np.zeros((3, height, cw), dtype=F32)
+        self.trans_colour[:, mesh == 2] = np.array([[0.9], [0.95], [1.0]], dtype=F32)
         self.rng = rng
 
     def frame(self, index: int) -> Frame:
@@ -78,25 +88,40 @@ class SceneCanvas:
             return np.ascontiguousarray(a[sl])
 
         albedo = crop(self.albedo)
-        spp = self.rng.exponential(1.0, (2, h, w)).astype(F32)
+        spp = self.rng.exponential(1.0, (self.signals, h, w)).astype(F32)
         emission = crop(self.emission)
-        direct = albedo * crop(self.direct) * spp[0] + emission
+        direct = albedo * crop(self.direct) * spp[0]
         indirect = albedo * crop(self.indirect) * spp[1]
         motion = np.zeros((2, h, w), dtype=F32)
         motion[0] = 1.0 if index % (self.pan + 1) else 0.0
+        if self.signals == 2:
+            signals = [Signal("direct", np.ascontiguousarray(direct, dtype=F32), albedo),
+                       Signal("indirect", np.ascontiguousarray(indirect, dtype=F32), albedo)]
+        else:
+            gloss, trans = crop(self.gloss_colour), crop(self.trans_colour)
+            light = crop(self.direct) + crop(self.indirect)
+            signals = [
+                Signal("diffuse", np.ascontiguousarray(direct + indirect, dtype=F32), albedo),
+                Signal("glossy", np.ascontiguousarray(gloss * light * spp[1], dtype=F32), gloss),
+                Signal("transmission", np.ascontiguousarray(trans * light * spp[2], dtype=F32),
+                       trans),
+            ]
         return Frame(
-            albedo=albedo, normal=crop(self.normal), depth=crop(self.depth), motion=motion,
-            mesh_id=crop(self.mesh), direct=np.ascontiguousarray(direct, dtype=F32),
-            indirect=np.ascontiguousarray(indirect, dtype=F32), emission=emission,
+            signals=signals, albedo=albedo, normal=crop(self.normal), depth=crop(self.depth),
+            motion=motion, mesh_id=crop(self.mesh), emission=emission,
         )
 
 
-def bench_size(width: int, height: int, frames: int, warmup: int, preset: str) -> dict[str, float]:
-    canvas = SceneCanvas(width, height, pan=warmup + frames + 1)
+def bench_size(
+    width: int, height: int, frames: int, warmup: int, preset: str, signals: int = 2
+) -> tuple[dict[str, float], dict[str, float]]:
+    """(wall ms/frame per stage + summary, CPU ms/frame per stage)."""
+    canvas = SceneCanvas(width, height, pan=warmup + frames + 1, signals=signals)
     denoiser = Denoiser(resolve_params(preset))
     for index in range(warmup):
         denoiser.process(canvas.frame(index))
     totals = dict.fromkeys(STAGES, 0.0)
+    cpu_totals = dict.fromkeys(STAGES, 0.0)
     walls: list[float] = []
     cpu = 0.0
     counters = cpu_steal_counters()
@@ -109,6 +134,8 @@ def bench_size(width: int, height: int, frames: int, warmup: int, preset: str) -
         walls.append(time.perf_counter() - start)
         for stage, seconds in denoiser.stage_seconds.items():
             totals[stage] = totals.get(stage, 0.0) + seconds
+        for stage, seconds in denoiser.stage_cpu_seconds.items():
+            cpu_totals[stage] = cpu_totals.get(stage, 0.0) + seconds
     result = {stage: 1e3 * seconds / frames for stage, seconds in totals.items()}
     result["total"] = 1e3 * sum(walls) / frames
     result["fastest"] = 1e3 * min(walls)
@@ -117,7 +144,7 @@ def bench_size(width: int, height: int, frames: int, warmup: int, preset: str) -
     result["cpu"] = 1e3 * cpu / frames
     result["steal"] = steal_percent(counters, cpu_steal_counters())
     result["buffers_mb"] = denoiser_buffer_bytes(denoiser) / 2**20
-    return result
+    return result, {stage: 1e3 * seconds / frames for stage, seconds in cpu_totals.items()}
 
 
 def cpu_steal_counters() -> tuple[int, int] | None:
@@ -156,13 +183,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--warmup", type=int, default=6, help="untimed frames first")
     parser.add_argument("--sizes", default="1280x720,1920x1080")
     parser.add_argument("--preset", default="paper")
+    parser.add_argument("--signals", type=int, choices=(2, 3), default=2,
+                        help="2: direct + indirect; 3: diffuse, glossy, transmission")
     args = parser.parse_args(argv)
-    print(f"SVGF filter core, preset {args.preset}, direct + indirect, "
+    kind = "direct + indirect" if args.signals == 2 else "diffuse + glossy + transmission"
+    print(f"SVGF filter core, preset {args.preset}, {kind}, "
           f"{args.frames} timed frames after {args.warmup} warm-up frames")
     for size in args.sizes.split(","):
         width, height = (int(v) for v in size.lower().split("x"))
-        result = bench_size(width, height, args.frames, args.warmup, args.preset)
+        result, cpu = bench_size(width, height, args.frames, args.warmup, args.preset,
+                                 args.signals)
         pixels = width * height
+        print(f"{width}x{height}: CPU ms/frame  "
+              + "  ".join(f"{s} {cpu.get(s, 0.0):7.1f}" for s in STAGES))
         stages = "  ".join(f"{s} {result.get(s, 0.0):7.1f}" for s in STAGES)
         summary = {"total", "fastest", "cpu", "steal", "buffers_mb"}
         extra = sorted(set(result) - set(STAGES) - summary)

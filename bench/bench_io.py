@@ -21,8 +21,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
@@ -55,7 +53,7 @@ def writer(result, out: Path, colour_only: bool):
     from svgf_cli.io.output import write_output
     from svgf_cli.runner import build_output
 
-    colour = np.stack([result.frame.direct[i] + result.frame.indirect[i] for i in range(3)])
+    colour = result.frame.total_radiance()
 
     def write() -> None:
         denoised = SimpleNamespace(color=colour.copy(), layers={}, warnings=list)

@@ -10,18 +10,37 @@ Conventions (every producer converts to these, every consumer relies on them):
   ``(x + 0.5, y + 0.5)`` was at ``(x + 0.5 + motion[0], y + 0.5 + motion[1])`` in the
   previous frame;
 * ``mesh_id`` is ``(H, W)`` int32, ``-1`` on background;
-* ``direct``/``indirect`` are the two noisy signals; when both are absent ``color`` is the
-  single combined signal. ``emission`` (optional) is radiance emitted at the primary hit.
+* ``signals`` are the noisy radiance signals, each filtered on its own (its own history,
+  moments and variance) and summed after filtering. A signal's radiance **excludes**
+  emission: ``emission`` (optional, noise-free radiance emitted at the primary hit, e.g.
+  Cycles' Emit + Env) is added back once, after filtering. Each signal names its own
+  demodulation colour (``Signal.albedo``; several signals may share one array);
+* ``albedo`` is the G-buffer albedo (guides, baselines such as OIDN); the filter
+  demodulates by each signal's own colour, not by this one;
+* ``luminance_weights`` are the RGB -> luminance weights of the data's colour space
+  (Rec.709 by default; the reader derives them from the file's chromaticities).
+
+Two constructors cover the common layouts: :meth:`Frame.direct_indirect` (the paper's two
+signals, emission inside ``direct`` as ``svgf trace`` writes it) and :meth:`Frame.combined`
+(one colour with emission inside it).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import re
+from dataclasses import dataclass, field
 
 import numpy as np
 
+REC709_LUMINANCE = (0.2126, 0.7152, 0.0722)
+# Signal names become EXR layer names (``variance.<name>``) and are stored in history files.
+_SIGNAL_NAME = re.compile(r"[A-Za-z0-9_-]+")
+
 
 def _check_plane(name: str, plane: np.ndarray, shape: tuple[int, ...], dtype: type) -> None:
+    if not isinstance(plane, np.ndarray):
+        raise ValueError(f"{name}: expected a numpy array, got {type(plane).__name__}")
     if plane.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {plane.shape}")
     if plane.dtype != dtype:
@@ -31,19 +50,81 @@ def _check_plane(name: str, plane: np.ndarray, shape: tuple[int, ...], dtype: ty
 
 
 @dataclass
+class Signal:
+    """One noisy radiance signal and the colour it is demodulated by.
+
+    ``radiance`` excludes emission. ``albedo`` is the demodulation colour: the signal is
+    filtered as ``radiance / albedo`` where that is a plausible reflectance (every channel
+    at most ~1, not black) and as plain radiance elsewhere (see ``filters.modulate``).
+    """
+
+    name: str
+    radiance: np.ndarray
+    albedo: np.ndarray
+
+
+@dataclass(kw_only=True)
 class Frame:
     """One input frame: noisy radiance signals plus the noise-free G-buffer."""
 
-    albedo: np.ndarray
+    signals: list[Signal]
     normal: np.ndarray
     depth: np.ndarray
     motion: np.ndarray
     mesh_id: np.ndarray
-    direct: np.ndarray | None = None
-    indirect: np.ndarray | None = None
-    color: np.ndarray | None = None
+    albedo: np.ndarray
     emission: np.ndarray | None = None
+    luminance_weights: tuple[float, float, float] = field(default=REC709_LUMINANCE)
 
+    # ----------------------------------------------------------------- constructors
+    @classmethod
+    def direct_indirect(
+        cls,
+        direct: np.ndarray,
+        indirect: np.ndarray,
+        *,
+        albedo: np.ndarray,
+        normal: np.ndarray,
+        depth: np.ndarray,
+        motion: np.ndarray,
+        mesh_id: np.ndarray,
+        emission: np.ndarray | None = None,
+        luminance_weights: tuple[float, float, float] = REC709_LUMINANCE,
+    ) -> Frame:
+        """The paper's two signals, both demodulated by ``albedo``. ``emission`` (when
+        given) is part of ``direct``, as ``svgf trace`` writes it; it is taken out of the
+        signal here and added back after filtering."""
+        return cls(
+            signals=[
+                Signal("direct", _without(direct, emission), albedo),
+                Signal("indirect", indirect, albedo),
+            ],
+            albedo=albedo, normal=normal, depth=depth, motion=motion, mesh_id=mesh_id,
+            emission=emission, luminance_weights=luminance_weights,
+        )
+
+    @classmethod
+    def combined(
+        cls,
+        color: np.ndarray,
+        *,
+        albedo: np.ndarray,
+        normal: np.ndarray,
+        depth: np.ndarray,
+        motion: np.ndarray,
+        mesh_id: np.ndarray,
+        emission: np.ndarray | None = None,
+        luminance_weights: tuple[float, float, float] = REC709_LUMINANCE,
+    ) -> Frame:
+        """One combined signal named ``color``, demodulated by ``albedo``. ``emission``
+        (when given) is part of ``color``; it is taken out and added back after filtering."""
+        return cls(
+            signals=[Signal("color", _without(color, emission), albedo)],
+            albedo=albedo, normal=normal, depth=depth, motion=motion, mesh_id=mesh_id,
+            emission=emission, luminance_weights=luminance_weights,
+        )
+
+    # ----------------------------------------------------------------- accessors
     @property
     def height(self) -> int:
         return int(self.depth.shape[0])
@@ -53,21 +134,31 @@ class Frame:
         return int(self.depth.shape[1])
 
     @property
-    def split(self) -> bool:
-        """True when direct and indirect are filtered as two separate signals."""
-        return self.direct is not None and self.indirect is not None
+    def names(self) -> tuple[str, ...]:
+        """The signal names, in order."""
+        return tuple(s.name for s in self.signals)
 
-    def signals(self) -> list[tuple[str, np.ndarray]]:
-        """The radiance signals to filter, by name: ``direct`` + ``indirect`` or ``color``."""
-        if self.split:
-            assert self.direct is not None and self.indirect is not None
-            return [("direct", self.direct), ("indirect", self.indirect)]
-        if self.color is None:
-            raise ValueError("frame has neither direct+indirect nor color")
-        return [("color", self.color)]
+    def signal(self, name: str) -> Signal:
+        """The signal called ``name`` (ValueError if there is none)."""
+        for s in self.signals:
+            if s.name == name:
+                return s
+        raise ValueError(f"frame has no signal {name!r} (it has {', '.join(self.names)})")
+
+    def total_radiance(self) -> np.ndarray:
+        """The unfiltered radiance the signals stand for: their sum plus the emission."""
+        total = np.zeros((3, self.height, self.width), dtype=np.float32)
+        for s in self.signals:
+            total += s.radiance
+        if self.emission is not None:
+            total += self.emission
+        return total
 
     def validate(self) -> None:
-        """Raise ValueError when a plane has the wrong shape, dtype or layout."""
+        """Raise ValueError when a plane has the wrong shape, dtype or layout, or the
+        signals or luminance weights are malformed (values are the Denoiser's business)."""
+        if not isinstance(self.depth, np.ndarray) or self.depth.ndim != 2:
+            raise ValueError("depth: expected an (H, W) array")
         h, w = self.depth.shape
         f32 = np.float32
         _check_plane("depth", self.depth, (h, w), f32)
@@ -75,24 +166,111 @@ class Frame:
         _check_plane("normal", self.normal, (3, h, w), f32)
         _check_plane("motion", self.motion, (2, h, w), f32)
         _check_plane("mesh_id", self.mesh_id, (h, w), np.int32)
-        for name in ("direct", "indirect", "color", "emission"):
-            plane = getattr(self, name)
-            if plane is not None:
-                _check_plane(name, plane, (3, h, w), f32)
-        if (self.direct is None) != (self.indirect is None):
-            raise ValueError("direct and indirect must be given together")
-        if not self.split and self.color is None:
-            raise ValueError("frame has neither direct+indirect nor color")
+        if self.emission is not None:
+            _check_plane("emission", self.emission, (3, h, w), f32)
+        if not self.signals:
+            raise ValueError("frame has no signals")
+        seen: set[str] = set()
+        for s in self.signals:
+            if not isinstance(s, Signal):
+                raise ValueError(f"signals: expected Signal objects, got {type(s).__name__}")
+            if not isinstance(s.name, str) or not _SIGNAL_NAME.fullmatch(s.name):
+                raise ValueError(
+                    f"signal name {s.name!r}: use letters, digits, '_' or '-' (it names layers)"
+                )
+            if s.name in seen:
+                raise ValueError(f"signal name {s.name!r} is used twice")
+            seen.add(s.name)
+            _check_plane(f"{s.name} radiance", s.radiance, (3, h, w), f32)
+            _check_plane(f"{s.name} albedo", s.albedo, (3, h, w), f32)
+        weights = tuple(self.luminance_weights)
+        if len(weights) != 3 or not all(
+            isinstance(v, (int, float, np.floating)) and math.isfinite(v) and v >= 0.0
+            for v in weights
+        ):
+            raise ValueError(
+                f"luminance_weights {self.luminance_weights!r}: need three finite weights >= 0"
+            )
+        if abs(sum(weights) - 1.0) > 0.01:
+            raise ValueError(
+                f"luminance_weights {self.luminance_weights!r}: must sum to 1 (they sum to"
+                f" {sum(weights):.4g})"
+            )
+
+
+def _without(radiance: np.ndarray, emission: np.ndarray | None) -> np.ndarray:
+    """``radiance - emission`` as a fresh float32 plane, or ``radiance`` itself."""
+    if emission is None:
+        return radiance
+    return np.ascontiguousarray(np.subtract(radiance, emission, dtype=np.float32))
 
 
 @dataclass
 class DenoisedFrame:
     """What the denoiser returns for one frame.
 
-    ``color`` is the final ``(3, H, W)`` radiance (remodulated, emission added, signals
-    summed). ``layers`` holds optional debug planes keyed by EXR channel name, each
-    ``(H, W)`` float32 (e.g. ``variance.direct``, ``history_length``, ``direct.R``).
+    ``color`` is the final ``(3, H, W)`` radiance (signals filtered, remodulated and summed,
+    emission added). ``layers`` holds optional debug planes keyed by EXR channel name, each
+    ``(H, W)`` float32 (``<signal>.R/G/B``, ``variance.<signal>``,
+    ``history_length.<signal>``, ``radiance_mode.<signal>``). ``counts`` reports what the
+    value policy and the demodulation did to this frame (see :data:`COUNT_KEYS`);
+    :meth:`warnings` turns the problems among them into one-line messages.
     """
 
     color: np.ndarray
     layers: dict[str, np.ndarray]
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def warnings(self) -> list[str]:
+        """One message per problem counted in this frame (empty when there is none)."""
+        return count_warnings(self.counts)
+
+
+# Keys of DenoisedFrame.counts. Totals are always present; per-signal keys end in
+# ".<signal>"; per-plane breakdowns ("nonfinite.<plane>", "extreme.<plane>") appear only
+# when non-zero.
+COUNT_KEYS = {
+    "nonfinite": "non-finite input values (NaN/Inf) replaced: radiance, emission, albedo and"
+    " normals by 0, depth by background, motion by 'no history'",
+    "extreme": "finite input values beyond +-VALUE_LIMIT (1e15) replaced: radiance,"
+    " emission and normals by 0, depth by background",
+    "clamped.<signal>": "demodulated values clamped to +-VALUE_LIMIT (large radiance over a"
+    " small albedo)",
+    "radiance_mode.<signal>": "surface pixels filtered as radiance, not demodulated (black or"
+    " implausible demodulation colour)",
+    "implausible_albedo.<signal>": "of those, pixels whose demodulation colour exceeds a"
+    " reflectance (a channel above 1 + tolerance)",
+    "history_resets": "pixel histories reset because a stage produced a non-finite value",
+}
+
+
+def count_warnings(counts: dict[str, int]) -> list[str]:
+    """Human-readable lines for the problem counts (radiance-mode pixels from black
+    surfaces are normal and not reported; implausible demodulation colours are)."""
+    lines: list[str] = []
+
+    def breakdown(prefix: str) -> str:
+        parts = [f"{k[len(prefix) + 1:]} {v}" for k, v in sorted(counts.items())
+                 if k.startswith(prefix + ".") and v]
+        return f" ({', '.join(parts)})" if parts else ""
+
+    if counts.get("nonfinite", 0):
+        lines.append(f"{counts['nonfinite']} non-finite input value(s) cleaned"
+                     f"{breakdown('nonfinite')}")
+    if counts.get("extreme", 0):
+        lines.append(f"{counts['extreme']} input value(s) beyond +-1e15 replaced by 0"
+                     f"{breakdown('extreme')}")
+    for key, value in sorted(counts.items()):
+        if not value:
+            continue
+        if key.startswith("clamped."):
+            lines.append(f"signal {key[8:]}: {value} demodulated value(s) clamped to +-1e15")
+        elif key.startswith("implausible_albedo."):
+            lines.append(
+                f"signal {key[19:]}: {value} pixel(s) with a demodulation colour above 1"
+                " filtered as radiance (not a reflectance)"
+            )
+    if counts.get("history_resets", 0):
+        lines.append(f"{counts['history_resets']} pixel history(ies) reset after a non-finite"
+                     " intermediate value")
+    return lines

@@ -3,7 +3,7 @@
 Everything is deterministic for a given ``seed``. A frame is described by its noise-free
 *illumination* (what the filter should recover after demodulation), an albedo, optional
 emission and a G-buffer; the noisy radiance signals are ``albedo * (illumination + noise)``
-(+ emission on ``direct``/``color``). Helpers:
+(the emission, when given, is the frame's own plane, added back after filtering). Helpers:
 
 * :func:`make_frame` - one frame from scalars or arrays (size, noise, seed, split or
   combined, emission, background, motion, depth/normal/mesh-id planes);
@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from svgf_cli.frame import Frame
+from svgf_cli.frame import Frame, Signal
 
 F32 = np.float32
 ArrayLike = float | Sequence[float] | np.ndarray
@@ -150,30 +150,22 @@ def make_frame(
             return clean * rng.exponential(1.0, (height, width)).astype(F32)[None]
         raise ValueError(f"unknown noise kind {noise_kind!r}")
 
-    def radiance(clean_illumination: ArrayLike, with_emission: bool) -> np.ndarray:
+    def radiance(clean_illumination: ArrayLike) -> np.ndarray:
         value = albedo_plane * noisy(_plane3(clean_illumination, height, width))
-        if with_emission and emission_plane is not None:
-            value = value + emission_plane
         return np.ascontiguousarray(value, dtype=F32)
 
-    frame = Frame(
-        albedo=albedo_plane,
-        normal=np.ascontiguousarray(normal),
-        depth=z,
-        motion=motion_plane,
-        mesh_id=mesh,
-        emission=emission_plane,
-    )
     if split:
         indirect = (
             _plane3(illumination, height, width) * F32(0.5)
             if indirect_illumination is None
             else indirect_illumination
         )
-        frame.direct = radiance(illumination, True)
-        frame.indirect = radiance(indirect, False)
+        signals = [Signal("direct", radiance(illumination), albedo_plane),
+                   Signal("indirect", radiance(indirect), albedo_plane)]
     else:
-        frame.color = radiance(illumination, True)
+        signals = [Signal("color", radiance(illumination), albedo_plane)]
+    frame = Frame(signals=signals, albedo=albedo_plane, normal=np.ascontiguousarray(normal),
+                  depth=z, motion=motion_plane, mesh_id=mesh, emission=emission_plane)
     frame.validate()
     return frame
 
@@ -227,8 +219,4 @@ def true_radiance(frame_illumination: ArrayLike, *, width: int, height: int,
     """Noise-free radiance that :func:`make_frame` would produce with ``noise=0``."""
     clean = make_frame(width, height, illumination=frame_illumination, albedo=albedo,
                        split=split, emission=emission)
-    if split:
-        assert clean.direct is not None and clean.indirect is not None
-        return clean.direct + clean.indirect
-    assert clean.color is not None
-    return clean.color
+    return clean.total_radiance()

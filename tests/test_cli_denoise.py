@@ -107,7 +107,8 @@ def test_float_output_and_debug_aovs(
     assert code == 0, err
     channels = read_exr(tmp_path / "o.0002.exr").channels
     debug = [n for n in channels if n.startswith("svgf.")]
-    assert {"svgf.history_length", "svgf.variance.direct", "svgf.direct.R"} <= set(debug)
+    assert {"svgf.history_length.direct", "svgf.variance.direct", "svgf.direct.R",
+            "svgf.radiance_mode.indirect"} <= set(debug)
     assert all(plane.dtype == np.float32 for plane in channels.values())
 
 

@@ -161,11 +161,12 @@ def _write_cycles(path: Path, frame: Frame, motion_scale: tuple[float, float] = 
     """``frame`` as Blender Cycles writes a multilayer EXR: ``ViewLayer.`` prefixes, the
     noisy beauty in Combined, ``Vector.XY`` = previous - current with +Y up (ZW: next frame),
     depth 1e10 and pass index 0 on background."""
-    assert frame.color is not None and frame.emission is not None
+    assert frame.emission is not None
+    colour = frame.total_radiance()
     layer = "ViewLayer."
     channels: dict[str, np.ndarray] = {}
     for i, c in enumerate("RGB"):
-        channels[f"{layer}Combined.{c}"] = frame.color[i]
+        channels[f"{layer}Combined.{c}"] = colour[i]
         channels[f"{layer}Denoising Albedo.{c}"] = frame.albedo[i]
         channels[f"{layer}Emit.{c}"] = frame.emission[i]
     channels[f"{layer}Combined.A"] = np.ones_like(frame.depth)
@@ -194,10 +195,11 @@ def test_moving_scene_written_by_cycles_converges_only_with_the_right_motion(
     folder.mkdir()
     truth, noisy, objects = {}, {}, {}
     for f in frames:
-        frame = scene_frame(f - 1, seed=3, split=False)
+        frame = scene_frame(f - 1, seed=3, layout="combined")
         _write_cycles(folder / f"in.{f:04d}.exr", frame)
-        clean = scene_frame(f - 1, noise=False, split=False)
-        truth[f], noisy[f], objects[f] = clean.color, frame.color, frame.mesh_id == 2
+        clean = scene_frame(f - 1, noise=False, layout="combined")
+        truth[f], noisy[f] = clean.total_radiance(), frame.total_radiance()
+        objects[f] = frame.mesh_id == 2
 
     def relative_mse(image: np.ndarray, f: int, mask: np.ndarray | None = None) -> float:
         keep = np.ones(image.shape[1:], bool) if mask is None else mask

@@ -40,13 +40,13 @@ W, H = 8, 6
 
 def make_frame(value: float, width: int = W, height: int = H) -> Frame:
     plane = np.full((3, height, width), value, np.float32)
-    return Frame(
+    return Frame.combined(
+        plane,
         albedo=np.ones((3, height, width), np.float32),
         normal=np.zeros((3, height, width), np.float32),
         depth=np.ones((height, width), np.float32),
         motion=np.zeros((2, height, width), np.float32),
         mesh_id=np.zeros((height, width), np.int32),
-        color=plane,
     )
 
 
@@ -59,10 +59,10 @@ class FakeDenoiser:
         self.on_process: Any = None
 
     def process(self, frame: Frame) -> DenoisedFrame:
-        assert frame.color is not None
+        current = frame.signal("color").radiance
         if self.on_process is not None:
             self.on_process(self.frames_processed)
-        color = frame.color if self.history is None else 0.8 * self.history + 0.2 * frame.color
+        color = current if self.history is None else 0.8 * self.history + 0.2 * current
         self.history = color.copy()
         self.frames_processed += 1
         return DenoisedFrame(color=color.copy(), layers={})

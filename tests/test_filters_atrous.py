@@ -14,7 +14,7 @@ import pytest
 import reference_svgf as ref
 
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
-from svgf_cli.filters.fastmath import fast_exp, fast_log2, fma
+from svgf_cli.filters.fastmath import REC709, fast_exp, fast_log2, fma
 
 F32 = np.float32
 
@@ -39,11 +39,24 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     ddy = np.gradient(depth, axis=0)
     illumination = rng.gamma(1.5, 0.7, (num_signals, 3, height, width))
     variance = rng.gamma(1.0, 0.3, (num_signals, height, width))
+    # A noise-free patch: zero variance, so the luminance stop's floor (1e-5 l) decides.
+    variance[:, 3:7, 2:6] = 0.0
+    # Radiance-mode pixels (mode mask bits): a block in signal 0, scattered pixels in the
+    # last signal, and a bit of an unrelated signal (2) that must not matter.
+    mode = np.zeros((height, width), dtype=np.uint16)
+    mode[2:6, 3:7] |= 1
+    mode |= ((rng.uniform(size=(height, width)) < 0.15) << (num_signals - 1)).astype(np.uint16)
+    mode[::3] |= 4
     return {
         "illumination": illumination.astype(F32), "variance": variance.astype(F32),
-        "depth": depth.astype(F32), "ddx": ddx.astype(F32), "ddy": ddy.astype(F32),
-        "normal": normal.astype(F32),
+        "mode": mode, "depth": depth.astype(F32), "ddx": ddx.astype(F32),
+        "ddy": ddy.astype(F32), "normal": normal.astype(F32),
     }
+
+
+def _radiance_mode(mode: np.ndarray, num_signals: int, first: int = 0) -> np.ndarray:
+    """(S, H, W) booleans: bit ``first + s`` of the mode mask (signal s filtered as radiance)."""
+    return np.stack([(mode >> (first + s)) & 1 == 1 for s in range(num_signals)])
 
 
 @pytest.mark.parametrize(
@@ -58,8 +71,8 @@ def test_atrous_iteration_matches_the_equations(
     scene = _scene(num_signals, height, width, seed=step + width)
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
-                          luminance, inverse_scale)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     out_c = np.full_like(scene["illumination"], np.nan)
     out_v = np.full_like(scene["variance"], np.nan)
     atrous_iteration(
@@ -67,10 +80,20 @@ def test_atrous_iteration_matches_the_equations(
         scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, sigma_normal, True, out_c,
         out_v,
     )
+    # The stage alone: the reference filters with the kernel's guides (the luminance is the
+    # guide's magnitude, the mode its sign).
     want_c, want_v = ref.atrous_iteration(
-        scene["illumination"], scene["variance"], luminance, inverse_scale, scene["depth"],
-        scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, sigma_normal,
+        scene["illumination"], scene["variance"], np.abs(luminance), luminance < 0,
+        inverse_scale, scene["depth"], scene["ddx"], scene["ddy"], scene["normal"], step, 1.0,
+        sigma_normal,
     )
+    # The mode test matters here: without it the result moves by far more than the tolerance.
+    mixed_c, _ = ref.atrous_iteration(
+        scene["illumination"], scene["variance"], np.abs(luminance),
+        np.zeros_like(luminance, dtype=bool), inverse_scale, scene["depth"], scene["ddx"],
+        scene["ddy"], scene["normal"], step, 1.0, sigma_normal,
+    )
+    assert np.max(np.abs(mixed_c - want_c)) > 0.05
     # fast_exp (relative error 4e-6) and fast_log2 (absolute error 1e-6 on log2(cos), so up
     # to sigma_n ln2 1e-6 = 9e-5 relative on w_n at sigma_n = 128) set the tolerance.
     np.testing.assert_allclose(out_c, want_c, rtol=2e-4, atol=1e-6)
@@ -92,11 +115,16 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     scene = {k: np.ascontiguousarray(v[..., :width]) for k, v in scene.items()}
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
-                          luminance, inverse_scale)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
+    radiance_mode = _radiance_mode(scene["mode"], num_signals)
     want_luminance, want_inverse_scale = ref.luminance_stop_guides(
-        scene["illumination"], scene["variance"], scene["depth"], 4.0)
-    np.testing.assert_allclose(luminance, want_luminance, rtol=1e-6)
+        scene["illumination"], scene["variance"], scene["depth"], 4.0, ref.REC709)
+    # The mode rides in the sign: radiance-mode guides are -(l + 1e-30), so even l = 0 is
+    # negative there.
+    assert np.all((luminance < 0) == radiance_mode)
+    assert radiance_mode.any() or width < 7
+    np.testing.assert_allclose(np.abs(luminance), want_luminance, rtol=1e-6)
     np.testing.assert_allclose(inverse_scale, want_inverse_scale, rtol=1e-5)
     # The inputs reach the renormalisation: without it (zero weight outside the image and on
     # background, no division) the scale would differ at borders and next to background.
@@ -104,16 +132,23 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     padded = np.pad(np.where(scene["depth"] > 0, scene["variance"], 0.0), ((0, 0), (1, 1), (1, 1)))
     plain = sum(g[i] * g[j] * padded[:, j:j + height, i:i + width]
                 for j in range(3) for i in range(3))
-    unnormalised = 1.0 / (4.0 * np.sqrt(plain + 1e-10))
+    unnormalised = 1.0 / (4.0 * np.sqrt(plain + (1e-5 * want_luminance) ** 2))
     assert np.mean(np.abs(unnormalised / want_inverse_scale - 1.0) > 0.01) > 0.2
+    # Where the variance is 0 the floor is relative to l (1e-5 l, so scaling the input
+    # scales the output), not absolute: 1 / (4e-5 l), far from 1 / 4e-5 unless l = 1.
+    flat = (slice(None), slice(4, 6), slice(3, 5))
+    if width >= 5:
+        np.testing.assert_allclose(want_inverse_scale[flat],
+                                   1.0 / (4e-5 * want_luminance[flat]), rtol=1e-9)
+        assert np.all(np.abs(want_luminance[flat] - 1.0) > 0.01)
 
 
 def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing() -> None:
     scene = _scene(2, 10, 12, seed=1)
     luminance = np.empty((2, 10, 12), dtype=F32)
     inverse_scale = np.empty_like(luminance)
-    luminance_stop_guides(scene["illumination"], scene["variance"], scene["depth"], F32(4.0),
-                          luminance, inverse_scale)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
     args = (luminance, inverse_scale, scene["depth"], scene["ddx"], scene["ddy"],
             scene["normal"], 1, 1.0, 128.0)
     out_c = np.empty_like(scene["illumination"])

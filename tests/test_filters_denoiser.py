@@ -20,9 +20,7 @@ F32 = np.float32
 
 
 def _radiance(frame) -> np.ndarray:
-    if frame.split:
-        return frame.direct + frame.indirect
-    return frame.color
+    return frame.total_radiance()
 
 
 def _run(params: SVGFParams, frames, debug: bool = False):
@@ -80,8 +78,8 @@ def test_no_temporal_leakage_across_mesh_id_change() -> None:
     frames.append(make_frame(w, h, split=False, mesh_id=mesh_after, illumination=illum_after))
     outputs, _ = _run(params, frames, debug=True)
     last = outputs[-1]
-    np.testing.assert_array_equal(last.layers["history_length"][:, 8:], 1.0)
-    np.testing.assert_array_equal(last.layers["history_length"][:, :8], 4.0)
+    np.testing.assert_array_equal(last.layers["history_length.color"][:, 8:], 1.0)
+    np.testing.assert_array_equal(last.layers["history_length.color"][:, :8], 4.0)
     np.testing.assert_allclose(last.color[:, :, 8:], _radiance(frames[-1])[:, :, 8:], rtol=1e-6)
 
 
@@ -116,7 +114,7 @@ def test_static_noisy_sequence_converges_and_variance_tracks_truth() -> None:
     # plain mean of 4 frames, whose population variance is sigma^2 (1 - 1/4).
     early = outputs[3].layers["variance.color"]
     assert abs(float(early.mean()) / (noise**2 * 0.75) - 1.0) < 0.05
-    np.testing.assert_array_equal(outputs[-1].layers["history_length"], float(n))
+    np.testing.assert_array_equal(outputs[-1].layers["history_length.color"], float(n))
 
 
 def test_filtering_reduces_error_of_noisy_input() -> None:
@@ -151,7 +149,7 @@ def test_disocclusion_resets_history() -> None:
         frames.append(make_frame(w, h, depth=depth, mesh_id=mesh, motion=motion, noise=0.1,
                                  seed=i))
     outputs, _ = _run(resolve_params("paper"), frames, debug=True)
-    length = outputs[-1].layers["history_length"]
+    length = outputs[-1].layers["history_length.direct"]
     x0 = 2 + speed * 3
     # Wall uncovered this frame. Its rim may reuse the wall that was visible right next to
     # it (the paper's 3x3 fallback); the interior has no consistent history at all.
@@ -174,7 +172,7 @@ def test_motion_outside_frame_and_zero_albedo_do_not_blow_up() -> None:
         assert np.all(np.isfinite(out.color))
     # Black albedo: radiance there is only noise around 0; the output stays that small.
     assert float(np.abs(outputs[-1].color[:, 4:8, 4:8]).max()) < 0.5
-    np.testing.assert_array_equal(outputs[-1].layers["history_length"][:, :5], 1.0)
+    np.testing.assert_array_equal(outputs[-1].layers["history_length.direct"][:, :5], 1.0)
 
 
 def test_two_runs_are_bit_identical_across_thread_counts() -> None:
@@ -222,7 +220,7 @@ def test_reset_makes_the_next_frame_cold() -> None:
     denoiser.reset()
     assert denoiser.frames_processed == 0
     out = denoiser.process(frames[0])
-    np.testing.assert_array_equal(out.layers["history_length"], 1.0)
+    np.testing.assert_array_equal(out.layers["history_length.direct"], 1.0)
 
 
 def test_resolution_change_raises() -> None:
@@ -236,7 +234,7 @@ def test_temporal_off_filters_every_frame_cold() -> None:
     frames = static_sequence(3, 20, 16, noise=0.3)
     outputs, _ = _run(resolve_params("paper", temporal=False), frames, debug=True)
     for frame, out in zip(frames, outputs, strict=True):
-        np.testing.assert_array_equal(out.layers["history_length"], 1.0)
+        np.testing.assert_array_equal(out.layers["history_length.direct"], 1.0)
         assert not np.allclose(out.color, _radiance(frame))
     single = Denoiser(resolve_params("paper", temporal=False)).process(frames[2]).color
     assert single.tobytes() == outputs[2].color.tobytes()
@@ -253,8 +251,7 @@ def test_atrous_off_outputs_the_temporal_accumulation() -> None:
 
 def test_firefly_clamp_removes_an_isolated_spike() -> None:
     frame = make_frame(16, 16, noise=0.05, seed=2, split=False)
-    assert frame.color is not None
-    frame.color[:, 8, 8] = 200.0
+    frame.signal("color").radiance[:, 8, 8] = 200.0
     plain = Denoiser(resolve_params("paper", atrous_iterations=0)).process(frame).color
     clamped = Denoiser(resolve_params("paper", atrous_iterations=0, firefly_clamp=3.0))
     out = clamped.process(frame).color

@@ -56,3 +56,12 @@ def test_xyz_encoded_file_weights_green_only() -> None:
 def test_non_negative_variant_for_kernels_that_need_it() -> None:
     r, g, b = luminance_weights(AP0).non_negative()
     assert b == 0.0 and np.isclose(r + g, 1.0) and r > 0 and g > 0
+
+
+def test_filter_weights_are_the_file_weights_unless_one_is_negative() -> None:
+    acescg = luminance_weights(ACESCG)
+    assert acescg.for_filter() == acescg.weights
+    assert "the filter uses" not in acescg.describe()
+    ap0 = luminance_weights(AP0)
+    assert ap0.for_filter() == ap0.non_negative()
+    assert "the filter uses R 0.3208, G 0.6792, B 0.0000" in ap0.describe()

@@ -95,11 +95,10 @@ def test_read_frame_by_name_regardless_of_order(tmp_path: Path) -> None:
     frame = result.frame
     frame.validate()
     assert result.warnings == []
-    assert frame.split and frame.color is None
-    assert np.array_equal(frame.direct, planes(channels, "direct.R", "direct.G", "direct.B"))
-    assert np.array_equal(
-        frame.indirect, planes(channels, "indirect.R", "indirect.G", "indirect.B")
-    )
+    assert frame.names == ("direct", "indirect")
+    direct, indirect = (s.radiance for s in frame.signals)
+    assert np.array_equal(direct, planes(channels, "direct.R", "direct.G", "direct.B"))
+    assert np.array_equal(indirect, planes(channels, "indirect.R", "indirect.G", "indirect.B"))
     assert np.array_equal(frame.albedo, planes(channels, "albedo.R", "albedo.G", "albedo.B"))
     assert np.allclose(frame.normal, planes(channels, "N.X", "N.Y", "N.Z"), atol=1e-6)
     assert np.array_equal(frame.depth, channels["Z"])
@@ -153,10 +152,11 @@ def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
     # NaN depth is a broken pixel, not a background convention: counted (Inf, <= 0 are not).
     assert f"{path}: 1 NaN values in depth treated as background" in joined
     assert len(result.warnings) == 6
-    for plane in (frame.direct, frame.indirect, frame.albedo, frame.motion, frame.normal):
+    direct, indirect = (s.radiance for s in frame.signals)
+    for plane in (direct, indirect, frame.albedo, frame.motion, frame.normal):
         assert np.isfinite(plane).all()
-    assert (frame.direct >= 0).all() and (frame.indirect >= 0).all()
-    assert frame.direct[1, 0, 0] == 0 and frame.indirect[2, 1, 1] == 0
+    assert (direct >= 0).all() and (indirect >= 0).all()
+    assert direct[1, 0, 0] == 0 and indirect[2, 1, 1] == 0
     assert np.allclose(frame.normal[:, 0, 0], [0.0, 0.6, 0.8])  # NaN -> 0, renormalised
     assert np.array_equal(frame.normal[:, 0, 1], [0.0, 0.0, 0.0])  # zero stays zero
     assert np.array_equal(frame.depth[5, :5], np.zeros(5, np.float32))
@@ -174,7 +174,7 @@ def test_absent_id_is_minus_one_on_background(tmp_path: Path) -> None:
     result = read_frame(path, build_mapping())
     assert list(result.frame.mesh_id[0, :3]) == [-1, -1, 0]
     assert result.alpha is not None and np.all(result.alpha == 0.5)
-    assert result.frame.color is not None and not result.frame.split
+    assert result.frame.names == ("color",)
 
 
 def test_multipart_channels_found_in_every_part(tmp_path: Path) -> None:
@@ -186,7 +186,7 @@ def test_multipart_channels_found_in_every_part(tmp_path: Path) -> None:
     info = read_info(path)
     assert info.parts == ["beauty", "data"]
     frame = read_frame(path, build_mapping()).frame
-    assert np.array_equal(frame.color, planes(channels, "R", "G", "B"))
+    assert np.array_equal(frame.signal("color").radiance, planes(channels, "R", "G", "B"))
     assert np.array_equal(frame.depth, channels["Z"])
 
     bad = tmp_path / "windows.exr"
@@ -329,7 +329,7 @@ def test_offset_data_window_and_tiled(tmp_path: Path, tiled: bool) -> None:
     assert out.write_image(np.ascontiguousarray(np.stack([channels[n] for n in names], -1)))
     assert out.close()
     frame = read_frame(path, build_mapping()).frame
-    assert np.array_equal(frame.color, planes(channels, "R", "G", "B"))
+    assert np.array_equal(frame.signal("color").radiance, planes(channels, "R", "G", "B"))
     assert np.array_equal(frame.depth, channels["Z"])
     assert np.array_equal(frame.motion, planes(channels, "motion.X", "motion.Y"))
 
@@ -354,7 +354,7 @@ def test_half_colour_and_uint_id_channels_decode_exactly(tmp_path: Path) -> None
         out.write(str(path))
     frame = read_frame(path, build_mapping()).frame
     as_half = channels["direct.R"].astype(np.float16).astype(np.float32)
-    assert np.array_equal(frame.direct[0], as_half)
+    assert np.array_equal(frame.signal("direct").radiance[0], as_half)
     assert np.array_equal(frame.depth, channels["Z"])  # float data stays exact
     assert frame.mesh_id[0, 0] == np.iinfo(np.int32).max
     assert np.array_equal(frame.mesh_id.ravel()[1:], ids.ravel()[1:].astype(np.int32))

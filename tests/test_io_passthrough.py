@@ -215,20 +215,59 @@ def test_float_option_makes_only_the_colour_float(
 
 
 ACESCG = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+AP0 = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
 
 
 def test_chromaticities_pass_through_and_set_luminance_weights(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """An ACEScg file is filtered with ACEScg luminance weights: the CLI's output is
+    bit-identical to a direct Denoiser run on frames carrying those weights and differs
+    from one with Rec.709 weights; the start-up log names them."""
+    from svgf_cli.filters.denoiser import Denoiser
+    from svgf_cli.filters.params import resolve_params
+
     header = {"chromaticities": ACESCG, "adoptedNeutral": (0.32168, 0.33767)}
     folder = sequence(tmp_path, lambda f: [PartSpec(gbuffer(f), header=header)])
-    weights = read_frame(folder / "in.0001.exr", build_mapping()).luminance_weights.weights
-    assert np.allclose(weights, (0.2722, 0.6741, 0.0537), atol=1e-4)
+    result = read_frame(folder / "in.0001.exr", build_mapping())
+    acescg = (0.2722, 0.6741, 0.0537)
+    assert np.allclose(result.luminance_weights.weights, acescg, atol=1e-4)
+    assert result.frame.luminance_weights == result.luminance_weights.weights
     out = denoise(folder, capsys)
     assert "luminance weights R 0.2722, G 0.6741, B 0.0537" in denoise.stdout
     check_all(folder, out, changed={"": RGB})
     (_, header_out, _), = read_parts(out / "o.0001.exr")
     assert np.allclose(header_out["chromaticities"], ACESCG)
+
+    def direct(weights: tuple[float, float, float] | None) -> np.ndarray:
+        denoiser = Denoiser(resolve_params("paper"))
+        for frame in FRAMES:
+            read = read_frame(folder / f"in.{frame:04d}.exr", build_mapping()).frame
+            if weights is not None:
+                read.luminance_weights = weights
+            colour = denoiser.process(read).color
+        return colour
+
+    (_, _, pixels), = read_parts(out / f"o.{FRAMES[-1]:04d}.exr")
+    written = np.stack([pixels[c] for c in "RGB"])
+    assert written.dtype == np.float32
+    assert bits_equal(written, direct(None))
+    assert not np.array_equal(written, direct((0.2126, 0.7152, 0.0722)))
+
+
+def test_negative_luminance_weight_is_dropped_for_the_filter(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """ACES2065-1 (AP0) has a negative blue weight: the filter gets the non-negative variant
+    (``Frame.validate`` refuses a negative weight) and the log says so."""
+    folder = sequence(tmp_path, lambda f: [PartSpec(gbuffer(f), header={"chromaticities": AP0})])
+    result = read_frame(folder / "in.0001.exr", build_mapping())
+    r, g, b = result.frame.luminance_weights
+    assert b == 0.0 and r > 0.3 and g > 0.6 and abs(r + g - 1.0) < 1e-9
+    assert result.luminance_weights.weights[2] < -0.07  # the file's own row, for reports
+    denoise(folder, capsys)
+    assert "B -0.0721" in denoise.stdout
+    assert f"the filter uses R {r:.4f}, G {g:.4f}, B 0.0000" in denoise.stdout
 
 
 def test_debug_layers_never_collide_with_input_layers(
@@ -237,17 +276,17 @@ def test_debug_layers_never_collide_with_input_layers(
     def parts(frame: int) -> list[PartSpec]:
         channels = dict(gbuffer(frame))
         channels["variance.color"] = np.full((H, W), 0.5, np.float32)  # an input AOV
-        channels["history_length"] = np.full((H, W), 3.0, np.float32)
+        channels["history_length.color"] = np.full((H, W), 3.0, np.float32)
         return [PartSpec(channels)]
 
     folder = sequence(tmp_path, parts)
     out = denoise(folder, capsys, "--debug-aovs")
-    added = {"svgf.variance.color", "svgf.history_length", "svgf.color.R"}
+    added = {"svgf.variance.color", "svgf.history_length.color", "svgf.color.R"}
     (_, _, pixels), = read_parts(out / "o.0002.exr")
     assert added <= set(pixels)
     debug = {n for n in pixels if n.startswith("svgf.")}
     check_all(folder, out, changed={"": RGB}, added={"": debug})
-    assert np.all(pixels["variance.color"] == 0.5) and np.all(pixels["history_length"] == 3)
+    assert np.all(pixels["variance.color"] == 0.5) and np.all(pixels["history_length.color"] == 3)
 
 
 def cycles_frame(frame: int, *, reference: bool = False) -> list[PartSpec]:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 from exr_fixtures import PartSpec, gbuffer, write_parts
@@ -27,16 +26,14 @@ class CountingDenoiser:
     def __init__(self, params: SVGFParams, debug: bool) -> None:
         self.frames_processed = 0
 
-    def process(self, frame) -> SimpleNamespace:
+    def process(self, frame) -> DenoisedFrame:
         self.frames_processed += 1
-        colour = frame.color.copy()
+        colour = frame.total_radiance()
         colour[0, 0, 0] = np.nan  # to be caught by the output boundary
         colour[1, 0, 1] = 1e6  # beyond half
-        return SimpleNamespace(
-            color=colour,
-            layers={},
-            warnings=lambda: ["3 input value(s) beyond +-1e15 replaced by 0"],
-        )
+        counts = {"nonfinite": 0, "extreme": 3, "extreme.radiance.direct": 3,
+                  "history_resets": 0}
+        return DenoisedFrame(color=colour, layers={}, counts=counts)
 
     def reset(self) -> None: ...
 
@@ -57,7 +54,8 @@ def test_denoiser_counts_and_output_policy_become_warnings(tmp_path: Path) -> No
     config = RunConfig(params=SVGFParams(), preset="paper", mapping=build_mapping())
     run_sequence([task], config, progress, make_denoiser=CountingDenoiser)
     lines = err.getvalue().splitlines()
-    assert f"WARNING: {path}: 3 input value(s) beyond +-1e15 replaced by 0" in lines
+    assert (f"WARNING: {path}: 3 input value(s) beyond +-1e15 replaced by 0"
+            " (radiance.direct 3)" in lines)
     assert f"WARNING: {path}: 1 non-finite output value(s) set to 0" in lines
     assert (
         f"WARNING: {path}: 1 output value(s) beyond the half-float range clamped to +-65504 "
@@ -75,14 +73,14 @@ def test_build_output_layout(tmp_path: Path) -> None:
     result = read_frame(path, mapping)
     assert result.colour_channels == tuple(f"view.beauty.{c}" for c in "RGB")
     denoised = DenoisedFrame(color=np.ones((3, 8, 12), np.float32),
-                             layers={"history_length": np.zeros((8, 12), np.float32)})
+                             layers={"history_length.color": np.zeros((8, 12), np.float32)})
     task = FrameTask(1, path, tmp_path / "o.exr")
     config = RunConfig(params=SVGFParams(), preset="paper", mapping=mapping, debug_aovs=True,
                        colour_only=True)
     output = build_output(result, denoised, config, task)
     assert output.part_index == 1  # the colour's own part
     assert set(output.channels) == {"view.beauty.R", "view.beauty.G", "view.beauty.B",
-                                    "svgf.history_length"}
+                                    "svgf.history_length.color"}
     assert output.keep_only == {"view.beauty.A"}
     assert output.channels["view.beauty.R"].dtype == np.float32  # the input's type
     assert output.attributes["svgf/kind"] == "denoised"

@@ -41,16 +41,9 @@ class Method(Protocol):
 
 
 def noisy_radiance(frame: Frame) -> np.ndarray:
-    """The frame's unfiltered radiance, composed the way the denoiser composes its output.
-
-    The sum of the signals: ``direct + indirect`` for a split frame, else ``color``. The
-    ``emission`` plane is already part of a signal (direct, or color); the denoiser only
-    uses it to keep emitters out of demodulation, so it is not added again.
-    """
-    radiance = np.zeros_like(frame.albedo)
-    for _, signal in frame.signals():
-        radiance += signal
-    return radiance
+    """The frame's unfiltered radiance, composed the way the denoiser composes its output:
+    the sum of the signals plus the emission."""
+    return frame.total_radiance()
 
 
 class InputMethod:

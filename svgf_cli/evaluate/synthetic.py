@@ -60,14 +60,14 @@ def synthetic_frame(
     direct = reference * DIRECT_SHARE * noise_direct
     indirect = reference * (1.0 - DIRECT_SHARE) * noise_indirect.astype(f32)
 
-    frame = Frame(
+    frame = Frame.direct_indirect(
+        np.ascontiguousarray(direct, f32),
+        np.ascontiguousarray(indirect, f32),
         albedo=np.ascontiguousarray(albedo, f32),
         normal=np.ascontiguousarray(normal),
         depth=np.ascontiguousarray(depth),
         motion=np.ascontiguousarray(motion),
         mesh_id=mesh_id,
-        direct=np.ascontiguousarray(direct, f32),
-        indirect=np.ascontiguousarray(indirect, f32),
     )
     return frame, np.ascontiguousarray(reference)
 
@@ -87,14 +87,15 @@ def write_synthetic_sequence(
     for i in range(frames):
         frame, reference = synthetic_frame(i, width, height)
         number = first + i
-        assert frame.direct is not None and frame.indirect is not None
-        beauty = frame.direct + frame.indirect
+        direct = frame.signal("direct").radiance
+        indirect = frame.signal("indirect").radiance
+        beauty = frame.total_radiance()
         channels = {
             "R": beauty[0],
             "G": beauty[1],
             "B": beauty[2],
-            **{f"direct.{c}": frame.direct[k] for k, c in enumerate("RGB")},
-            **{f"indirect.{c}": frame.indirect[k] for k, c in enumerate("RGB")},
+            **{f"direct.{c}": direct[k] for k, c in enumerate("RGB")},
+            **{f"indirect.{c}": indirect[k] for k, c in enumerate("RGB")},
             **{f"albedo.{c}": frame.albedo[k] for k, c in enumerate("RGB")},
             **{f"N.{c}": frame.normal[k] for k, c in enumerate("XYZ")},
             "Z": frame.depth,

@@ -6,17 +6,22 @@ kernel ``h = (1/16, 1/4, 3/8, 1/4, 1/16)`` dilated by ``s``, each tap weighted b
 
 * ``w_z = exp(-|z(p) - z(q)| / (sigma_z |grad z(p) . (p - q)| + eps))``  (eq. 3)
 * ``w_n = max(0, n(p) . n(q)) ** sigma_n``                                (eq. 4)
-* ``w_l = exp(-|l(p) - l(q)| / (sigma_l sqrt(g3x3(Var(l(p)))) + eps))``  (eq. 5)
+* ``w_l = exp(-|l(p) - l(q)| / (sigma_l sqrt(g3x3(Var(l(p))) + (eps l(p))^2)))``  (eq. 5)
+* ``w = 0`` between pixels of different demodulation modes (``filters.modulate``)
 
 ``c' = sum(h w c) / sum(h w)`` (eq. 1) and the variance is carried with squared weights,
 ``Var' = sum(h^2 w^2 Var) / (sum h w)^2`` (eq. 2). ``g3x3`` is the 3x3 Gaussian (1/4 centre,
-1/8 edge, 1/16 corner), renormalised over in-image surface pixels; it only drives w_l.
+1/8 edge, 1/16 corner), renormalised over in-image surface pixels; it only drives w_l. The
+luminance ``l`` uses the frame's luminance weights; ``eps = 1e-5`` keeps a zero variance
+from making the stop infinitely strict, relative to ``l`` so that scaling the input scales
+the output (the paper's absolute epsilon would not).
 
 How it is fast: the kernel is register-blocked. For one kernel row (a fixed vertical offset)
 a single vectorized loop over pixels evaluates that row's five taps with the running sums in
 registers, so each centre pixel's guides and sums are loaded and stored once per kernel row,
-not once per tap. Direct and indirect share ``h * w_n`` and the w_z exponent; each signal
-then pays one fast polynomial exp. Taps that fall outside the image are given weight 0 and
+not once per tap. The two signals of a pair share ``h * w_n`` and the w_z exponent; each
+signal then pays one fast polynomial exp, and its mode test is a sign compare of the guide
+it loads anyway. Taps that fall outside the image are given weight 0 and
 the centre pixel's address, so the image border runs the same vector loop as the interior.
 The loop touches ~35 arrays; :func:`noalias_njit` tells LLVM the written ones never overlap
 the read ones, which it cannot check cheaply at run time.
@@ -28,7 +33,14 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.edges import DEPTH_EPSILON, DEPTH_TINY
-from svgf_cli.filters.fastmath import FASTMATH, fast_exp, fast_log2, fma, luminance
+from svgf_cli.filters.fastmath import (
+    FASTMATH,
+    fast_exp,
+    fast_log2,
+    float32_weights,
+    fma,
+    luminance,
+)
 from svgf_cli.filters.noalias import check_disjoint, noalias_njit
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
@@ -36,7 +48,14 @@ F32 = np.float32
 U = np.uint64  # unsigned indices: numba adds no negative-index wrap-around, loops vectorize
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
-_VARIANCE_EPSILON = F32(1e-10)
+# The luminance stop's deviation is at least this fraction of the pixel's luminance (so a
+# zero variance never makes the stop infinitely strict, at any brightness) ...
+RELATIVE_DEVIATION_FLOOR = F32(1e-5)
+# ... and at least this (absolute; only black pixels reach it). Keeps 1/scale below 1e20, so
+# |dl| * 1/scale stays finite for every |l| <= 2 * VALUE_LIMIT.
+_MIN_SCALE = F32(1e-20)
+# Radiance-mode guides are -(l + _MODE_OFFSET): strictly negative, so the sign is the mode.
+_MODE_OFFSET = F32(1e-30)
 _TINY_COSINE = F32(1e-30)
 _LN2 = 0.6931471805599453  # sigma_n * ln 2 is formed once per call
 # Pixels per row chunk: the accumulators and the touched row pieces stay in L1/L2.
@@ -51,33 +70,48 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_
 def luminance_stop_guides(
     illumination: np.ndarray,
     variance: np.ndarray,
+    mode: np.ndarray,
+    first_signal: int,
     depth: np.ndarray,
     sigma_luminance: float,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
 ) -> None:
-    """Per pixel and signal: ``l(p)`` and ``1 / (sigma_l sqrt(g3x3(Var)) + eps)`` (eq. 5).
+    """Per pixel and signal: the guide luminance and the inverse scale of eq. 5.
 
-    The 3x3 Gaussian is renormalised over in-image surface pixels (background variance is
-    meaningless); a pixel without any such neighbour keeps its own variance. ``S`` is 1
-    or 2 signals; outputs must not overlap the inputs (checked).
+    ``l = max(0, luminance(c))`` with the frame's ``luminance_weights``; the guide is ``l``
+    where the signal is demodulated and ``-(l + 1e-30)`` where it is filtered as radiance
+    (bit ``first_signal + s`` of the (H, W) uint16 ``mode`` mask), so the a-trous reads the
+    mode of a tap from the sign of the guide it loads anyway.
+    ``1 / max(sigma_l sqrt(g3x3(Var) + (1e-5 l)^2), 1e-20)``: the floor on the deviation
+    is relative to the luminance, so the stop does not depend on the brightness (the
+    absolute 1e-20 only matters on black pixels and keeps every product finite). The 3x3
+    Gaussian is renormalised over in-image surface pixels (background variance is
+    meaningless); a pixel without any such neighbour keeps its own variance.
+    ``S`` is 1 or 2 signals; outputs must not overlap the inputs (checked).
     """
     if illumination.shape[0] not in (1, 2):
         raise ValueError("luminance_stop_guides takes one or two signals")
     check_disjoint(
         {"out_luminance": out_luminance, "out_inverse_scale": out_inverse_scale},
-        {"illumination": illumination, "variance": variance, "depth": depth},
+        {"illumination": illumination, "variance": variance, "mode": mode, "depth": depth},
     )
-    _guide_rows(illumination, variance, depth, F32(sigma_luminance), out_luminance,
-                out_inverse_scale, np.int64(get_num_threads()))
+    _guide_rows(illumination, variance, mode, np.int64(first_signal), depth,
+                F32(sigma_luminance),
+                float32_weights(luminance_weights), out_luminance, out_inverse_scale,
+                np.int64(get_num_threads()))
 
 
 @njit(parallel=True, **_JIT)
 def _guide_rows(
     illumination: np.ndarray,
     variance: np.ndarray,
+    mode: np.ndarray,
+    first_signal: int,
     depth: np.ndarray,
     sigma_luminance: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
     threads: int,
@@ -90,8 +124,8 @@ def _guide_rows(
             continue
         # Surface weight, then the weighted variance sums of both signals.
         sums = np.empty((3, depth.shape[1]), dtype=np.float32)
-        _guide_row(y, sums, illumination, variance, depth, sigma_luminance,
-                   out_luminance, out_inverse_scale)
+        _guide_row(y, sums, illumination, variance, mode, first_signal, depth, sigma_luminance,
+                   luminance_weights, out_luminance, out_inverse_scale)
 
 
 @noalias_njit(**_JIT)
@@ -100,8 +134,11 @@ def _guide_row(
     sums: np.ndarray,
     illumination: np.ndarray,
     variance: np.ndarray,
+    mode: np.ndarray,
+    first_signal: int,
     depth: np.ndarray,
     sigma_luminance: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
 ) -> None:
@@ -149,15 +186,16 @@ def _guide_row(
     for s in range(num_signals):
         for i in range(width):
             x = U(i)
-            out_luminance[s, uy, x] = luminance(
-                illumination[s, 0, uy, x], illumination[s, 1, uy, x], illumination[s, 2, uy, x]
-            )
+            lum = max(luminance(illumination[s, 0, uy, x], illumination[s, 1, uy, x],
+                                illumination[s, 2, uy, x], luminance_weights), _ZERO)
+            radiance_mode = (mode[uy, x] >> (first_signal + s)) & 1 != 0
+            out_luminance[s, uy, x] = -(lum + _MODE_OFFSET) if radiance_mode else lum
             weight = sums[0, x]
             own = variance[s, uy, x]
             filtered = sums[1 + s, x] / weight if weight > _ZERO else own
-            out_inverse_scale[s, uy, x] = _ONE / (
-                sigma_luminance * np.sqrt(max(filtered, _ZERO) + _VARIANCE_EPSILON)
-            )
+            floor = RELATIVE_DEVIATION_FLOOR * lum
+            scale = sigma_luminance * np.sqrt(max(filtered, _ZERO) + floor * floor)
+            out_inverse_scale[s, uy, x] = _ONE / max(scale, _MIN_SCALE)
 
 
 def atrous_iteration(
@@ -178,9 +216,11 @@ def atrous_iteration(
 ) -> None:
     """One a-trous iteration at ``step`` over (S, 3, H, W) illumination and (S, H, W) variance.
 
-    ``S`` is 1 (combined colour) or 2 (direct and indirect). ``guide_*`` come from
-    :func:`luminance_stop_guides` for the same input. Background pixels (zero normal)
-    receive no weight from surfaces and pass through unchanged. Without
+    ``S`` is 1 or 2 signals (the Denoiser filters its signals in pairs). ``guide_*`` come
+    from :func:`luminance_stop_guides` for the same input: a tap whose guide has another
+    sign than the centre's (another demodulation mode) gets weight 0 for that signal.
+    Background pixels (zero normal) receive no weight from surfaces and pass through
+    unchanged. Without
     ``propagate_variance`` (the last iteration: nothing reads its variance) ``out_variance``
     is not touched. Outputs must not overlap any input (checked).
     """
@@ -442,8 +482,13 @@ def _tap(
     log_normal = normal_log_scale * fast_log2(max(cosine, _TINY_COSINE))
     shared = log_normal - depth_exponent
     weight = kernel if cosine > _ZERO else _ZERO
-    w0 = weight * fast_exp(shared - abs(lum0 - guide_luminance[0, uq, qx]) * inv0)
-    w1 = weight * fast_exp(shared - abs(lum1 - guide_luminance[second, uq, qx]) * inv1)
+    guide0 = guide_luminance[0, uq, qx]
+    guide1 = guide_luminance[second, uq, qx]
+    w0 = weight * fast_exp(shared - abs(lum0 - guide0) * inv0)
+    w1 = weight * fast_exp(shared - abs(lum1 - guide1) * inv1)
+    # The guide's sign is the demodulation mode: modes never exchange weight.
+    w0 = w0 if (guide0 < _ZERO) == (lum0 < _ZERO) else _ZERO
+    w1 = w1 if (guide1 < _ZERO) == (lum1 < _ZERO) else _ZERO
     return (
         acc[0] + w0,
         fma(w0, illumination[0, 0, uq, qx], acc[1]),

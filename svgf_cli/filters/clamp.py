@@ -26,9 +26,16 @@ _ONE = F32(1.0)
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def firefly_clamp(
-    illumination: np.ndarray, depth: np.ndarray, k: np.float32, out: np.ndarray
+    illumination: np.ndarray,
+    depth: np.ndarray,
+    k: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    out: np.ndarray,
 ) -> None:
-    """Clamp luminance to mean + k*sigma of the 8 neighbours, scaling rgb. (S, 3, H, W)."""
+    """Clamp luminance to mean + k*sigma of the 8 neighbours, scaling rgb. (S, 3, H, W).
+
+    Neighbours are counted within the signal as they come (the demodulation mode is not
+    consulted: the clamp is an optional, biased extra)."""
     num_signals = illumination.shape[0]
     height, width = depth.shape
     for y in prange(height):
@@ -53,6 +60,7 @@ def firefly_clamp(
                             illumination[s, 0, yy, xx],
                             illumination[s, 1, yy, xx],
                             illumination[s, 2, yy, xx],
+                            luminance_weights,
                         )
                         count += 1
                         total += lum_q
@@ -62,7 +70,7 @@ def firefly_clamp(
                 mean = total / F32(count)
                 sigma = np.sqrt(max(total_sq / F32(count) - mean * mean, _ZERO))
                 limit = max(mean + k * sigma, _ZERO)
-                lum = luminance(r, g, b)
+                lum = luminance(r, g, b, luminance_weights)
                 if lum > limit:
                     scale = limit / lum
                     out[s, 0, y, x] = r * scale
@@ -82,15 +90,18 @@ def history_clamp(
 ) -> None:
     """In place: clamp each history channel to the current 3x3 mean +- k*sigma.
 
-    ``history`` and ``current`` are (S, 3, H, W); pixels without history are left alone.
+    ``history`` and ``current`` are (S, 3, H, W), ``history_length`` (S, H, W); a signal's
+    pixels without history are left alone.
     """
     num_signals = history.shape[0]
     height, width = depth.shape
     for y in prange(height):
         for x in range(width):
-            if history_length[y, x] <= _ZERO or depth[y, x] <= _ZERO:
+            if depth[y, x] <= _ZERO:
                 continue
             for s in range(num_signals):
+                if history_length[s, y, x] <= _ZERO:
+                    continue
                 for c in range(3):
                     count = 0
                     total = _ZERO

@@ -1,18 +1,20 @@
 """The SVGF denoiser: owns the history buffers and runs the stages in order.
 
-Per frame: geometry gradients -> demodulate (+ optional firefly clamp) -> reproject the
-history (+ optional history clamp) -> accumulate -> variance -> a-trous iterations (the
-``feedback_iteration`` output becomes next frame's colour history) -> remodulate, add
-emission, sum the signals, restore background -> optional TAA.
+Per frame: input values (``values``) -> geometry gradients -> demodulate every signal, with
+its per-pixel mode (+ optional firefly clamp) -> reproject every signal's history -> the
+pre-accumulation hook (optional history clamp; anti-lag goes here) -> accumulate -> variance
+-> a-trous iterations over pairs of signals (the ``feedback_iteration`` output becomes next
+frame's colour history) -> history guard -> remodulate, sum the signals, add emission,
+restore background -> optional TAA.
 
-All buffers are float32 structure-of-arrays planes, allocated once per resolution and
-reused, so memory does not grow with the sequence length. Scratch is shared between stages
-(names are roles; a buffer is taken on first use): the reprojected history is accumulated in
-place, the a-trous ping-pong reuses the demodulated illumination once it is dead, the
-reprojection thresholds live in the a-trous variance buffers until those are needed, and the
-output radiance is a fresh array per frame handed to the caller (no resident copy).
-At 1080p with two signals the resident set is about 60 float32 planes (~0.5 GB) including
-the history.
+All buffers are float32 structure-of-arrays planes (the mode mask uint16), allocated once per
+resolution and signal count and reused, so memory does not grow with the sequence length.
+Scratch is shared between stages (names are roles; a buffer is taken on first use): the
+reprojected history is accumulated in place, the a-trous ping-pong reuses the demodulated
+illumination once it is dead, the reprojection thresholds live in the a-trous variance
+buffers until those are needed, and the output radiance is a fresh array per frame handed to
+the caller (no resident copy). At 1080p with two signals the resident set is about 60
+float32 planes (~0.5 GB) including the history.
 """
 
 from __future__ import annotations
@@ -24,35 +26,43 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from svgf_cli.filters import modulate, values
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.edges import normal_squarings
+from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
-from svgf_cli.filters.modulate import (
-    demodulate,
-    filter_normals,
-    remodulate,
-    remodulate_add,
-    restore_background,
-)
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.reproject import accumulate_in_place, reproject
 from svgf_cli.filters.taa import taa_resolve
 from svgf_cli.filters.variance import estimate_variance
-from svgf_cli.frame import DenoisedFrame, Frame
+from svgf_cli.frame import DenoisedFrame, Frame, Signal
 
 F32 = np.float32
 
-# Arrays that make up the persistent history; state() returns exactly these (plus metadata).
-_HISTORY_KEYS = (
-    "history_illumination",
-    "history_moments",
-    "history_length",
-    "prev_depth",
-    "prev_normal",
-    "prev_mesh_id",
-)
+# Version of the state() layout: 2 = per-signal history length and modes, named signals.
+STATE_FORMAT = 2
 
+# A demodulation colour whose brightest channel exceeds this is not a reflectance (1 plus a
+# tolerance for pixel-filter overshoot and half-float storage): such pixels are filtered as
+# radiance.
+MAX_REFLECTANCE = 1.05
+# Per-channel demodulation floor relative to the pixel's brightest albedo channel (bounds
+# the remodulation gain within a pixel's colour; see filters.modulate and
+# bench/demodulation_floor.py).
+RELATIVE_ALBEDO_FLOOR = 0.02
+
+# Arrays that make up the persistent history; state() returns exactly these (plus metadata).
+_HISTORY_SHAPES = {
+    # name: (shape given (S, H, W), dtype)
+    "history_illumination": (lambda s, h, w: (s, 3, h, w), F32),
+    "history_moments": (lambda s, h, w: (s, 2, h, w), F32),
+    "history_length": (lambda s, h, w: (s, h, w), F32),
+    "history_mode": (lambda s, h, w: (h, w), np.uint16),
+    "prev_depth": (lambda s, h, w: (h, w), F32),
+    "prev_normal": (lambda s, h, w: (3, h, w), F32),
+    "prev_mesh_id": (lambda s, h, w: (h, w), np.int32),
+}
 
 # Illumination-shaped (S, 3, H, W) scratch roles, in order of preference for a-trous outputs.
 _ILLUMINATION_SCRATCH = ("demodulated", "accumulated", "spare_a", "spare_b", "spare_c")
@@ -71,40 +81,89 @@ class _Workspace:
     num_signals: int
     planes: dict[str, np.ndarray] = field(default_factory=dict)
 
-    def shape(self, name: str) -> tuple[int, ...]:
+    def shape(self, name: str) -> tuple[tuple[int, ...], type]:
         h, w, s = self.height, self.width, self.num_signals
         if name in _ILLUMINATION_SCRATCH:
-            return (s, 3, h, w)
-        shapes: dict[str, tuple[int, ...]] = {
-            "normal": (3, h, w),
-            "filter_normal": (3, h, w),
-            "ddx": (h, w),
-            "ddy": (h, w),
+            return (s, 3, h, w), F32
+        shapes: dict[str, tuple[tuple[int, ...], type]] = {
+            "normal": ((3, h, w), F32),
+            "ddx": ((h, w), F32),
+            "ddy": ((h, w), F32),
+            "mode": ((h, w), np.uint16),
             # resampled and then (in place) accumulated moments and history length
-            "moments": (s, 2, h, w),
-            "history_length": (h, w),
-            "variance": (s, h, w),
-            "variance_a": (s, h, w),
-            "variance_b": (s, h, w),
-            "guide_luminance": (s, h, w),
-            "guide_inverse_scale": (s, h, w),
-            "taa": (3, h, w),
+            "moments": ((s, 2, h, w), F32),
+            "history_length": ((s, h, w), F32),
+            "variance": ((s, h, w), F32),
+            "variance_a": ((s, h, w), F32),
+            "variance_b": ((s, h, w), F32),
+            "guide_luminance": ((s, h, w), F32),
+            "guide_inverse_scale": ((s, h, w), F32),
+            "taa": ((3, h, w), F32),
         }
         return shapes[name]
 
     def __getitem__(self, name: str) -> np.ndarray:
         plane = self.planes.get(name)
         if plane is None:
-            plane = np.zeros(self.shape(name), dtype=F32)
+            shape, dtype = self.shape(name)
+            plane = np.zeros(shape, dtype=dtype)
             self.planes[name] = plane
         return plane
+
+
+@dataclass
+class TemporalState:
+    """What the Denoiser holds between reprojection and accumulation (the anti-lag hook).
+
+    All arrays are the Denoiser's own buffers, (S, ...) with one entry per signal, in the
+    order of ``names``. ``history_*`` are last frame's history resampled at this frame's
+    pixels (``history_length`` 0 = no history); ``current`` is this frame's demodulated
+    illumination (after the optional firefly clamp); ``mode`` is the (H, W) uint16 mask of
+    its demodulation modes (bit s set: signal s is filtered as radiance at that pixel).
+    A stage here may change the history in place; lowering ``history_length[s]`` at a
+    pixel raises that signal's blend factor there, since accumulation uses
+    ``alpha = max(alpha, 1 / (h + 1))`` per signal (h = 0: the current frame alone).
+    """
+
+    names: tuple[str, ...]
+    current: np.ndarray
+    mode: np.ndarray
+    history_illumination: np.ndarray
+    history_moments: np.ndarray
+    history_length: np.ndarray
+    depth: np.ndarray
+    luminance_weights: tuple[np.float32, np.float32, np.float32]
 
 
 class Denoiser:
     """Spatiotemporal variance-guided filtering of a frame sequence (Schied et al. 2017).
 
     Feed frames in sequence order to :meth:`process`; the history persists between calls.
-    ``stage_seconds`` holds the wall time of each stage of the last frame (for benchmarks).
+    A frame carries any number of named signals (``Frame.signals``); each is filtered on
+    its own, with its own history (illumination, luminance moments, history length,
+    demodulation mode per pixel) and variance, and the filtered signals are summed with the
+    emission added back. The signal names must stay the same for the whole sequence.
+
+    Per signal and pixel, a mode (``filters.modulate``): demodulated by the signal's colour
+    where that is a plausible reflectance (brightest channel in ``[albedo_epsilon,
+    MAX_REFLECTANCE]``, per-channel floor ``max(albedo_epsilon, RELATIVE_ALBEDO_FLOOR *
+    brightest)``), else filtered as radiance. Modes never exchange weight (a-trous, spatial
+    variance) nor history (reprojection).
+
+    Values (``filters.values``): non-finite and beyond-1e15 inputs are replaced and counted,
+    demodulated values are clamped to +-1e15, the history can never hold a non-finite value.
+    :attr:`DenoisedFrame.counts` reports all of it per frame (``frame.COUNT_KEYS``).
+
+    **Anti-lag hook.** After reprojection and before accumulation, :meth:`process` builds a
+    :class:`TemporalState` (per signal: the reprojected history illumination, moments and
+    length, the current demodulated illumination and its mode) and calls
+    :meth:`_before_accumulation` with it (today: the optional history clamp). Accumulation
+    derives each signal's blend factor from that signal's own history length,
+    ``alpha = max(alpha, 1/h)`` with ``h = min(cap, h_prev + 1)``, so an anti-lag stage only
+    needs to lower ``history_length[s]`` per pixel (and may adjust the history itself).
+
+    ``stage_seconds`` / ``stage_cpu_seconds`` hold the wall and process CPU time of each
+    stage of the last frame (for benchmarks).
     """
 
     def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
@@ -112,18 +171,25 @@ class Denoiser:
         self.params = params
         self.debug_layers = debug_layers
         self._squarings = normal_squarings(params.sigma_normal)
+        self._rule = (F32(params.albedo_epsilon), F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
         self._work: _Workspace | None = None
         self._signal_names: tuple[str, ...] | None = None
         self._history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
+        self.stage_cpu_seconds: dict[str, float] = {}
 
     # ----------------------------------------------------------------- public API
     @property
     def frames_processed(self) -> int:
         """Frames processed since construction or the last :meth:`reset`."""
         return self._frames_processed
+
+    @property
+    def signal_names(self) -> tuple[str, ...] | None:
+        """The signals of the sequence so far (None before the first frame)."""
+        return self._signal_names
 
     def reset(self) -> None:
         """Drop all history: the next frame is processed cold."""
@@ -136,52 +202,47 @@ class Denoiser:
         """Denoise the next frame of the sequence."""
         frame.validate()
         frame = _writable(frame)
-        signals = frame.signals()
-        names = tuple(name for name, _ in signals)
-        height, width = frame.height, frame.width
-        work = self._workspace(height, width, len(signals))
+        names = frame.names
+        if len(names) > modulate.MAX_SIGNALS:
+            raise ValueError(f"at most {modulate.MAX_SIGNALS} signals, got {len(names)}")
         if self._signal_names is not None and self._signal_names != names:
             raise ValueError(
                 f"signals changed from {'+'.join(self._signal_names)} to {'+'.join(names)}"
             )
+        height, width = frame.height, frame.width
+        work = self._workspace(height, width, len(names))
         self._signal_names = names
         p = self.params
+        weights = float32_weights(frame.luminance_weights)
+        counts: dict[str, int] = {"nonfinite": 0, "extreme": 0, "history_resets": 0}
         timings: dict[str, float] = {}
-        clock = time.perf_counter()
+        cpu_timings: dict[str, float] = {}
+        clock = [time.perf_counter(), time.process_time()]
 
         def lap(stage: str) -> None:
-            nonlocal clock
-            now = time.perf_counter()
-            timings[stage] = timings.get(stage, 0.0) + now - clock
-            clock = now
+            now = (time.perf_counter(), time.process_time())
+            timings[stage] = timings.get(stage, 0.0) + now[0] - clock[0]
+            cpu_timings[stage] = cpu_timings.get(stage, 0.0) + now[1] - clock[1]
+            clock[:] = now
 
-        depth = frame.depth
+        depth, normal_in, motion = self._clean_geometry(frame, counts)
+        lap("values")
+
         normal = work["normal"]
-        unit_normals(frame.normal, depth, normal)
+        unit_normals(normal_in, depth, normal)
         # The reprojection thresholds are only needed until the a-trous writes variance:
         # they borrow its variance buffers (one (H, W) plane each, also with one signal).
         depth_slope = work["variance_a"][0]
         normal_width = work["variance_b"][0]
         depth_gradients(depth, work["ddx"], work["ddy"], depth_slope)
         normal_gradient(normal, depth, normal_width)
-        # Spatial weights use filter_normal (negated where not demodulated); reprojection
-        # compares the true normals.
-        filter_normal = work["filter_normal"]
-        filter_normals(normal, frame.albedo, F32(p.albedo_epsilon), filter_normal)
         lap("gradients")
 
-        # Demodulate each signal; emission belongs to direct (split) or color (combined).
-        emission = frame.emission
-        has_emission = emission is not None
-        # Without emission any (3, H, W) float32 plane will do: the kernels never read it.
-        emission_plane = emission if emission is not None else frame.albedo
-        eps = F32(p.albedo_epsilon)
         illumination = work["demodulated"]
-        for index, (_, signal) in enumerate(signals):
-            demodulate(signal, emission_plane, has_emission and index == 0, frame.albedo, eps,
-                       illumination[index])
+        mode = work["mode"]
+        self._demodulate(frame.signals, depth, illumination, mode, counts)
         if p.firefly_clamp > 0.0:
-            firefly_clamp(illumination, depth, F32(p.firefly_clamp), work["spare_a"])
+            firefly_clamp(illumination, depth, F32(p.firefly_clamp), weights, work["spare_a"])
             illumination = work["spare_a"]
         lap("demodulate")
 
@@ -192,15 +253,16 @@ class Denoiser:
         history = self._history
         if p.temporal and history is not None:
             reproject(
-                frame.motion, depth, normal, frame.mesh_id, depth_slope, normal_width,
+                motion, depth, normal, frame.mesh_id, mode, depth_slope, normal_width,
                 history["prev_depth"], history["prev_normal"], history["prev_mesh_id"],
-                history["history_illumination"], history["history_moments"],
-                history["history_length"], F32(p.depth_tolerance), F32(p.depth_slack),
-                F32(p.normal_tolerance), accumulated, moments, history_length,
+                history["history_mode"], history["history_illumination"],
+                history["history_moments"], history["history_length"], F32(p.depth_tolerance),
+                F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
+                history_length,
             )
-            if p.history_clamp > 0.0:
-                history_clamp(accumulated, history_length, illumination, depth,
-                              F32(p.history_clamp))
+            self._before_accumulation(TemporalState(
+                names, illumination, mode, accumulated, moments, history_length, depth, weights,
+            ))
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
             history_length.fill(0.0)
@@ -208,7 +270,7 @@ class Denoiser:
             moments.fill(0.0)
         accumulate_in_place(
             illumination, accumulated, moments, history_length, depth, F32(p.alpha),
-            F32(p.moments_alpha), F32(p.history_cap),
+            F32(p.moments_alpha), F32(p.history_cap), weights,
         )
         busy = {"accumulated"}  # the demodulated (and clamped) illumination is dead now
         lap("reproject")
@@ -227,7 +289,7 @@ class Denoiser:
             filtered_name = scratch(*busy)
             blurred = work[filtered_name]
         estimate_variance(
-            accumulated, moments, history_length, depth, work["ddx"], work["ddy"], filter_normal,
+            accumulated, moments, history_length, mode, depth, work["ddx"], work["ddy"], normal,
             history_threshold=float(p.variance_history_threshold),
             radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
             sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
@@ -249,9 +311,8 @@ class Denoiser:
             variance_names = ("variance_a", "variance", "variance_b")
         guide_luminance = work["guide_luminance"]
         guide_inverse_scale = work["guide_inverse_scale"]
+        pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]
         for iteration in range(p.atrous_iterations):
-            luminance_stop_guides(filtered, filtered_variance, depth, F32(p.sigma_luminance),
-                                  guide_luminance, guide_inverse_scale)
             out_name = scratch(filtered_name_now, history_name)
             if iteration == feedback:
                 history_name = out_name
@@ -262,79 +323,76 @@ class Denoiser:
                     work[v] for v in variance_names if work[v] is not filtered_variance
                 )
             out_illumination = work[out_name]
-            atrous_iteration(
-                filtered, filtered_variance, guide_luminance, guide_inverse_scale, depth,
-                work["ddx"], work["ddy"], filter_normal, 1 << iteration, p.sigma_depth,
-                p.sigma_normal, propagate, out_illumination, out_variance,
-            )
+            # Signals in pairs: the kernel is register-blocked for two, sharing the geometry.
+            for pair in pairs:
+                luminance_stop_guides(
+                    filtered[pair], filtered_variance[pair], mode, pair.start, depth,
+                    F32(p.sigma_luminance), weights, guide_luminance[pair],
+                    guide_inverse_scale[pair],
+                )
+                atrous_iteration(
+                    filtered[pair], filtered_variance[pair], guide_luminance[pair],
+                    guide_inverse_scale[pair], depth, work["ddx"], work["ddy"], normal,
+                    1 << iteration, p.sigma_depth, p.sigma_normal, propagate,
+                    out_illumination[pair], out_variance[pair],
+                )
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
         lap("atrous")
 
         # Hand this frame's buffers to the history by swapping (no copies); the workspace
         # takes the stale history arrays and overwrites them next frame.
-        self._store_history(frame, history_name)
-        lap("reproject")
+        self._store_history(frame, depth, history_name, counts)
+        lap("history")
 
-        # Remodulate, restore the background and sum the signals straight into a fresh
-        # output array (handed to the caller, so nothing full-frame stays resident).
-        radiance = np.zeros((3, height, width), dtype=F32)
-        layers: dict[str, np.ndarray] = {}
-        for index, (name, signal) in enumerate(signals):
-            if self.debug_layers:
-                signal_radiance = np.empty((3, height, width), dtype=F32)
-                remodulate(filtered[index], emission_plane, has_emission and index == 0,
-                           frame.albedo, eps, signal_radiance)
-                restore_background(signal_radiance, signal, depth)
-                radiance += signal_radiance
-                for c, channel in enumerate("RGB"):
-                    layers[f"{name}.{channel}"] = signal_radiance[c]
-                layers[f"variance.{name}"] = variance[index].copy()
-            else:
-                remodulate_add(filtered[index], signal, emission_plane,
-                               has_emission and index == 0, frame.albedo, eps, depth, radiance)
-        if self.debug_layers:
-            layers["history_length"] = history_length.copy()
+        output, layers = self._compose(frame, filtered, variance, history_length, mode, depth,
+                                       counts)
         lap("modulate")
 
         if p.taa:
             if self._taa_previous is None:
-                self._taa_previous = radiance.copy()
+                self._taa_previous = output.copy()
             else:
-                taa_resolve(radiance, self._taa_previous, frame.motion, F32(p.taa_alpha),
-                            work["taa"])
+                taa_resolve(output, self._taa_previous, motion, F32(p.taa_alpha), work["taa"])
                 np.copyto(self._taa_previous, work["taa"])
             output = self._taa_previous.copy()
             lap("taa")
-        else:
-            output = radiance
 
         self._frames_processed += 1
         self.stage_seconds = timings
-        return DenoisedFrame(color=output, layers=layers)
+        self.stage_cpu_seconds = cpu_timings
+        return DenoisedFrame(color=output, layers=layers, counts=counts)
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""
         state: dict[str, np.ndarray] = {
+            "format_version": np.array(STATE_FORMAT, dtype=np.int64),
             "params": _encode(self.params.to_json()),
             "frames_processed": np.array(self._frames_processed, dtype=np.int64),
         }
         if self._signal_names is not None:
             state["signals"] = _encode(",".join(self._signal_names))
         if self._history is not None:
-            for key in _HISTORY_KEYS:
+            for key in _HISTORY_SHAPES:
                 state[key] = self._history[key].copy()
         if self._taa_previous is not None:
             state["taa_previous"] = self._taa_previous.copy()
         return state
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
-        """Continue from :meth:`state`; ValueError if it was saved with other params/shapes."""
+        """Continue from :meth:`state`; ValueError if it was saved by another state format,
+        with other parameters or with inconsistent shapes."""
         try:
+            version = int(np.asarray(state["format_version"])) if "format_version" in state else 1
             saved_params = _decode(state["params"])
             frames = int(np.asarray(state["frames_processed"]))
         except (KeyError, TypeError, ValueError, UnicodeDecodeError) as exc:
             raise ValueError(f"not a denoiser state: {exc}") from exc
+        if version != STATE_FORMAT:
+            raise ValueError(
+                f"denoiser state has format {version}, this version reads format "
+                f"{STATE_FORMAT} (per-signal history); rebuild the history with a warm-up"
+            )
         if json.loads(saved_params) != json.loads(self.params.to_json()):
             raise ValueError("denoiser state was saved with different parameters")
         names = tuple(_decode(state["signals"]).split(",")) if "signals" in state else None
@@ -342,25 +400,25 @@ class Denoiser:
         if "history_illumination" in state:
             if names is None:
                 raise ValueError("denoiser state has history but no signal names")
-            missing = [k for k in _HISTORY_KEYS if k not in state]
+            missing = [k for k in _HISTORY_SHAPES if k not in state]
             if missing:
                 raise ValueError(f"denoiser state lacks {', '.join(missing)}")
             height, width = np.asarray(state["prev_depth"]).shape
-            s = len(names)
-            expected = {
-                "history_illumination": ((s, 3, height, width), F32),
-                "history_moments": ((s, 2, height, width), F32),
-                "history_length": ((height, width), F32),
-                "prev_depth": ((height, width), F32),
-                "prev_normal": ((3, height, width), F32),
-                "prev_mesh_id": ((height, width), np.int32),
-            }
             history = {}
-            for key, (shape, dtype) in expected.items():
+            for key, (shape_of, dtype) in _HISTORY_SHAPES.items():
                 array = np.asarray(state[key])
+                shape = shape_of(len(names), height, width)
                 if array.shape != shape:
-                    raise ValueError(f"denoiser state {key}: shape {array.shape}, expected {shape}")
+                    raise ValueError(
+                        f"denoiser state {key}: shape {array.shape}, expected {shape} for "
+                        f"signals {'+'.join(names)}"
+                    )
                 history[key] = np.array(array, dtype=dtype, copy=True, order="C")
+            # A state file is input too: it must obey the value policy.
+            values.reset_nonfinite_history(
+                history["history_illumination"], history["history_moments"],
+                history["history_length"], history["history_mode"],
+            )
         taa_previous = None
         if "taa_previous" in state:
             taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
@@ -370,6 +428,84 @@ class Denoiser:
         self._taa_previous = taa_previous
         self._signal_names = names
         self._frames_processed = frames
+
+    # ----------------------------------------------------------------- stages
+    def _clean_geometry(
+        self, frame: Frame, counts: dict[str, int]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Depth, normal and motion obeying the value policy: the frame's own planes when
+        they are clean (the common case: a read-only scan), cleaned copies otherwise."""
+        cleaners = (("depth", frame.depth, values.cleaned_depth),
+                    ("normal", frame.normal, values.cleaned_normal),
+                    ("motion", frame.motion, values.cleaned_motion))
+        found = values.count_geometry(frame.depth, frame.normal, frame.motion)
+        planes = []
+        for name, plane, cleaned in cleaners:
+            nonfinite, extreme = found[name]
+            if name == "motion":
+                extreme = 0  # far-away motion only means "no history": nothing overflows
+            _add(counts, "nonfinite", name, nonfinite)
+            _add(counts, "extreme", name, extreme)
+            planes.append(cleaned(plane) if nonfinite or extreme else plane)
+        return planes[0], planes[1], planes[2]
+
+    def _demodulate(self, signals: list[Signal], depth: np.ndarray, out: np.ndarray,
+                    mode: np.ndarray, counts: dict[str, int]) -> None:
+        rows = np.zeros((depth.shape[0], modulate.DEMODULATE_COUNTERS), dtype=np.int64)
+        for index, signal in enumerate(signals):
+            modulate.demodulate(signal.radiance, signal.albedo, depth, *self._rule,
+                                index, out[index], mode, rows)
+            total = rows.sum(axis=0)
+            name = signal.name
+            _add(counts, "nonfinite", f"radiance.{name}", int(total[modulate.NONFINITE_RADIANCE]))
+            _add(counts, "extreme", f"radiance.{name}", int(total[modulate.EXTREME_RADIANCE]))
+            _add(counts, "nonfinite", f"albedo.{name}", int(total[modulate.NONFINITE_ALBEDO]))
+            counts[f"clamped.{name}"] = int(total[modulate.CLAMPED])
+            counts[f"radiance_mode.{name}"] = int(total[modulate.RADIANCE_MODE])
+            counts[f"implausible_albedo.{name}"] = int(total[modulate.IMPLAUSIBLE])
+
+    def _before_accumulation(self, temporal: TemporalState) -> None:
+        """Adjust the reprojected history before it is blended (the anti-lag hook)."""
+        p = self.params
+        if p.history_clamp > 0.0:
+            history_clamp(temporal.history_illumination, temporal.history_length,
+                          temporal.current, temporal.depth, F32(p.history_clamp))
+
+    def _compose(
+        self, frame: Frame, filtered: np.ndarray, variance: np.ndarray,
+        history_length: np.ndarray, mode: np.ndarray, depth: np.ndarray,
+        counts: dict[str, int],
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Remodulate, restore the background, sum the signals and add the emission straight
+        into a fresh output array (handed to the caller, so nothing full-frame stays
+        resident); the debug layers when asked."""
+        height, width = depth.shape
+        radiance = np.zeros((3, height, width), dtype=F32)
+        emission = frame.emission
+        has_emission = emission is not None
+        # Without emission any (3, H, W) float32 plane will do: the kernel never reads it.
+        emission_plane = emission if emission is not None else radiance
+        rows = np.zeros((height, 2), dtype=np.int64)
+        layers: dict[str, np.ndarray] = {}
+        for index, signal in enumerate(frame.signals):
+            add_emission = has_emission and index == 0
+            modulate.remodulate_add(filtered[index], signal.radiance, signal.albedo, depth,
+                                    emission_plane, add_emission, *self._rule, radiance, rows)
+            if add_emission:
+                total = rows.sum(axis=0)
+                _add(counts, "nonfinite", "emission", int(total[0]))
+                _add(counts, "extreme", "emission", int(total[1]))
+            if self.debug_layers:
+                name = signal.name
+                alone = np.zeros((3, height, width), dtype=F32)
+                modulate.remodulate_add(filtered[index], signal.radiance, signal.albedo, depth,
+                                        emission_plane, False, *self._rule, alone, rows)
+                for c, channel in enumerate("RGB"):
+                    layers[f"{name}.{channel}"] = alone[c]
+                layers[f"variance.{name}"] = variance[index].copy()
+                layers[f"history_length.{name}"] = history_length[index].copy()
+                layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
+        return radiance, layers
 
     # ----------------------------------------------------------------- internals
     def _resolution(self) -> tuple[int, int] | None:
@@ -394,42 +530,58 @@ class Denoiser:
             self._work = work
         return work
 
-    def _store_history(self, frame: Frame, illumination_name: str) -> None:
+    def _store_history(self, frame: Frame, depth: np.ndarray, illumination_name: str,
+                       counts: dict[str, int]) -> None:
         work = self._work
         assert work is not None
         history = self._history
         if history is None or history["history_illumination"].shape != (
             work[illumination_name].shape
         ):
-            history = {
-                "history_illumination": np.zeros_like(work[illumination_name]),
-                "history_moments": np.zeros_like(work["moments"]),
-                "history_length": np.zeros_like(work["history_length"]),
-                "prev_depth": np.empty_like(frame.depth),
-                "prev_normal": np.empty_like(work["normal"]),
-                "prev_mesh_id": np.empty_like(frame.mesh_id),
-            }
+            h, w, s = work.height, work.width, work.num_signals
+            history = {key: np.zeros(shape_of(s, h, w), dtype=dtype)
+                       for key, (shape_of, dtype) in _HISTORY_SHAPES.items()}
             self._history = history
         for key, name in (
             ("history_illumination", illumination_name),
             ("history_moments", "moments"),
             ("history_length", "history_length"),
+            ("history_mode", "mode"),
             ("prev_normal", "normal"),
         ):
             history[key], work.planes[name] = work.planes[name], history[key]
         # The frame's planes belong to the caller: copy.
-        np.copyto(history["prev_depth"], frame.depth)
+        np.copyto(history["prev_depth"], depth)
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
+        counts["history_resets"] += values.reset_nonfinite_history(
+            history["history_illumination"], history["history_moments"],
+            history["history_length"], history["history_mode"],
+        )
+
+
+def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
+    """Add to a total (``kind``) and, when non-zero, to its per-plane breakdown."""
+    counts[kind] = counts.get(kind, 0) + value
+    if value:
+        counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
 
 
 def _writable(frame: Frame) -> Frame:
     """The frame with read-only planes copied: numba compiles a separate version of every
     kernel for read-only arrays, which would double the JIT time for no benefit."""
+
+    def own(plane: np.ndarray) -> np.ndarray:
+        return plane if plane.flags.writeable else plane.copy()
+
     planes = {}
     for f in dataclasses.fields(frame):
         plane = getattr(frame, f.name)
         if isinstance(plane, np.ndarray) and not plane.flags.writeable:
             planes[f.name] = plane.copy()
+    if any(not s.radiance.flags.writeable or not s.albedo.flags.writeable
+           for s in frame.signals):
+        planes["signals"] = [Signal(s.name, own(s.radiance), own(s.albedo))
+                             for s in frame.signals]
     return dataclasses.replace(frame, **planes) if planes else frame
 
 

@@ -27,10 +27,8 @@ F32 = np.float32
 # make every build of a kernel round identically, so outputs are bit-identical run to run.
 FASTMATH = {"nnan", "ninf", "nsz"}
 
-# Rec.709 luminance weights (the paper's l(.)).
-LUMA_R = F32(0.2126)
-LUMA_G = F32(0.7152)
-LUMA_B = F32(0.0722)
+# Rec.709 luminance weights (the paper's l(.)), the default of Frame.luminance_weights.
+REC709 = (F32(0.2126), F32(0.7152), F32(0.0722))
 
 _LOG2E = F32(1.4426950408889634)
 _EXP2_MIN = F32(-126.0)
@@ -93,7 +91,7 @@ def fma(typingctx, a, b, c):  # type: ignore[no-untyped-def]
 
 
 @intrinsic
-def _float32_as_int32_bits(typingctx, value):  # type: ignore[no-untyped-def]
+def float32_bits(typingctx, value):  # type: ignore[no-untyped-def]
     """Reinterpret a float32 as its 32 IEEE-754 bits (an LLVM bitcast; vectorizes)."""
     if value != types.float32:
         return None
@@ -108,7 +106,7 @@ def _float32_as_int32_bits(typingctx, value):  # type: ignore[no-untyped-def]
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
 def fast_log2(x: np.float32) -> np.float32:
     """log2(x) for finite float32 ``x > 0`` (normal numbers; absolute error < 1e-6)."""
-    bits = _float32_as_int32_bits(x)
+    bits = float32_bits(x)
     # Not named like any caller's variable: numba's inline="always" can let an inlined
     # callee's local overwrite a caller's variable of the same name (seen with "exponent").
     log2_whole = np.float32((bits >> 23) - 127)
@@ -129,6 +127,15 @@ def fast_exp(x: np.float32) -> np.float32:
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
-def luminance(r: np.float32, g: np.float32, b: np.float32) -> np.float32:
-    """Rec.709 luminance of one linear RGB value."""
-    return LUMA_R * r + LUMA_G * g + LUMA_B * b
+def luminance(
+    r: np.float32, g: np.float32, b: np.float32, weights: tuple[np.float32, np.float32, np.float32]
+) -> np.float32:
+    """Luminance ``w_r r + w_g g + w_b b`` of one linear RGB value (``weights`` from the
+    frame's colour space; summed in this order, so Rec.709 weights reproduce the former
+    constants bit for bit)."""
+    return weights[0] * r + weights[1] * g + weights[2] * b
+
+
+def float32_weights(weights: tuple[float, float, float]) -> tuple[F32, F32, F32]:
+    """The float32 triple every kernel takes (one numba signature for all callers)."""
+    return (F32(weights[0]), F32(weights[1]), F32(weights[2]))

@@ -1,14 +1,35 @@
-"""Albedo demodulation and remodulation (paper section 4: filter illumination, not radiance).
+"""Demodulation and remodulation of one signal (paper section 4: filter illumination).
 
-``illumination = (signal - emission) / max(albedo, eps)`` per channel, so texture detail never
-reaches the filter; after filtering ``radiance = max(albedo, eps) * illumination + emission``.
-Remodulating with the same floored albedo makes the pair an exact inverse (a constant input
-stays constant even where one albedo channel is below ``eps``). Pixels whose albedo is below
-``eps`` in every channel (black or metallic surfaces) are not demodulated at all: dividing
-by the floor would turn their noise into huge illumination values, so they are filtered as
-radiance (albedo treated as 1) - and only among themselves: :func:`filter_normals` negates
-their normal for the edge-stopping weights, so ``max(0, n.n')`` is 0 between a demodulated
-and a non-demodulated pixel and radiance never mixes with illumination.
+Per signal and pixel a **mode** decides how the signal is filtered:
+
+* **demodulated** (mode 0) where the signal's demodulation colour ``a`` is a plausible
+  reflectance: ``max(a) >= black`` (not black) and ``max(a) <= max_reflectance`` (no
+  channel above 1 + a small tolerance). The filter sees ``illumination = radiance / a'``
+  with the per-channel floor ``a'_c = max(a_c, black, relative_floor * max(a))``;
+* **radiance** (mode 1) elsewhere: black surfaces (dividing would turn their noise into
+  huge values) and colours that are not reflectances (Cycles' ``Denoising Albedo`` reaches
+  128 on mirror-like pixels): ``a' = 1``.
+
+The modes of all signals of a pixel are one ``uint16`` mask, bit ``s`` for signal ``s``
+(at most :data:`MAX_SIGNALS`; the top bit, :data:`NO_HISTORY`, marks a history pixel that
+must not be resampled), so the stages that compare modes load one value per pixel.
+
+Remodulation multiplies by the same ``a'`` (an exact inverse: a constant input stays
+constant). Why the floor is relative: remodulating pixel ``p`` scales a neighbour ``q``'s
+contribution by ``a'_p / a'_q`` per channel, so with an absolute floor of 1e-3 a
+saturated colour's dark channel multiplies whatever does not follow the albedo there (a
+white highlight in the radiance, an antialiased edge) by up to 1000 before it leaks into its
+neighbours; ``relative_floor`` bounds that gain to ``1 / relative_floor`` within a pixel's
+colour (see ``bench/demodulation_floor.py`` for the measurement behind the default).
+
+Pixels of different modes never exchange weight within a signal (the a-trous guides carry
+the mode in the sign of the guide luminance, the spatial variance compares modes) nor
+history (reprojection rejects a tap whose stored mode differs), so radiance and
+illumination never mix.
+
+Values (``filters.values``): non-finite and beyond-limit radiance become 0, non-finite
+albedo channels 0, and the demodulated illumination is clamped to ``+-VALUE_LIMIT``; each
+is counted per row.
 """
 
 from __future__ import annotations
@@ -16,152 +37,194 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from svgf_cli.filters.fastmath import FASTMATH, luminance
+from svgf_cli.filters.fastmath import FASTMATH
+from svgf_cli.filters.values import (  # noqa: F401 - NO_HISTORY belongs to the mode mask
+    NO_HISTORY,
+    VALUE_LIMIT,
+    is_extreme,
+    is_nonfinite,
+    is_usable,
+)
 
 F32 = np.float32
 _ONE = F32(1.0)
 _ZERO = F32(0.0)
-
-
-@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
-def _effective_albedo(
-    ar: np.float32, ag: np.float32, ab: np.float32, eps: np.float32
-) -> tuple[np.float32, np.float32, np.float32]:
-    if ar < eps and ag < eps and ab < eps:
-        return _ONE, _ONE, _ONE
-    return max(ar, eps), max(ag, eps), max(ab, eps)
-
-
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+MAX_SIGNALS = 15  # bits of the uint16 mode mask below NO_HISTORY
+# Counters written per row by demodulate (columns of ``counts``).
+NONFINITE_RADIANCE, EXTREME_RADIANCE, NONFINITE_ALBEDO, RADIANCE_MODE, IMPLAUSIBLE, CLAMPED = (
+    range(6)
 )
+DEMODULATE_COUNTERS = 6
+
+_JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+
+
+@njit(inline="always", **_JIT)
+def clean_value(v: np.float32) -> np.float32:
+    """The value policy for radiance and emission: usable values pass, others become 0."""
+    return v if is_usable(v) else _ZERO
+
+
+@njit(inline="always", **_JIT)
+def clean_albedo(v: np.float32) -> np.float32:
+    """Non-finite albedo channels become 0 (large finite ones make the pixel radiance mode)."""
+    return _ZERO if is_nonfinite(v) else v
+
+
+@njit(inline="always", **_JIT)
+def effective_albedo(
+    ar: np.float32,
+    ag: np.float32,
+    ab: np.float32,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
+) -> tuple[bool, np.float32, np.float32, np.float32]:
+    """``(demodulated, a'_r, a'_g, a'_b)`` of one (cleaned) demodulation colour."""
+    brightest = max(ar, max(ag, ab))
+    if not (brightest >= black and brightest <= max_reflectance):
+        return False, _ONE, _ONE, _ONE
+    floor = max(black, relative_floor * brightest)
+    return True, max(ar, floor), max(ag, floor), max(ab, floor)
+
+
+@njit(parallel=True, **_JIT)
 def demodulate(
-    signal: np.ndarray,
-    emission: np.ndarray,
-    has_emission: bool,
+    radiance: np.ndarray,
     albedo: np.ndarray,
-    eps: np.float32,
-    out: np.ndarray,
+    depth: np.ndarray,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
+    signal_index: int,
+    out_illumination: np.ndarray,
+    mode: np.ndarray,
+    counts: np.ndarray,
 ) -> None:
-    """Write the illumination ``(signal - emission) / max(albedo, eps)`` of one (3, H, W)
-    signal into ``out``; ``emission`` is ignored unless ``has_emission``."""
-    height, width = signal.shape[1], signal.shape[2]
+    """One signal: ``out_illumination = clean(radiance) / a'`` (clamped to +-VALUE_LIMIT),
+    and bit ``signal_index`` of the (H, W) uint16 ``mode`` mask (0 demodulated, 1 radiance;
+    signal 0 writes the mask, later signals add their bit).
+
+    ``counts`` (H, DEMODULATE_COUNTERS) int64 receives per row: non-finite and extreme
+    radiance values, non-finite albedo values, radiance-mode surface pixels, implausible
+    (above ``max_reflectance``) surface pixels and clamped illumination values. Branch-free
+    over row slices, so it vectorizes.
+    """
+    height, width = depth.shape
+    limit = VALUE_LIMIT
+    bit = np.uint16(1 << signal_index)
+    keep = np.uint16(0) if signal_index == 0 else ~bit
     for y in prange(height):
+        a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
+        r_r, r_g, r_b = radiance[0, y], radiance[1, y], radiance[2, y]
+        o_r, o_g, o_b = out_illumination[0, y], out_illumination[1, y], out_illumination[2, y]
+        z = depth[y]
+        m = mode[y]
+        nonfinite_radiance = 0
+        extreme_radiance = 0
+        nonfinite_albedo = 0
+        radiance_mode = 0
+        implausible = 0
+        clamped = 0
         for x in range(width):
-            er = eg = eb = _ZERO
-            if has_emission:
-                er = emission[0, y, x]
-                eg = emission[1, y, x]
-                eb = emission[2, y, x]
-            ar, ag, ab = _effective_albedo(albedo[0, y, x], albedo[1, y, x], albedo[2, y, x], eps)
-            out[0, y, x] = (signal[0, y, x] - er) / ar
-            out[1, y, x] = (signal[1, y, x] - eg) / ag
-            out[2, y, x] = (signal[2, y, x] - eb) / ab
+            nonfinite_albedo += is_nonfinite(a_r[x]) + is_nonfinite(a_g[x]) + is_nonfinite(a_b[x])
+            ar = clean_albedo(a_r[x])
+            ag = clean_albedo(a_g[x])
+            ab = clean_albedo(a_b[x])
+            demodulated, dr, dg, db = effective_albedo(ar, ag, ab, black, max_reflectance,
+                                                       relative_floor)
+            surface = z[x] > _ZERO
+            radiance_mode += surface and not demodulated
+            implausible += surface and max(ar, max(ag, ab)) > max_reflectance
+            m[x] = (m[x] & keep) | (np.uint16(0) if demodulated else bit)
+            vr = r_r[x]
+            vg = r_g[x]
+            vb = r_b[x]
+            nonfinite_radiance += is_nonfinite(vr) + is_nonfinite(vg) + is_nonfinite(vb)
+            extreme_radiance += is_extreme(vr) + is_extreme(vg) + is_extreme(vb)
+            ir = clean_value(vr) / dr
+            ig = clean_value(vg) / dg
+            ib = clean_value(vb) / db
+            clamped += (abs(ir) > limit) + (abs(ig) > limit) + (abs(ib) > limit)
+            o_r[x] = min(max(ir, -limit), limit)
+            o_g[x] = min(max(ig, -limit), limit)
+            o_b[x] = min(max(ib, -limit), limit)
+        counts[y, NONFINITE_RADIANCE] = nonfinite_radiance
+        counts[y, EXTREME_RADIANCE] = extreme_radiance
+        counts[y, NONFINITE_ALBEDO] = nonfinite_albedo
+        counts[y, RADIANCE_MODE] = radiance_mode
+        counts[y, IMPLAUSIBLE] = implausible
+        counts[y, CLAMPED] = clamped
 
 
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
+@njit(parallel=True, **_JIT)
 def remodulate(
     illumination: np.ndarray,
-    emission: np.ndarray,
-    has_emission: bool,
     albedo: np.ndarray,
-    eps: np.float32,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
     out: np.ndarray,
 ) -> None:
-    """Inverse of :func:`demodulate`: ``out = max(albedo, eps) * illumination + emission``."""
+    """Inverse of :func:`demodulate`: ``out = a' * illumination`` (one signal, no emission)."""
     height, width = illumination.shape[1], illumination.shape[2]
     for y in prange(height):
         for x in range(width):
-            er = eg = eb = _ZERO
-            if has_emission:
-                er = emission[0, y, x]
-                eg = emission[1, y, x]
-                eb = emission[2, y, x]
-            ar, ag, ab = _effective_albedo(albedo[0, y, x], albedo[1, y, x], albedo[2, y, x], eps)
-            out[0, y, x] = ar * illumination[0, y, x] + er
-            out[1, y, x] = ag * illumination[1, y, x] + eg
-            out[2, y, x] = ab * illumination[2, y, x] + eb
+            _, ar, ag, ab = effective_albedo(
+                clean_albedo(albedo[0, y, x]), clean_albedo(albedo[1, y, x]),
+                clean_albedo(albedo[2, y, x]), black, max_reflectance, relative_floor,
+            )
+            out[0, y, x] = ar * illumination[0, y, x]
+            out[1, y, x] = ag * illumination[1, y, x]
+            out[2, y, x] = ab * illumination[2, y, x]
 
 
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
-def restore_background(radiance: np.ndarray, original: np.ndarray, depth: np.ndarray) -> None:
-    """Background pixels (depth <= 0) are not filtered: copy their input radiance back."""
-    height, width = depth.shape
-    for y in prange(height):
-        for x in range(width):
-            if depth[y, x] <= _ZERO:
-                radiance[0, y, x] = original[0, y, x]
-                radiance[1, y, x] = original[1, y, x]
-                radiance[2, y, x] = original[2, y, x]
-
-
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
-def luminance_plane(rgb: np.ndarray, out: np.ndarray) -> None:
-    """Rec.709 luminance of a (3, H, W) image into an (H, W) plane."""
-    height, width = rgb.shape[1], rgb.shape[2]
-    for y in prange(height):
-        r = rgb[0, y]
-        g = rgb[1, y]
-        b = rgb[2, y]
-        o = out[y]
-        for x in range(width):
-            o[x] = luminance(r[x], g[x], b[x])
-
-
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
-def filter_normals(
-    unit_normal: np.ndarray, albedo: np.ndarray, eps: np.float32, out: np.ndarray
-) -> None:
-    """Normals for the spatial weights: negated where the pixel is not demodulated."""
-    height, width = unit_normal.shape[1], unit_normal.shape[2]
-    for y in prange(height):
-        for x in range(width):
-            sign = _ONE
-            if albedo[0, y, x] < eps and albedo[1, y, x] < eps and albedo[2, y, x] < eps:
-                sign = -_ONE
-            out[0, y, x] = sign * unit_normal[0, y, x]
-            out[1, y, x] = sign * unit_normal[1, y, x]
-            out[2, y, x] = sign * unit_normal[2, y, x]
-
-
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
+@njit(parallel=True, **_JIT)
 def remodulate_add(
     illumination: np.ndarray,
-    signal: np.ndarray,
+    radiance: np.ndarray,
+    albedo: np.ndarray,
+    depth: np.ndarray,
     emission: np.ndarray,
     has_emission: bool,
-    albedo: np.ndarray,
-    eps: np.float32,
-    depth: np.ndarray,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
     out: np.ndarray,
+    counts: np.ndarray,
 ) -> None:
-    """``out +=`` :func:`remodulate` of one signal on surface pixels, ``+= signal`` on
-    background (depth <= 0): remodulation, background restore and the sum of the signals in
-    one pass, without a full-frame temporary per signal."""
+    """``out +=`` :func:`remodulate` of one signal on surface pixels and ``+= radiance``
+    (cleaned, unfiltered) on background (depth <= 0); with ``has_emission`` also
+    ``+= emission`` everywhere (cleaned; ``counts`` (H, 2) receives its non-finite and
+    extreme values per row). Remodulation, background restore, the sum of the signals and
+    the emission in one pass, without a full-frame temporary per signal."""
     height, width = illumination.shape[1], illumination.shape[2]
     for y in prange(height):
+        nonfinite = 0
+        extreme = 0
+        z = depth[y]
+        a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
+        f_r, f_g, f_b = illumination[0, y], illumination[1, y], illumination[2, y]
+        r_r, r_g, r_b = radiance[0, y], radiance[1, y], radiance[2, y]
+        e_r, e_g, e_b = emission[0, y], emission[1, y], emission[2, y]
+        o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
         for x in range(width):
-            if depth[y, x] <= _ZERO:
-                out[0, y, x] += signal[0, y, x]
-                out[1, y, x] += signal[1, y, x]
-                out[2, y, x] += signal[2, y, x]
-                continue
-            er = eg = eb = _ZERO
+            _, ar, ag, ab = effective_albedo(
+                clean_albedo(a_r[x]), clean_albedo(a_g[x]), clean_albedo(a_b[x]), black,
+                max_reflectance, relative_floor,
+            )
+            surface = z[x] > _ZERO
+            vr = ar * f_r[x] if surface else clean_value(r_r[x])
+            vg = ag * f_g[x] if surface else clean_value(r_g[x])
+            vb = ab * f_b[x] if surface else clean_value(r_b[x])
             if has_emission:
-                er = emission[0, y, x]
-                eg = emission[1, y, x]
-                eb = emission[2, y, x]
-            ar, ag, ab = _effective_albedo(albedo[0, y, x], albedo[1, y, x], albedo[2, y, x], eps)
-            out[0, y, x] += ar * illumination[0, y, x] + er
-            out[1, y, x] += ag * illumination[1, y, x] + eg
-            out[2, y, x] += ab * illumination[2, y, x] + eb
+                nonfinite += is_nonfinite(e_r[x]) + is_nonfinite(e_g[x]) + is_nonfinite(e_b[x])
+                extreme += is_extreme(e_r[x]) + is_extreme(e_g[x]) + is_extreme(e_b[x])
+                vr += clean_value(e_r[x])
+                vg += clean_value(e_g[x])
+                vb += clean_value(e_b[x])
+            o_r[x] += vr
+            o_g[x] += vg
+            o_b[x] += vb
+        counts[y, 0] = nonfinite
+        counts[y, 1] = extreme

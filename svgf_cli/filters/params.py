@@ -47,8 +47,9 @@ class SVGFParams:
     spatial_variance_radius: int = _p(3, "Radius of the spatial variance estimate (3 = 7x7).")
     spatial_variance_sigma_luminance: float = _p(
         10.0,
-        "Weak luminance edge-stop of the spatial variance estimate: exp(-|dl| / sigma)"
-        " (Falcor's raw phiColor).",
+        "Weak luminance edge-stop of the spatial variance estimate, relative to the pair's"
+        " mean luminance: exp(-|dl| / (sigma * mean l)) (Falcor's raw phiColor at l = 1,"
+        " the same at every brightness).",
     )
     spatial_variance_blur_color: bool = _p(
         False,
@@ -65,7 +66,10 @@ class SVGFParams:
     sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.")
     # Demodulation (paper section 4).
     albedo_epsilon: float = _p(
-        1e-3, "Albedo floor for demodulation; below it in all channels a pixel is not demodulated."
+        1e-3,
+        "Demodulation floor: a signal's colour below it in every channel is black and filtered"
+        " as radiance; otherwise each channel is floored at max(albedo_epsilon, 0.02 * the"
+        " brightest channel).",
     )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(

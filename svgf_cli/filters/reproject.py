@@ -2,20 +2,23 @@
 
 Two kernels, so each step can be tested alone:
 
-* :func:`reproject` resamples last frame's history (illumination, moments, history length)
-  at the backprojected position ``(x + motion.x, y + motion.y)`` in pixel-index space. It
-  tries the 2x2 bilinear taps, each bounds-checked and tested for consistency (previous pixel
-  not background, same mesh id, depth within ``depth_tolerance * (slope + depth_slack * z)``,
-  normal within ``normal_tolerance * (fwidth_n + 0.01)``); the bilinear weights are
-  renormalised over the taps that pass and the pixel is rejected when their sum is < 0.01.
-  Failing that, a plain average over the passing taps of the 3x3 around the rounded position;
-  failing that, a disocclusion (history length 0). The history length of the taps is combined
-  with the *same* weights as the colour (never ``max``, which ghosts at disocclusions); a
-  result within 1e-3 of a whole number of frames is that number (float rounding of the
-  weights must not move a count across the variance threshold).
-* :func:`accumulate` blends: ``h = min(cap, h_prev + 1)`` on success else 1,
-  ``c = lerp(c_hist, c, max(alpha, 1/h))`` and the luminance moments
-  ``(l, l^2)`` likewise with ``max(moments_alpha, 1/h)`` (paper equation 6).
+* :func:`reproject` resamples last frame's history of every signal (illumination, moments,
+  history length) at the backprojected position ``(x + motion.x, y + motion.y)`` in
+  pixel-index space. It tries the 2x2 bilinear taps, each bounds-checked and tested for
+  consistency (previous pixel not background, same mesh id, depth within
+  ``depth_tolerance * (slope + depth_slack * z)``, normal within
+  ``normal_tolerance * (fwidth_n + 0.01)``) and, per signal, for the same demodulation mode
+  as the pixel has now; the bilinear weights are renormalised over the taps that pass and the
+  signal's history is rejected when their sum is < 0.01. Failing that, a plain average over
+  the passing taps of the 3x3 around the rounded position; failing that, a disocclusion
+  (history length 0). The history length of the taps is combined with the *same* weights as
+  the colour (never ``max``, which ghosts at disocclusions); a result within 1e-3 of a whole
+  number of frames is that number (float rounding of the weights must not move a count
+  across the variance threshold).
+* :func:`accumulate` blends each signal with its own history length:
+  ``h = min(cap, h_prev + 1)`` on success else 1, ``c = lerp(c_hist, c, max(alpha, 1/h))``
+  and the luminance moments ``(l, l^2)`` likewise with ``max(moments_alpha, 1/h)`` (paper
+  equation 6).
 
 Departures from Falcor (svgf-anchors.md section 3.1): the mesh-id test is back (the paper
 has it); each tap is bounds-checked on its own; the depth slack is relative to depth
@@ -29,6 +32,7 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
+from svgf_cli.filters.modulate import NO_HISTORY
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
@@ -93,11 +97,13 @@ def reproject(
     depth: np.ndarray,
     normal: np.ndarray,
     mesh_id: np.ndarray,
+    mode: np.ndarray,
     depth_slope: np.ndarray,
     normal_width: np.ndarray,
     prev_depth: np.ndarray,
     prev_normal: np.ndarray,
     prev_mesh_id: np.ndarray,
+    prev_mode: np.ndarray,
     prev_illumination: np.ndarray,
     prev_moments: np.ndarray,
     prev_history_length: np.ndarray,
@@ -110,16 +116,38 @@ def reproject(
 ) -> None:
     """Resample the history of every signal at the backprojected position.
 
-    ``prev_illumination`` is (S, 3, H, W), ``prev_moments`` (S, 2, H, W). Writes the
-    resampled history into the ``out_*`` arrays; ``out_history_length`` is the resampled
-    previous history length, 0 where the history is rejected (disocclusion).
+    ``prev_illumination`` is (S, 3, H, W), ``prev_moments`` (S, 2, H, W),
+    ``prev_history_length`` (S, H, W); ``mode`` and ``prev_mode`` are the (H, W) uint16 mode
+    masks (bit s: signal s; ``modulate.NO_HISTORY``: no usable history). The geometric tests
+    are shared by all signals; on top, signal ``s`` accepts a tap only if the tap's stored
+    mode equals the pixel's current mode for that signal (radiance and illumination history
+    never mix), so each signal has its own bilinear weights, fallback and history length
+    (one set of weights for all where every usable tap agrees, the common case). Writes
+    the resampled history into the ``out_*`` arrays; ``out_history_length`` (S, H, W) is the
+    resampled previous history length, 0 where the signal's history is rejected.
     """
     _reproject_rows(
-        motion, depth, normal, mesh_id, depth_slope, normal_width, prev_depth, prev_normal,
-        prev_mesh_id, prev_illumination, prev_moments, prev_history_length,
-        F32(depth_tolerance), F32(depth_slack), F32(normal_tolerance), out_illumination,
-        out_moments, out_history_length, np.int64(get_num_threads()),
+        motion, depth, normal, mesh_id, mode, depth_slope, normal_width, prev_depth,
+        prev_normal, prev_mesh_id, prev_mode, prev_illumination, prev_moments,
+        prev_history_length, F32(depth_tolerance), F32(depth_slack), F32(normal_tolerance),
+        out_illumination, out_moments, out_history_length, np.int64(get_num_threads()),
     )
+
+
+@njit(
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
+)
+def _clear(
+    s: int, uy: np.uint64, ux: np.uint64, out_illumination: np.ndarray, out_moments: np.ndarray,
+    out_history_length: np.ndarray,
+) -> None:
+    """No history for signal ``s`` at the pixel."""
+    out_history_length[s, uy, ux] = _ZERO
+    for c in range(3):
+        out_illumination[s, c, uy, ux] = _ZERO
+    out_moments[s, 0, uy, ux] = _ZERO
+    out_moments[s, 1, uy, ux] = _ZERO
 
 
 @njit(
@@ -130,11 +158,13 @@ def _reproject_rows(
     depth: np.ndarray,
     normal: np.ndarray,
     mesh_id: np.ndarray,
+    mode: np.ndarray,
     depth_slope: np.ndarray,
     normal_width: np.ndarray,
     prev_depth: np.ndarray,
     prev_normal: np.ndarray,
     prev_mesh_id: np.ndarray,
+    prev_mode: np.ndarray,
     prev_illumination: np.ndarray,
     prev_moments: np.ndarray,
     prev_history_length: np.ndarray,
@@ -161,8 +191,9 @@ def _reproject_rows(
             z = depth[uy, ux]
             px = F32(x) + motion[0, uy, ux]
             py = F32(y) + motion[1, uy, ux]
-            # Positions this far outside cannot reach a tap (and NaN motion fails every
-            # comparison), which also keeps the int conversions below in range.
+            # Positions this far outside cannot reach a tap (the Denoiser replaces
+            # non-finite motion by a far-away one), which also keeps the int conversions
+            # below in range.
             reachable = (
                 z > _ZERO
                 and px > F32(-2.0)
@@ -171,12 +202,8 @@ def _reproject_rows(
                 and py < fheight + F32(1.0)
             )
             if not reachable:
-                out_history_length[uy, ux] = _ZERO
                 for s in range(num_signals):
-                    for c in range(3):
-                        out_illumination[s, c, uy, ux] = _ZERO
-                    out_moments[s, 0, uy, ux] = _ZERO
-                    out_moments[s, 1, uy, ux] = _ZERO
+                    _clear(s, uy, ux, out_illumination, out_moments, out_history_length)
                 continue
             nx = normal[0, uy, ux]
             ny = normal[1, uy, ux]
@@ -192,93 +219,127 @@ def _reproject_rows(
             y0 = int(fy0)
             fx = px - fx0
             fy = py - fy0
-            w00 = (_ONE - fx) * (_ONE - fy)
-            w10 = fx * (_ONE - fy)
-            w01 = (_ONE - fx) * fy
-            w11 = fx * fy
+            g00 = (_ONE - fx) * (_ONE - fy)
+            g10 = fx * (_ONE - fy)
+            g01 = (_ONE - fx) * fy
+            g11 = fx * fy
             if not _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
-                w00 = _ZERO
+                g00 = _ZERO
             if not _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
-                w10 = _ZERO
+                g10 = _ZERO
             if not _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
-                w01 = _ZERO
+                g01 = _ZERO
             if not _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
-                w11 = _ZERO
-            weight_sum = w00 + w10 + w01 + w11
-            if weight_sum >= _MIN_BILINEAR_WEIGHT:
-                inv = _ONE / weight_sum
-                w00 *= inv
-                w10 *= inv
-                w01 *= inv
-                w11 *= inv
-                # Taps with zero weight may lie outside the image: clamp their index.
-                xa = U(min(max(x0, 0), width - 1))
-                xb = U(min(max(x0 + 1, 0), width - 1))
-                ya = U(min(max(y0, 0), height - 1))
-                yb = U(min(max(y0 + 1, 0), height - 1))
-                out_history_length[uy, ux] = _whole_if_close(
-                    w00 * prev_history_length[ya, xa]
-                    + w10 * prev_history_length[ya, xb]
-                    + w01 * prev_history_length[yb, xa]
-                    + w11 * prev_history_length[yb, xb]
-                )
-                # Index the 4-D arrays directly: a per-pixel sub-array view would cost an
-                # atomic reference-count update, contended between threads.
-                for s in range(num_signals):
-                    for c in range(3):
-                        out_illumination[s, c, uy, ux] = (
-                            w00 * prev_illumination[s, c, ya, xa]
-                            + w10 * prev_illumination[s, c, ya, xb]
-                            + w01 * prev_illumination[s, c, yb, xa]
-                            + w11 * prev_illumination[s, c, yb, xb]
-                        )
-                    for c in range(2):
-                        out_moments[s, c, uy, ux] = (
-                            w00 * prev_moments[s, c, ya, xa]
-                            + w10 * prev_moments[s, c, ya, xb]
-                            + w01 * prev_moments[s, c, yb, xa]
-                            + w11 * prev_moments[s, c, yb, xb]
-                        )
-                continue
-
-            # 3x3 box of consistent taps around the rounded previous position.
-            cx = int(np.floor(px + F32(0.5)))
-            cy = int(np.floor(py + F32(0.5)))
-            count = 0
-            h_sum = _ZERO
+                g11 = _ZERO
+            # Taps with zero weight may lie outside the image: clamp their index.
+            xa = U(min(max(x0, 0), width - 1))
+            xb = U(min(max(x0 + 1, 0), width - 1))
+            ya = U(min(max(y0, 0), height - 1))
+            yb = U(min(max(y0 + 1, 0), height - 1))
+            m = mode[uy, ux]
+            t00 = prev_mode[ya, xa]
+            t10 = prev_mode[ya, xb]
+            t01 = prev_mode[yb, xa]
+            t11 = prev_mode[yb, xb]
+            if (
+                (g00 == _ZERO or t00 == m) and (g10 == _ZERO or t10 == m)
+                and (g01 == _ZERO or t01 == m) and (g11 == _ZERO or t11 == m)
+            ):
+                # Every usable tap has the pixel's modes in every signal (the common case):
+                # one set of weights for all signals.
+                weight_sum = g00 + g10 + g01 + g11
+                if weight_sum >= _MIN_BILINEAR_WEIGHT:
+                    inv = _ONE / weight_sum
+                    for s in range(num_signals):
+                        _bilinear(s, uy, ux, ya, yb, xa, xb, g00 * inv, g10 * inv, g01 * inv,
+                                  g11 * inv, prev_illumination, prev_moments,
+                                  prev_history_length, out_illumination, out_moments,
+                                  out_history_length)
+                    continue
+            # Per signal: a tap counts only where its stored mode equals the pixel's (a
+            # history pixel marked NO_HISTORY matches no signal).
+            box_mask = -1  # the 3x3 fallback's geometric tests, once, if a signal needs them
             for s in range(num_signals):
-                for c in range(3):
-                    out_illumination[s, c, uy, ux] = _ZERO
-                out_moments[s, 0, uy, ux] = _ZERO
-                out_moments[s, 1, uy, ux] = _ZERO
-            for ty in range(cy - 1, cy + 2):
-                for tx in range(cx - 1, cx + 2):
-                    if not _tap_consistent(tx, ty, z, nx, ny, nz, mesh, max_depth_diff,
-                                           max_normal_diff_sq, prev_depth, prev_normal,
-                                           prev_mesh_id):
+                relevant = np.uint16(1 << s) | NO_HISTORY
+                w00 = g00 if (t00 ^ m) & relevant == 0 else _ZERO
+                w10 = g10 if (t10 ^ m) & relevant == 0 else _ZERO
+                w01 = g01 if (t01 ^ m) & relevant == 0 else _ZERO
+                w11 = g11 if (t11 ^ m) & relevant == 0 else _ZERO
+                weight_sum = w00 + w10 + w01 + w11
+                if weight_sum >= _MIN_BILINEAR_WEIGHT:
+                    inv = _ONE / weight_sum
+                    _bilinear(s, uy, ux, ya, yb, xa, xb, w00 * inv, w10 * inv, w01 * inv,
+                              w11 * inv, prev_illumination, prev_moments, prev_history_length,
+                              out_illumination, out_moments, out_history_length)
+                    continue
+
+                # 3x3 box of consistent taps (of the same mode) around the rounded position.
+                cx = int(np.floor(px + F32(0.5)))
+                cy = int(np.floor(py + F32(0.5)))
+                if box_mask < 0:
+                    box_mask = 0
+                    for k in range(9):
+                        if _tap_consistent(cx - 1 + k % 3, cy - 1 + k // 3, z, nx, ny, nz, mesh,
+                                           max_depth_diff, max_normal_diff_sq, prev_depth,
+                                           prev_normal, prev_mesh_id):
+                            box_mask |= 1 << k
+                _clear(s, uy, ux, out_illumination, out_moments, out_history_length)
+                count = 0
+                h_sum = _ZERO
+                for k in range(9):
+                    if not (box_mask >> k) & 1:
+                        continue
+                    qy, qx = U(cy - 1 + k // 3), U(cx - 1 + k % 3)
+                    if (prev_mode[qy, qx] ^ m) & relevant != 0:
                         continue
                     count += 1
-                    qy, qx = U(ty), U(tx)
-                    h_sum += prev_history_length[qy, qx]
-                    for s in range(num_signals):
-                        for c in range(3):
-                            out_illumination[s, c, uy, ux] += prev_illumination[s, c, qy, qx]
-                        out_moments[s, 0, uy, ux] += prev_moments[s, 0, qy, qx]
-                        out_moments[s, 1, uy, ux] += prev_moments[s, 1, qy, qx]
-            if count == 0:
-                out_history_length[uy, ux] = _ZERO
-                continue
-            inv = _ONE / F32(count)
-            out_history_length[uy, ux] = _whole_if_close(h_sum * inv)
-            for s in range(num_signals):
+                    h_sum += prev_history_length[s, qy, qx]
+                    for c in range(3):
+                        out_illumination[s, c, uy, ux] += prev_illumination[s, c, qy, qx]
+                    out_moments[s, 0, uy, ux] += prev_moments[s, 0, qy, qx]
+                    out_moments[s, 1, uy, ux] += prev_moments[s, 1, qy, qx]
+                if count == 0:
+                    continue
+                inv = _ONE / F32(count)
+                out_history_length[s, uy, ux] = _whole_if_close(h_sum * inv)
                 for c in range(3):
                     out_illumination[s, c, uy, ux] *= inv
                 out_moments[s, 0, uy, ux] *= inv
                 out_moments[s, 1, uy, ux] *= inv
+
+
+@njit(
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
+)
+def _bilinear(
+    s: int, uy: np.uint64, ux: np.uint64, ya: np.uint64, yb: np.uint64, xa: np.uint64,
+    xb: np.uint64, w00: np.float32, w10: np.float32, w01: np.float32, w11: np.float32,
+    prev_illumination: np.ndarray, prev_moments: np.ndarray, prev_history_length: np.ndarray,
+    out_illumination: np.ndarray, out_moments: np.ndarray, out_history_length: np.ndarray,
+) -> None:
+    """Signal ``s``'s history at the pixel: the taps with the given (normalised) weights.
+
+    Indexes the 4-D arrays directly: a per-pixel sub-array view would cost an atomic
+    reference-count update, contended between threads."""
+    out_history_length[s, uy, ux] = _whole_if_close(
+        w00 * prev_history_length[s, ya, xa] + w10 * prev_history_length[s, ya, xb]
+        + w01 * prev_history_length[s, yb, xa] + w11 * prev_history_length[s, yb, xb]
+    )
+    for c in range(3):
+        out_illumination[s, c, uy, ux] = (
+            w00 * prev_illumination[s, c, ya, xa] + w10 * prev_illumination[s, c, ya, xb]
+            + w01 * prev_illumination[s, c, yb, xa] + w11 * prev_illumination[s, c, yb, xb]
+        )
+    for c in range(2):
+        out_moments[s, c, uy, ux] = (
+            w00 * prev_moments[s, c, ya, xa] + w10 * prev_moments[s, c, ya, xb]
+            + w01 * prev_moments[s, c, yb, xa] + w11 * prev_moments[s, c, yb, xb]
+        )
 
 
 def accumulate(
@@ -290,16 +351,18 @@ def accumulate(
     alpha: np.float32,
     moments_alpha: np.float32,
     history_cap: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
     out_illumination: np.ndarray,
     out_moments: np.ndarray,
     out_history_length: np.ndarray,
 ) -> None:
     """Exponential moving average with adaptive alpha (paper eq. 6, alpha = max(a, 1/h)).
 
-    ``history_length_prev`` is the output of :func:`reproject` (0 = no history). Background
-    pixels get history length 0 and their current illumination. The ``out_*`` arrays may be
-    the history arrays themselves (the Denoiser accumulates in place); otherwise the history
-    is copied into them first and :func:`accumulate_in_place` blends there.
+    ``history_length_prev`` (S, H, W) is the output of :func:`reproject` (0 = no history);
+    each signal blends with its own history length. Background pixels get history length 0
+    and their current illumination. The ``out_*`` arrays may be the history arrays
+    themselves (the Denoiser accumulates in place); otherwise the history is copied into
+    them first and :func:`accumulate_in_place` blends there.
     """
     for source, target in (
         (history_illumination, out_illumination),
@@ -309,7 +372,7 @@ def accumulate(
         if source is not target:
             np.copyto(target, source)
     accumulate_in_place(illumination, out_illumination, out_moments, out_history_length, depth,
-                        alpha, moments_alpha, history_cap)
+                        alpha, moments_alpha, history_cap, luminance_weights)
 
 
 @njit(
@@ -324,38 +387,43 @@ def accumulate_in_place(
     alpha: np.float32,
     moments_alpha: np.float32,
     history_cap: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
 ) -> None:
     """:func:`accumulate` overwriting the (reprojected) history arrays with the result.
 
-    Written branch-free over row slices (a blend factor of exactly 1 where there is no
-    history) so it vectorizes; the history buffers must hold finite values everywhere.
-    Reading and writing the same array (rather than a separate output that may alias it)
-    keeps LLVM's runtime alias checks passing, so the vector loops run.
+    Per signal ``s`` and pixel: ``h = min(cap, h_prev + 1)`` where there is history
+    (``h_prev > 0``), else 1 (0 on background); ``c = lerp(c_hist, c, max(alpha, 1/h))`` and
+    the luminance moments ``(l, l^2)`` with ``max(moments_alpha, 1/h)``. A stage that
+    shortens ``history_length`` before this call (anti-lag) therefore raises that signal's
+    blend factor at that pixel. Written branch-free over row slices (a blend factor of
+    exactly 1 where there is no history) so it vectorizes; the history buffers must hold
+    finite values everywhere. Reading and writing the same array (rather than a separate
+    output that may alias it) keeps LLVM's runtime alias checks passing.
     """
     num_signals = illumination.shape[0]
     height, width = depth.shape
     for y in prange(height):
         blend = np.empty(width, dtype=np.float32)
         blend_moments = np.empty(width, dtype=np.float32)
-        h_row = history_length[y]
         z = depth[y]
-        for x in range(width):
-            h_prev = h_row[x]
-            surface = z[x] > _ZERO
-            reused = surface and h_prev > _ZERO
-            h = min(history_cap, h_prev + _ONE) if reused else _ONE
-            h_row[x] = h if surface else _ZERO
-            inv_h = _ONE / h
-            blend[x] = max(alpha, inv_h) if reused else _ONE
-            blend_moments[x] = max(moments_alpha, inv_h) if reused else _ONE
         for s in range(num_signals):
+            h_row = history_length[s, y]
+            for x in range(width):
+                h_prev = h_row[x]
+                surface = z[x] > _ZERO
+                reused = surface and h_prev > _ZERO
+                h = min(history_cap, h_prev + _ONE) if reused else _ONE
+                h_row[x] = h if surface else _ZERO
+                inv_h = _ONE / h
+                blend[x] = max(alpha, inv_h) if reused else _ONE
+                blend_moments[x] = max(moments_alpha, inv_h) if reused else _ONE
             r = illumination[s, 0, y]
             g = illumination[s, 1, y]
             b = illumination[s, 2, y]
             m1 = history_moments[s, 0, y]
             m2 = history_moments[s, 1, y]
             for x in range(width):
-                lum = luminance(r[x], g[x], b[x])
+                lum = luminance(r[x], g[x], b[x], luminance_weights)
                 a = blend_moments[x]
                 m1[x] = (_ONE - a) * m1[x] + a * lum
                 m2[x] = (_ONE - a) * m2[x] + a * (lum * lum)

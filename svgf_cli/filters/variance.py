@@ -2,8 +2,9 @@
 
 * With enough history (``h >= variance_history_threshold``, 4): the temporal estimate
   ``Var = max(0, m2 - m1^2)`` from the integrated moments (:func:`temporal_variance`).
-* Shorter history: :func:`spatial_variance`, a 7x7 edge-aware (depth, normal and a weak
-  luminance stop) box-weighted estimate of the moments around the pixel, then
+* Shorter history: :func:`spatial_variance`, a 7x7 edge-aware (depth, normal, same
+  demodulation mode and a weak relative luminance stop) box-weighted estimate of the
+  moments around the pixel, then
   :func:`boost_short_history` multiplies it by ``threshold / h`` (Falcor's 4/h) because a
   few frames of history are not yet averaged down and the estimate itself is noisy.
 
@@ -11,6 +12,9 @@ The spatial estimator is kept unboosted and close to unbiased: the weighted popu
 variance is divided by ``1 - sum(w^2) / (h * (sum w)^2)``, the reliability-weights
 (Bessel) correction for a weighted sample of h-frame averages, so its expectation is the
 per-sample noise variance even where an edge leaves only a few neighbours.
+
+Every signal has its own history length, so each decides on its own whether it needs the
+spatial estimate; the geometry weights of a tap are computed once for all signals.
 
 Colour: the paper blurs only the variance here; Falcor also replaces the colour of
 short-history pixels by the 7x7 weighted mean. ``spatial_variance_blur_color`` selects the
@@ -28,6 +32,9 @@ from svgf_cli.filters.fastmath import FASTMATH, fast_exp
 F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
+_HALF = F32(0.5)
+# Keeps 0/0 away where both moments are 0 (the stop then sees |0 - 0| / tiny = 0).
+_TINY = F32(1e-30)
 # Pixels of ordinary history between two short-history runs below which the runs merge.
 RUN_GAP = 16
 
@@ -48,6 +55,32 @@ def temporal_variance(moments: np.ndarray, out: np.ndarray) -> None:
                 o[x] = max(m2[x] - m1[x] * m1[x], _ZERO)
 
 
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
+def _short(h: np.float32, history_threshold: np.float32) -> bool:
+    return h > _ZERO and h < history_threshold
+
+
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _needed_row(
+    history_length: np.ndarray, y: int, history_threshold: np.float32, out: np.ndarray
+) -> bool:
+    """``out[x]`` = 1 where some signal has ``0 < h < threshold`` in row ``y``; whether any
+    pixel does (vectorized passes, one per signal, and a max)."""
+    num_signals = history_length.shape[0]
+    width = out.shape[0]
+    h_row = history_length[0, y]
+    for x in range(width):
+        out[x] = _short(h_row[x], history_threshold)
+    for s in range(1, num_signals):
+        h_row = history_length[s, y]
+        for x in range(width):
+            out[x] |= _short(h_row[x], history_threshold)
+    largest = np.uint8(0)
+    for x in range(width):
+        largest = max(largest, out[x])
+    return largest != 0
+
+
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
@@ -55,6 +88,7 @@ def spatial_variance(
     illumination: np.ndarray,
     moments: np.ndarray,
     history_length: np.ndarray,
+    mode: np.ndarray,
     depth: np.ndarray,
     ddx: np.ndarray,
     ddy: np.ndarray,
@@ -69,37 +103,44 @@ def spatial_variance(
     out_variance: np.ndarray,
     out_illumination: np.ndarray,
 ) -> None:
-    """Unboosted edge-aware spatial variance of pixels with ``0 < h < history_threshold``.
+    """Unboosted edge-aware spatial variance of the signals with ``0 < h < threshold``.
 
-    Weights: box kernel over (2*radius+1)^2 taps times ``w_n * exp(-depth term -
-    |m1(p) - m1(q)| / sigma_luminance)`` (the luminance stop is deliberately weak: it is not
-    scaled by a variance, which is what is being estimated). Other pixels of ``out_variance``
-    (S, H, W) are not touched. With ``blur_color`` the weighted mean illumination is written
-    to ``out_illumination`` for the same pixels (Falcor's behaviour).
+    Per signal ``s`` (own history length ``history_length[s]`` and mode, bit ``s`` of the
+    (H, W) uint16 ``mode`` mask), weights:
+    box kernel over (2*radius+1)^2 taps times ``w_n * exp(-depth term - |m1(p) - m1(q)| /
+    (sigma_luminance * (|m1(p)| + |m1(q)|) / 2))``, and 0 between pixels of different modes.
+    The luminance stop is relative to the pair's mean luminance, so it is as weak at every
+    brightness as Falcor's absolute ``exp(-|dl| / 10)`` is at luminance ~1 (absolute, it
+    underestimated the variance ~2x at mean luminance 10 and ~50x at 100); it is deliberately
+    weak because it is not scaled by a variance (that is what is being estimated). Other
+    pixels of ``out_variance`` (S, H, W) are not touched. With ``blur_color`` the weighted
+    mean illumination is written to ``out_illumination`` for the same pixels (Falcor).
     """
     height, width = depth.shape
     for y in prange(height):
-        # Runs of pixels that need the estimate (disocclusions: thin slivers along
-        # silhouettes, ~0.3% of a moving 1080p frame). Runs closer than RUN_GAP merge, so a
-        # sliver costs one short vector loop and the pixels between runs cost nothing.
-        hrow = history_length[y]
+        # Runs of pixels where some signal needs the estimate (disocclusions: thin slivers
+        # along silhouettes, ~0.3% of a moving 1080p frame). Runs closer than RUN_GAP merge,
+        # so a sliver costs one short vector loop and the pixels between runs cost nothing.
+        needed = np.empty(width, dtype=np.uint8)
+        if not _needed_row(history_length, y, history_threshold, needed):
+            continue
         x = 0
         while x < width:
-            while x < width and not (hrow[x] > _ZERO and hrow[x] < history_threshold):
+            while x < width and not needed[x]:
                 x += 1
             if x >= width:
                 break
             first = x
             last = x
             while x < width and x - last <= RUN_GAP:
-                if hrow[x] > _ZERO and hrow[x] < history_threshold:
+                if needed[x]:
                     last = x
                 x += 1
             x = last + 1
             _spatial_variance_run(
-                np.int64(y), first, last, illumination, moments, history_length, depth, ddx, ddy,
-                normal, history_threshold, radius, sigma_depth, sigma_luminance, squarings,
-                sigma_normal, blur_color, out_variance, out_illumination,
+                np.int64(y), first, last, illumination, moments, history_length, mode, depth,
+                ddx, ddy, normal, history_threshold, radius, sigma_depth, sigma_luminance,
+                squarings, sigma_normal, blur_color, out_variance, out_illumination,
             )
 
 
@@ -111,6 +152,7 @@ def _spatial_variance_run(
     illumination: np.ndarray,
     moments: np.ndarray,
     history_length: np.ndarray,
+    mode: np.ndarray,
     depth: np.ndarray,
     ddx: np.ndarray,
     ddy: np.ndarray,
@@ -128,8 +170,7 @@ def _spatial_variance_run(
     """:func:`spatial_variance` for the pixels of row ``y`` in ``[first, last]`` that need it."""
     num_signals = moments.shape[0]
     height, width = depth.shape
-    inv_sigma_l = _ONE / sigma_luminance
-    hrow = history_length[y]
+    half_sigma = _HALF * sigma_luminance
     run = last + 1 - first
     # Per signal: sum w, sum w^2, sum w*m1, sum w*m2, sum w*rgb.
     acc = np.zeros((num_signals, 7, run), dtype=np.float32)
@@ -165,14 +206,19 @@ def _spatial_variance_run(
                 m1_p = moments[s, 0, y, x0:x1]
                 m1_q = moments[s, 0, yy, x0 + ox:x1 + ox]
                 m2_q = moments[s, 1, yy, x0 + ox:x1 + ox]
+                mode_p = mode[y, x0:x1]
+                mode_q = mode[yy, x0 + ox:x1 + ox]
+                bit = np.uint16(1 << s)
                 sum_w = acc[s, 0, a:a + count]
                 sum_w2 = acc[s, 1, a:a + count]
                 sum_m1 = acc[s, 2, a:a + count]
                 sum_m2 = acc[s, 3, a:a + count]
                 for i in range(count):
+                    scale = half_sigma * (abs(m1_p[i]) + abs(m1_q[i])) + _TINY
                     w = normal_weight[i] * fast_exp(
-                        -(depth_exponent[i] + abs(m1_p[i] - m1_q[i]) * inv_sigma_l)
+                        -(depth_exponent[i] + abs(m1_p[i] - m1_q[i]) / scale)
                     )
+                    w = w if (mode_p[i] ^ mode_q[i]) & bit == 0 else _ZERO
                     tap_weight[i] = w
                     sum_w[i] += w
                     sum_w2[i] += w * w
@@ -191,11 +237,11 @@ def _spatial_variance_run(
                         sum_g[i] += w * g_q[i]
                         sum_b[i] += w * b_q[i]
     for x in range(first, last + 1):
-        h = hrow[x]
-        if not (h > _ZERO and h < history_threshold):
-            continue
         i = x - first
         for s in range(num_signals):
+            h = history_length[s, y, x]
+            if not _short(h, history_threshold):
+                continue
             sum_w = acc[s, 0, i]
             inv = _ONE / sum_w
             mean1 = acc[s, 2, i] * inv
@@ -218,22 +264,24 @@ def _spatial_variance_run(
 def boost_short_history(
     variance: np.ndarray, history_length: np.ndarray, history_threshold: np.float32
 ) -> None:
-    """In place: ``Var *= threshold / h`` where ``0 < h < threshold`` (Falcor's 4/h)."""
-    num_signals = variance.shape[0]
-    height, width = history_length.shape
+    """In place, per signal: ``Var *= threshold / h`` where ``0 < h < threshold`` (Falcor's
+    4/h). ``variance`` and ``history_length`` are (S, H, W)."""
+    num_signals, height, width = history_length.shape
     for y in prange(height):
-        for x in range(width):
-            h = history_length[y, x]
-            if h > _ZERO and h < history_threshold:
-                boost = history_threshold / h
-                for s in range(num_signals):
-                    variance[s, y, x] *= boost
+        for s in range(num_signals):
+            h_row = history_length[s, y]
+            v_row = variance[s, y]
+            for x in range(width):
+                h = h_row[x]
+                if _short(h, history_threshold):
+                    v_row[x] *= history_threshold / h
 
 
 def estimate_variance(
     illumination: np.ndarray,
     moments: np.ndarray,
     history_length: np.ndarray,
+    mode: np.ndarray,
     depth: np.ndarray,
     ddx: np.ndarray,
     ddy: np.ndarray,
@@ -250,7 +298,9 @@ def estimate_variance(
 ) -> None:
     """Paper 4.2 as a whole: temporal variance, spatial estimate + boost for short history.
 
-    With ``out_illumination`` (Falcor's colour blur) it receives ``illumination`` with the
+    ``history_length`` is (S, H, W) and ``mode`` the (H, W) mode mask: each signal
+    decides by its own history length, and pixels of different modes never mix. With
+    ``out_illumination`` (Falcor's colour blur) it receives ``illumination`` with the
     short-history pixels replaced by their spatially filtered colour.
     """
     temporal_variance(moments, out_variance)
@@ -261,8 +311,8 @@ def estimate_variance(
         return
     threshold = F32(history_threshold)
     spatial_variance(
-        illumination, moments, history_length, depth, ddx, ddy, normal, threshold, radius,
-        F32(sigma_depth), F32(sigma_luminance), squarings, F32(sigma_normal), blur_color,
-        out_variance, out_illumination if blur_color else illumination,
+        illumination, moments, history_length, mode, depth, ddx, ddy, normal, threshold,
+        radius, F32(sigma_depth), F32(sigma_luminance), squarings, F32(sigma_normal),
+        blur_color, out_variance, out_illumination if blur_color else illumination,
     )
     boost_short_history(out_variance, history_length, threshold)

@@ -32,9 +32,22 @@ class LuminanceWeights:
         r, g, b = (w / total for w in clipped)
         return (r, g, b)
 
+    def for_filter(self) -> tuple[float, float, float]:
+        """The weights the filter uses (``Frame.luminance_weights``): these weights, or
+        :meth:`non_negative` where one is negative (a negative weight would make a bright
+        saturated colour read as negative luminance, which the filter's luminance terms
+        cannot take)."""
+        if min(self.weights) >= 0.0:
+            return self.weights
+        return self.non_negative()
+
     def describe(self) -> str:
         r, g, b = self.weights
-        return f"luminance weights R {r:.4f}, G {g:.4f}, B {b:.4f} ({self.source})"
+        text = f"luminance weights R {r:.4f}, G {g:.4f}, B {b:.4f} ({self.source})"
+        if self.for_filter() != self.weights:
+            r, g, b = self.for_filter()
+            text += f"; the filter uses R {r:.4f}, G {g:.4f}, B {b:.4f} (negative set to 0)"
+        return text
 
 
 def rgb_to_xyz_matrix(chromaticities: Sequence[float]) -> np.ndarray:

@@ -660,9 +660,10 @@ def read_frame(
     (background); NaN depth -> 0 with a counted warning; normals non-finite -> 0 then
     renormalised; NaN/Inf in radiance, albedo, emission, motion -> 0 with a counted
     warning; negative radiance/albedo -> 0 with a counted warning; mesh id rounded to int32,
-    NaN -> -1, absent -> -1 on background and 0 elsewhere. The whole file is decoded and kept
-    in ``source`` (unchanged) for the writer; ``passthrough`` False keeps only what a
-    ``--colour-only`` output needs. Raises InputError (one line, naming the file) for
+    NaN -> -1, absent -> -1 on background and 0 elsewhere. The frame's luminance weights are
+    the file's (chromaticities; ``LuminanceWeights.for_filter``). The whole file is decoded
+    and kept in ``source`` (unchanged) for the writer; ``passthrough`` False keeps only what
+    a ``--colour-only`` output needs. Raises InputError (one line, naming the file) for
     anything unreadable, for deep parts and for multi-view files.
     """
     path = Path(path)
@@ -728,17 +729,20 @@ def read_frame(
 
     alpha = values["alpha"][0] if "alpha" in values else None
 
-    frame = Frame(
+    geometry = dict(
         albedo=values["albedo"],
         normal=values["normal"],
         depth=np.ascontiguousarray(depth),
         motion=motion,
         mesh_id=mesh_id,
-        direct=values.get("direct"),
-        indirect=values.get("indirect"),
-        color=None if resolved.split else values.get("color"),
         emission=values.get("emission"),
+        # The filter's luminance is the file's own (its chromaticities), never negative.
+        luminance_weights=info.luminance_weights.for_filter(),
     )
+    if resolved.split:
+        frame = Frame.direct_indirect(values["direct"], values["indirect"], **geometry)
+    else:
+        frame = Frame.combined(values["color"], **geometry)
     frame.validate()
     return ReadResult(
         frame=frame,

@@ -51,6 +51,9 @@ FILTER_TESTS = (
     "tests/test_filters_stages.py",
     "tests/test_filters_denoiser.py",
     "tests/test_filters_atrous.py",
+    "tests/test_filters_signals.py",
+    "tests/test_filters_values.py",
+    "tests/test_filters_scale.py",
 )
 IO_TESTS = (
     "tests/test_io_presets.py",
@@ -77,8 +80,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "no-3x3-fallback", "filters", "3x3 reprojection fallback removed",
         "svgf_cli/filters/reproject.py",
-        (("            if count == 0:\n                out_history_length[uy, ux] = _ZERO",
-          "            if True:\n                out_history_length[uy, ux] = _ZERO"),),
+        (("                if count == 0:\n                    continue\n",
+          "                if True:\n                    continue\n"),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -98,8 +101,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "atrous-linear-steps", "filters", "a-trous steps 1,2,3,4,5 instead of 2^i",
         "svgf_cli/filters/denoiser.py",
-        (("filter_normal, 1 << iteration, p.sigma_depth,",
-          "filter_normal, iteration + 1, p.sigma_depth,"),),
+        (("                    1 << iteration, p.sigma_depth, p.sigma_normal, propagate,",
+          "                    iteration + 1, p.sigma_depth, p.sigma_normal, propagate,"),),
         FILTER_TESTS + ("tests/test_evaluate_regression.py",),
     ),
     Mutant(
@@ -165,6 +168,83 @@ MUTANTS: tuple[Mutant, ...] = (
         (("frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]",
           "frames = [(f, p) for f, p in usable if f in write]"),),
         ("tests/test_farm_resume.py", "tests/test_farm_chunks.py"),
+    ),
+    # --- the generalised filter (signals branch): N signals, modes, values, colour space
+    Mutant(
+        "reproject-mode-blind", "filters", "mode test removed from reprojection",
+        "svgf_cli/filters/reproject.py",
+        (("relevant = np.uint16(1 << s) | NO_HISTORY", "relevant = NO_HISTORY"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "history-length-of-signal-0", "filters",
+        "per-signal history length replaced by signal 0's",
+        "svgf_cli/filters/denoiser.py",
+        (("            self._before_accumulation(TemporalState(",
+          "            history_length[1:] = history_length[0]\n"
+          "            self._before_accumulation(TemporalState("),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "rec709-weights", "filters", "luminance weights ignored (Rec.709 constants used)",
+        "svgf_cli/filters/denoiser.py",
+        (("weights = float32_weights(frame.luminance_weights)",
+          "weights = float32_weights((0.2126, 0.7152, 0.0722))"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "no-history-guard", "filters", "history guard removed",
+        "svgf_cli/filters/denoiser.py",
+        (('        counts["history_resets"] += values.reset_nonfinite_history(\n'
+          '            history["history_illumination"], history["history_moments"],\n'
+          '            history["history_length"], history["history_mode"],\n'
+          '        )\n',
+          '        counts["history_resets"] += 0\n'),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "variance-mode-blind", "filters", "mode test removed from the spatial variance",
+        "svgf_cli/filters/variance.py",
+        (("w = w if (mode_p[i] ^ mode_q[i]) & bit == 0 else _ZERO", "w = w"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "atrous-mode-blind", "filters", "a-trous ignores the mode (guide sign)",
+        "svgf_cli/filters/atrous.py",
+        (("    w0 = w0 if (guide0 < _ZERO) == (lum0 < _ZERO) else _ZERO\n"
+          "    w1 = w1 if (guide1 < _ZERO) == (lum1 < _ZERO) else _ZERO\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "implausible-demodulated", "filters", "colours above 1.05 demodulated",
+        "svgf_cli/filters/modulate.py",
+        (("if not (brightest >= black and brightest <= max_reflectance):",
+          "if not brightest >= black:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "absolute-albedo-floor", "filters", "demodulation floor not relative to max(a)",
+        "svgf_cli/filters/modulate.py",
+        (("floor = max(black, relative_floor * brightest)", "floor = black"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "extreme-radiance-kept", "filters", "radiance beyond 1e15 kept (only NaN/Inf cleaned)",
+        "svgf_cli/filters/modulate.py",
+        (("return v if is_usable(v) else _ZERO", "return _ZERO if is_nonfinite(v) else v"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "emission-per-signal", "filters", "emission added once per signal",
+        "svgf_cli/filters/denoiser.py",
+        (("add_emission = has_emission and index == 0", "add_emission = has_emission"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "absolute-deviation-floor", "filters", "a-trous deviation floor absolute (1e-5)",
+        "svgf_cli/filters/atrous.py",
+        (("floor = RELATIVE_DEVIATION_FLOOR * lum", "floor = RELATIVE_DEVIATION_FLOOR"),),
+        FILTER_TESTS,
     ),
     # --- write safety: the io engineer's tests (issue 15 item 3); listed to run after merge
     Mutant(

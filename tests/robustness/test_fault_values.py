@@ -93,11 +93,6 @@ def test_nan_depth_is_counted(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert len(err.splitlines()) == len(FRAMES)  # one line a frame; Inf and 1e10 are silent
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="needs the Denoiser's value policy (signals branch, issue 11 defect 1): extreme "
-    "finite input (1e20) must be replaced before it enters the history",
-)
 def test_one_extreme_frame_does_not_blacken_the_shot(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
