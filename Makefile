@@ -5,7 +5,13 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 SVGF   := $(VENV)/bin/svgf
 
-.PHONY: venv demo test lint bench results clean
+# Blender as a Python module, for `make cycles-fixtures` only (CI never runs it): bpy 4.5 LTS
+# needs Python 3.11 (bpy 5.0 writes only Combined to multilayer EXR from a script).
+PYTHON_BLENDER ?= python3.11
+BLENDER_VENV   := .venv-blender
+BLENDER_STAMP  := $(BLENDER_VENV)/.installed
+
+.PHONY: venv demo test lint bench results clean cycles-fixtures lag-fixtures
 
 venv: $(STAMP)
 
@@ -30,6 +36,20 @@ bench: $(STAMP)
 
 results: $(STAMP)
 	$(PY) -m svgf_cli.results
+
+$(BLENDER_STAMP):
+	test -x $(BLENDER_VENV)/bin/python || $(PYTHON_BLENDER) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install -q "bpy==4.5.*"
+	touch $(BLENDER_STAMP)
+
+# Re-renders testdata/cycles (about 20 minutes on two cores); see testdata/cycles/README.md.
+cycles-fixtures: $(BLENDER_STAMP)
+	nice -n 10 $(BLENDER_VENV)/bin/python testdata/cycles/render.py
+
+# Regenerates testdata/lag/ (scenes, animations, 5 x 16 frames + references; nice'd,
+# about 15 CPU-minutes). See testdata/lag/README.md.
+lag-fixtures: $(STAMP)
+	$(PY) testdata/make_lag.py --render
 
 clean:
 	rm -rf $(VENV) demo bench/out results .pytest_cache .ruff_cache

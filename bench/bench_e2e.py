@@ -127,6 +127,9 @@ def run_cli(pattern: Path, out: Path, frames: int) -> dict[str, float]:
         "compute": float(done.group(2)) / frames,
         "write": float(done.group(3)) / frames,
         "rss_mb": usage.ru_maxrss / 1024.0,  # Linux reports KiB
+        # CPU seconds of the whole process (all threads): independent of other load on a
+        # shared machine, unlike the wall times.
+        "cpu": usage.ru_utime + usage.ru_stime,
     }
 
 
@@ -145,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         run_cli(root / "tiny" / "in.####.exr", root / "tiny_out", 2)
         print(
             f"{'size':>10} {'frames':>6} {'s/frame':>8} {'1st':>6} {'read':>6} "
-            f"{'compute':>8} {'write':>6} {'peak MB':>8}",
+            f"{'compute':>8} {'write':>6} {'peak MB':>8} {'CPU s':>7}",
             flush=True,
         )
         for width, height in sizes:
@@ -158,14 +161,22 @@ def main(argv: list[str] | None = None) -> int:
                 "MB/frame)",
                 flush=True,
             )
+            cpu = {}
             for frames in (n, 2 * n):
                 r = run_cli(folder / "in.####.exr", root / f"out_{width}x{height}", frames)
+                cpu[frames] = r["cpu"]
                 print(
                     f"{width}x{height:<5} {frames:>6} {r['steady']:>8.3f} "
                     f"{r['first_frame']:>6.2f} {r['read']:>6.3f} {r['compute']:>8.3f} "
-                    f"{r['write']:>6.3f} {r['rss_mb']:>8.0f}",
+                    f"{r['write']:>6.3f} {r['rss_mb']:>8.0f} {r['cpu']:>7.1f}",
                     flush=True,
                 )
+            per_frame = (cpu[2 * n] - cpu[n]) / n
+            print(
+                f"  CPU seconds per frame (the {n} extra frames of the longer run): "
+                f"{per_frame:.2f}; on 2 fully used cores that is >= {per_frame / 2:.2f} s/frame",
+                flush=True,
+            )
     print(
         "s/frame: mean wall per frame after the first written one; 1st: seconds to the "
         "first written frame, process start included; read/compute/write: mean seconds per "

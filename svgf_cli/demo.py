@@ -5,7 +5,9 @@ Steps (each a subprocess of this Python, so it runs exactly what a user would ty
 1. ``svgf trace testdata/cornell_checker.obj`` -> ``demo/in.####.exr`` (noisy 1 spp input)
    and ``demo/ref.####.exr`` (references);
 2. ``svgf denoise demo/in.####.exr -o demo/den.####.exr``;
-3. ``svgf evaluate`` of the denoised frames against the references, when that command exists.
+3. ``svgf evaluate`` of the denoised frames against the references;
+4. a picture, ``demo/demo.png``: the last frame as noisy input | svgf | reference, labelled
+   with that frame's relMSE and FLIP (the image in the README comes from here).
 
 Run ``python -m svgf_cli.demo [--frames 1-24] [--resolution 320x180] [--reference-spp 64]
 [--out demo]``. Exits non-zero with an ``ERROR:`` line naming the step that failed.
@@ -14,7 +16,6 @@ Run ``python -m svgf_cli.demo [--frames 1-24] [--resolution 320x180] [--referenc
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import subprocess
 import sys
 import time
@@ -60,16 +61,30 @@ def main(argv: list[str] | None = None) -> int:
         "--reference-spp", args.reference_spp, "--overwrite",
     ])  # fmt: skip
     _run("denoise", ["denoise", noisy, "-o", denoised, "--overwrite"])
-    if importlib.util.find_spec("svgf_cli.commands.evaluate") is not None:
-        _run("evaluate", ["evaluate", denoised, "--reference", reference, "--input", noisy])
-    else:
-        print("\n(svgf evaluate is not available; skipped)")
+    _run("evaluate", ["evaluate", denoised, "--reference", reference, "--input", noisy])
+    picture = out / "demo.png"
+    write_picture(noisy, denoised, reference, picture)
 
     print(f"\nDemo outputs in {out.resolve()}/:")
     print(f"  {noisy}      noisy 1-spp input with its G-buffer")
     print(f"  {denoised}     SVGF-denoised frames")
     print(f"  {reference}     converged references ({args.reference_spp} spp)")
+    print(f"\nPicture (input | svgf | reference): {picture.resolve()}")
     return 0
+
+
+def write_picture(noisy: str, denoised: str, reference: str, path: Path) -> None:
+    """The last frame side by side (input | svgf | reference), labelled with its metrics."""
+    from svgf_cli.evaluate.contact import write_contact_sheet
+    from svgf_cli.evaluate.engine import EvaluationRequest, resolve_frames, run_evaluation
+    from svgf_cli.io.patterns import SequencePattern
+
+    last = resolve_frames(SequencePattern.parse(denoised), denoised, None)[-1]
+    request = EvaluationRequest(
+        output=denoised, reference=reference, input=noisy, frames=[last], contact_frames=[last]
+    )
+    report, contacts = run_evaluation(request)
+    write_contact_sheet(report, contacts, path, error_map=False, dpi=100)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Camera and rigid object animation from a small JSON file, evaluated per frame.
+"""Camera, rigid object and emission animation from a small JSON file, evaluated per frame.
 
 Format (every key optional except each keyframe's ``frame``)::
 
@@ -15,7 +15,13 @@ Format (every key optional except each keyframe's ``frame``)::
         ],
         "tall_block": {"pivot": [368, 0, 351],
                        "keys": [{"frame": 1, "rotate": {"axis": [0, 1, 0], "angle": 0}},
-                                {"frame": 9, "rotate": {"axis": [0, 1, 0], "angle": 90}}]}
+                                {"frame": 9, "rotate": {"axis": [0, 1, 0], "angle": 90}}]},
+        "light": [
+          {"frame": 1, "translate": [0, 0, 0]},
+          {"frame": 16, "translate": [-150, 0, 0]},
+          {"frame": 9, "emission_scale": 1.0},
+          {"frame": 10, "emission_scale": 0.45}
+        ]
       }
     }
 
@@ -27,9 +33,18 @@ Format (every key optional except each keyframe's ``frame``)::
   "angle": degrees}``; ``scale`` a number or ``[sx, sy, sz]``. Rotation and scale act about
   the object's ``pivot`` (default: the centre of its bounding box in the OBJ). The matrix is
   ``T(translate) T(pivot) R S T(-pivot)``.
-* Between keys: linear interpolation of vectors and fov, quaternion slerp (shortest arc) of
-  rotations, so keep successive rotation keys less than 180 degrees apart. Before the first
-  and after the last key the end key holds. Fractional frames are allowed.
+* Emission keys: ``emission_scale``, a number or ``[r, g, b]`` (>= 0), multiplies the
+  object's ``Ke`` (every emissive triangle of the object); 1 where an object has no emission
+  keys. Emission keys form their own track: a key with only ``emission_scale`` (and
+  ``frame``) leaves the transform alone, a key with only transform fields leaves the
+  emission alone, and a key may carry both. Emission is interpolated linearly like the
+  rest, so a step is two keys on consecutive frames (``1.0`` at 9, ``0.45`` at 10: frame 10
+  on is dimmed). Next-event estimation samples the lights with the frame's emission and
+  the frame's (moved) geometry.
+* Between keys: linear interpolation of vectors, fov and emission, quaternion slerp
+  (shortest arc) of rotations, so keep successive rotation keys less than 180 degrees
+  apart. Before the first and after the last key the end key holds. Fractional frames are
+  allowed.
 """
 
 from __future__ import annotations
@@ -46,6 +61,7 @@ from svgf_cli.errors import InputError
 from svgf_trace.camera import Camera
 
 DEFAULT_FOV_Y = 39.3
+TRANSFORM_FIELDS = ("translate", "rotate", "scale")
 
 
 def quaternion_from_axis_angle(axis: np.ndarray, degrees: float) -> np.ndarray:
@@ -120,6 +136,12 @@ class TransformKey:
     scale: np.ndarray
 
 
+@dataclass(frozen=True)
+class EmissionKey:
+    frame: float
+    scale: np.ndarray  # (3,) multiplier of Ke
+
+
 def _bracket(frames: list[float], frame: float) -> tuple[int, int, float]:
     """Indices of the keys around ``frame`` and the blend weight of the second."""
     if frame <= frames[0]:
@@ -141,12 +163,18 @@ class Animation:
         camera_keys: list[CameraKey] | None = None,
         object_keys: dict[str, list[TransformKey]] | None = None,
         pivots: dict[str, np.ndarray] | None = None,
+        emission_keys: dict[str, list[EmissionKey]] | None = None,
     ) -> None:
         self.camera_keys = sorted(camera_keys or [], key=lambda k: k.frame)
         self.object_keys = {
             name: sorted(keys, key=lambda k: k.frame) for name, keys in (object_keys or {}).items()
         }
         self.pivots = dict(pivots or {})
+        self.emission_keys = {
+            name: sorted(keys, key=lambda k: k.frame)
+            for name, keys in (emission_keys or {}).items()
+            if keys
+        }
 
     @property
     def has_camera(self) -> bool:
@@ -183,6 +211,15 @@ class Animation:
         matrix[:3, 3] = translate + pivot - linear @ pivot
         return matrix
 
+    def emission_scale(self, name: str, frame: float) -> np.ndarray:
+        """(3,) multiplier of the object's ``Ke`` at ``frame`` (ones when not keyed)."""
+        keys = self.emission_keys.get(name)
+        if not keys:
+            return np.ones(3)
+        lo, hi, t = _bracket([k.frame for k in keys], frame)
+        a, b = keys[lo], keys[hi]
+        return a.scale + (b.scale - a.scale) * t
+
 
 def _vector(value: Any, where: str, path: Path, size: int = 3) -> np.ndarray:
     try:
@@ -204,6 +241,15 @@ def _frame_of(key: Any, where: str, path: Path) -> float:
     if not math.isfinite(frame):
         raise InputError(f"{where}: bad frame {key['frame']!r}", str(path))
     return frame
+
+
+def _emission(value: Any, where: str, path: Path) -> np.ndarray:
+    raw = [value] * 3 if isinstance(value, (int, float)) else value
+    scale = _vector(raw, f"{where}.emission_scale", path)
+    if np.any(scale < 0.0):
+        raise InputError(f"{where}.emission_scale: must not be negative, got {value!r}",
+                         str(path))  # fmt: skip
+    return scale
 
 
 def _rotation(value: Any, where: str, path: Path) -> np.ndarray:
@@ -261,6 +307,7 @@ def load_animation(path: str | Path, object_names: list[str]) -> Animation:
         previous = merged
 
     object_keys: dict[str, list[TransformKey]] = {}
+    emission_keys: dict[str, list[EmissionKey]] = {}
     pivots: dict[str, np.ndarray] = {}
     raw_objects = data.get("objects", {})
     if not isinstance(raw_objects, dict):
@@ -277,9 +324,14 @@ def load_animation(path: str | Path, object_names: list[str]) -> Animation:
         if not isinstance(keys, list):
             raise InputError(f"objects.{name}: expected a list of keyframes", str(path))
         parsed: list[TransformKey] = []
+        emission: list[EmissionKey] = []
         for i, key in enumerate(keys):
             where = f"objects.{name}[{i}]"
             frame = _frame_of(key, where, path)
+            if "emission_scale" in key:
+                emission.append(EmissionKey(frame, _emission(key["emission_scale"], where, path)))
+                if not any(field in key for field in TRANSFORM_FIELDS):
+                    continue
             translate = _vector(key.get("translate", [0, 0, 0]), f"{where}.translate", path)
             rotation = _rotation(key.get("rotate", [0, 0, 0]), f"{where}.rotate", path)
             raw_scale = key.get("scale", 1.0)
@@ -288,4 +340,5 @@ def load_animation(path: str | Path, object_names: list[str]) -> Animation:
             scale = _vector(raw_scale, f"{where}.scale", path)
             parsed.append(TransformKey(frame, translate, rotation, scale))
         object_keys[name] = parsed
-    return Animation(camera_keys, object_keys, pivots)
+        emission_keys[name] = emission
+    return Animation(camera_keys, object_keys, pivots, emission_keys)

@@ -1,4 +1,5 @@
-"""Numba kernels of the wavefront path tracer: G-buffer, shading, next-event estimation.
+"""Numba kernels of the wavefront path tracer: G-buffer, lobe colours, motion, shading with
+next-event estimation and MIS (Lambertian and glossy materials, ``bsdf``), lobe passes.
 
 Every kernel works on a batch of rays (structure of arrays) between two Embree calls. Each
 iteration touches only its own rows (and its own path's accumulator row), so the caller can
@@ -16,6 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
+from svgf_trace.bsdf import glossy_eval, glossy_sample, glossy_setup
+
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -32,6 +35,14 @@ INV_PI = 1.0 / math.pi
 DIMS_PER_BOUNCE = 6
 # Fraction of the way to its triangle's centroid a ray origin is moved (see shade_kernel).
 EDGE_NUDGE = 1e-4
+# Path keys with this bit set give a second stream of numbers per path: the lobe choice of a
+# glossy vertex draws from it, so the six dimensions above (and every Lambertian scene's
+# samples) stay exactly what they were before glossy materials existed.
+LOBE_STREAM = np.uint64(1 << 63)
+# shade_kernel's mis_mode values.
+MIS_POWER = 0
+MIS_BSDF_ONLY = 1
+MIS_LIGHT_ONLY = 2
 
 
 @njit(cache=True)
@@ -155,8 +166,8 @@ def _project(m, x, y, z, width, height):
 @njit(nogil=True, cache=True)
 def gbuffer_kernel(
     prim, bu, bv, dirs, eye, forward,
-    tri_v, tri_prev_v, tri_ng, tri_ns, tri_has_ns, tri_uv, tri_mat, tri_obj,
-    mat_kd, mat_ke, tex_off, tex_w, tex_h, tex_data,
+    tri_v, tri_prev_v, tri_ng, tri_ns, tri_has_ns, tri_uv, tri_mat, tri_obj, tri_ke,
+    mat_kd, tex_off, tex_w, tex_h, tex_data,
     ndc_now, ndc_prev, width, height,
     out_p, out_n, out_albedo, out_emission, out_z, out_id, out_motion,
 ):  # fmt: skip
@@ -182,7 +193,6 @@ def gbuffer_kernel(
             t, b0, b1, b2, dirs[i, 0], dirs[i, 1], dirs[i, 2], tri_ng, tri_ns, tri_has_ns
         )
         r, g, b = _albedo(t, b0, b1, b2, tri_uv, tri_mat, mat_kd, tex_off, tex_w, tex_h, tex_data)
-        m = tri_mat[t]
         out_p[i, 0] = px
         out_p[i, 1] = py
         out_p[i, 2] = pz
@@ -193,7 +203,7 @@ def gbuffer_kernel(
         out_albedo[i, 1] = g
         out_albedo[i, 2] = b
         for c in range(3):
-            out_emission[i, c] = mat_ke[m, c] if front else 0.0
+            out_emission[i, c] = tri_ke[t, c] if front else 0.0
         out_z[i] = (
             (px - eye[0]) * forward[0] + (py - eye[1]) * forward[1] + (pz - eye[2]) * forward[2]
         )
@@ -210,23 +220,119 @@ def gbuffer_kernel(
 
 
 @njit(nogil=True, cache=True)
+def reproject_kernel(prim, bu, bv, tri_v, tri_other_v, ndc_now, ndc_other, width, height, out):
+    """Screen motion of each pixel's surface point to another frame: the point's barycentrics
+    on the other frame's vertices, projected with that frame's camera, minus its projection
+    now (pixels, x right, y down; 0 on background)."""
+    for i in range(prim.shape[0]):
+        t = prim[i]
+        if t < 0:
+            out[i, 0] = 0.0
+            out[i, 1] = 0.0
+            continue
+        b0, b1, b2 = _barycentrics(bu[i], bv[i])
+        px = b0 * tri_v[t, 0, 0] + b1 * tri_v[t, 1, 0] + b2 * tri_v[t, 2, 0]
+        py = b0 * tri_v[t, 0, 1] + b1 * tri_v[t, 1, 1] + b2 * tri_v[t, 2, 1]
+        pz = b0 * tri_v[t, 0, 2] + b1 * tri_v[t, 1, 2] + b2 * tri_v[t, 2, 2]
+        qx = b0 * tri_other_v[t, 0, 0] + b1 * tri_other_v[t, 1, 0] + b2 * tri_other_v[t, 2, 0]
+        qy = b0 * tri_other_v[t, 0, 1] + b1 * tri_other_v[t, 1, 1] + b2 * tri_other_v[t, 2, 1]
+        qz = b0 * tri_other_v[t, 0, 2] + b1 * tri_other_v[t, 1, 2] + b2 * tri_other_v[t, 2, 2]
+        other_x, other_y = _project(ndc_other, qx, qy, qz, width, height)
+        now_x, now_y = _project(ndc_now, px, py, pz, width, height)
+        out[i, 0] = other_x - now_x
+        out[i, 1] = other_y - now_y
+
+
+@njit(nogil=True, cache=True)
+def lobe_colours_kernel(
+    prim, bu, bv, dirs, tri_ng, tri_ns, tri_has_ns, tri_uv, tri_mat,
+    mat_kd, mat_gloss, mat_rough, mat_alpha, mat_metal, mat_f0,
+    tex_off, tex_w, tex_h, tex_data, tab_e1, tab_e2, tab_a1, tab_a2,
+    out_diff, out_gloss,
+):  # fmt: skip
+    """Noise-free lobe reflectances at the primary hit (``DiffCol``, ``GlossCol``): the
+    diffuse and specular lobes' directional albedos for the view direction (bsdf module).
+    A Lambertian material's ``DiffCol`` is its albedo and its ``GlossCol`` 0."""
+    for i in range(prim.shape[0]):
+        t = prim[i]
+        for c in range(3):
+            out_diff[i, c] = 0.0
+            out_gloss[i, c] = 0.0
+        if t < 0:
+            continue
+        b0, b1, b2 = _barycentrics(bu[i], bv[i])
+        dx = np.float64(dirs[i, 0])
+        dy = np.float64(dirs[i, 1])
+        dz = np.float64(dirs[i, 2])
+        _, _, _, _, sx, sy, sz = _frame_normals(t, b0, b1, b2, dx, dy, dz, tri_ng, tri_ns,
+                                                tri_has_ns)  # fmt: skip
+        r, g, b = _albedo(t, b0, b1, b2, tri_uv, tri_mat, mat_kd, tex_off, tex_w, tex_h, tex_data)
+        m = tri_mat[t]
+        if mat_gloss[m] == 0:
+            out_diff[i, 0] = r
+            out_diff[i, 1] = g
+            out_diff[i, 2] = b
+            continue
+        mu_o = -(sx * dx + sy * dy + sz * dz)
+        setup = glossy_setup(r, g, b, mat_rough[m], mat_alpha[m], mat_metal[m], mat_f0[m],
+                             mu_o, tab_e1, tab_e2, tab_a1, tab_a2)  # fmt: skip
+        out_gloss[i, 0] = setup[8]
+        out_gloss[i, 1] = setup[9]
+        out_gloss[i, 2] = setup[10]
+        out_diff[i, 0] = setup[11]
+        out_diff[i, 1] = setup[12]
+        out_diff[i, 2] = setup[13]
+
+
+@njit(cache=True)
+def _add_split(acc_lobes, pid, slot, v0, v1, v2, f0, f1, f2):
+    """Add a contribution to the diffuse pass ``slot`` (0 direct, 1 indirect) and the glossy
+    pass ``slot + 2`` in the per-channel proportions ``f`` : ``1 - f``."""
+    acc_lobes[pid, slot, 0] += v0 * f0
+    acc_lobes[pid, slot, 1] += v1 * f1
+    acc_lobes[pid, slot, 2] += v2 * f2
+    acc_lobes[pid, slot + 2, 0] += v0 * (1.0 - f0)
+    acc_lobes[pid, slot + 2, 1] += v1 * (1.0 - f1)
+    acc_lobes[pid, slot + 2, 2] += v2 * (1.0 - f2)
+
+
+@njit(cache=True)
+def _diffuse_share(fd, fs):
+    """The diffuse lobe's share of a BSDF value (1 where both are 0)."""
+    total = fd + fs
+    return fd / total if total > 0.0 else 1.0
+
+
+@njit(nogil=True, cache=True)
 def shade_kernel(
-    depth, max_depth, rr_depth, key, eps,
-    path_id, path_key, ray_org, ray_dir, prim, bu, bv, tfar, throughput, prev_pdf,
-    acc_direct, acc_indirect,
-    tri_v, tri_ng, tri_ns, tri_has_ns, tri_uv, tri_mat,
-    mat_kd, mat_ke, tex_off, tex_w, tex_h, tex_data,
+    depth, max_depth, rr_depth, key, eps, mis_mode, lobes,
+    path_id, path_key, ray_dir, prim, bu, bv, tfar, throughput, prev_pdf, lobe_frac,
+    acc_direct, acc_indirect, acc_lobes,
+    tri_v, tri_ng, tri_ns, tri_has_ns, tri_uv, tri_mat, tri_ke,
+    mat_kd, mat_gloss, mat_rough, mat_alpha, mat_metal, mat_f0,
+    tex_off, tex_w, tex_h, tex_data, tab_e1, tab_e2, tab_a1, tab_a2,
     light_tri, light_cdf, tri_light_pdf,
-    shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_on,
-    next_org, next_dir, next_pdf, alive,
+    shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_frac, shadow_on,
+    next_org, next_dir, next_pdf, next_frac, alive,
 ):  # fmt: skip
     """One bounce for every active path: emission (MIS-weighted after the first hit), a
-    next-event-estimation shadow ray, and a cosine-sampled continuation with Russian
+    next-event-estimation shadow ray, and a BSDF-sampled continuation with Russian
     roulette. Contributions of the primary hit and of the first bounce's light go to
     ``acc_direct``; everything later to ``acc_indirect``.
 
     Path-length convention (as in pbrt): ``depth`` counts bounces before this hit; at
     ``depth == max_depth`` only emission is added.
+
+    ``mis_mode``: ``MIS_POWER`` combines light and BSDF sampling with the power heuristic
+    (Veach 1997); ``MIS_BSDF_ONLY`` traces no shadow rays and counts every emitter hit in
+    full; ``MIS_LIGHT_ONLY`` counts emitters hit after a bounce as 0 and shadow rays in full
+    (the two are for tests: all three estimate the same image).
+
+    With ``lobes``, every contribution except the primary hit's emission is also split into
+    ``acc_lobes[path, (DiffDir, DiffInd, GlossDir, GlossInd)]``: at the first hit by each
+    lobe's share of the BSDF value for that direction, per channel; after it by the share
+    the first bounce's sampled direction had (``lobe_frac``), as Blender Cycles' light
+    passes do, so the four add up to ``direct + indirect - emission``.
     """
     n_lights = light_tri.shape[0]
     dim0 = depth * DIMS_PER_BOUNCE
@@ -253,19 +359,26 @@ def shade_kernel(
         tp1 = throughput[i, 1]
         tp2 = throughput[i, 2]
         direct = depth <= 1
+        slot = 0 if direct else 1
+        fr0 = lobe_frac[i, 0]
+        fr1 = lobe_frac[i, 1]
+        fr2 = lobe_frac[i, 2]
 
         # Emission seen by this ray (front side only), MIS against light sampling.
-        ke0 = mat_ke[m, 0]
-        ke1 = mat_ke[m, 1]
-        ke2 = mat_ke[m, 2]
+        ke0 = tri_ke[t, 0]
+        ke1 = tri_ke[t, 1]
+        ke2 = tri_ke[t, 2]
         if front and (ke0 > 0.0 or ke1 > 0.0 or ke2 > 0.0):
             weight = 1.0
             if depth > 0:
-                cos_light = -(tri_ng[t, 0] * dx + tri_ng[t, 1] * dy + tri_ng[t, 2] * dz)
-                dist = np.float64(tfar[i])
-                pdf_light = tri_light_pdf[t] * dist * dist / cos_light
-                pdf_bsdf = prev_pdf[i]
-                weight = pdf_bsdf * pdf_bsdf / (pdf_bsdf * pdf_bsdf + pdf_light * pdf_light)
+                if mis_mode == MIS_POWER:
+                    cos_light = -(tri_ng[t, 0] * dx + tri_ng[t, 1] * dy + tri_ng[t, 2] * dz)
+                    dist = np.float64(tfar[i])
+                    pdf_light = tri_light_pdf[t] * dist * dist / cos_light
+                    pdf_bsdf = prev_pdf[i]
+                    weight = pdf_bsdf * pdf_bsdf / (pdf_bsdf * pdf_bsdf + pdf_light * pdf_light)
+                elif mis_mode == MIS_LIGHT_ONLY:
+                    weight = 0.0
             if direct:
                 acc_direct[pid, 0] += tp0 * ke0 * weight
                 acc_direct[pid, 1] += tp1 * ke1 * weight
@@ -274,6 +387,9 @@ def shade_kernel(
                 acc_indirect[pid, 0] += tp0 * ke0 * weight
                 acc_indirect[pid, 1] += tp1 * ke1 * weight
                 acc_indirect[pid, 2] += tp2 * ke2 * weight
+            if lobes and depth > 0:
+                _add_split(acc_lobes, pid, slot, tp0 * ke0 * weight, tp1 * ke1 * weight,
+                           tp2 * ke2 * weight, fr0, fr1, fr2)  # fmt: skip
         if depth >= max_depth:
             continue
 
@@ -288,8 +404,44 @@ def shade_kernel(
         oy = py + (_centroid(tri_v, t, 1) - py) * EDGE_NUDGE + gy * eps
         oz = pz + (_centroid(tri_v, t, 2) - pz) * EDGE_NUDGE + gz * eps
 
+        # Orthonormal basis around the shading normal (Duff et al. 2017, branchless).
+        sign = 1.0 if sz >= 0.0 else -1.0
+        a = -1.0 / (sign + sz)
+        bb = sx * sy * a
+        t1x = 1.0 + sign * sx * sx * a
+        t1y = sign * bb
+        t1z = -sign * sx
+        t2x = bb
+        t2y = sign + sy * sy * a
+        t2z = -sy
+
+        # Glossy materials: the view direction in the local frame and the lobe constants.
+        glossy = mat_gloss[m] != 0
+        wox = 0.0
+        woy = 0.0
+        woz = 0.0
+        rough = mat_rough[m]
+        alpha = mat_alpha[m]
+        f0d = mat_f0[m]
+        g_f0r = g_f0g = g_f0b = g_kdr = g_kdg = g_kdb = g_edo = g_inv = g_pspec = 0.0
+        if glossy:
+            wox = -(t1x * dx + t1y * dy + t1z * dz)
+            woy = -(t2x * dx + t2y * dy + t2z * dz)
+            woz = -(sx * dx + sy * dy + sz * dz)
+            setup = glossy_setup(ar, ag, ab, rough, alpha, mat_metal[m], f0d, woz,
+                                 tab_e1, tab_e2, tab_a1, tab_a2)  # fmt: skip
+            g_f0r = setup[0]
+            g_f0g = setup[1]
+            g_f0b = setup[2]
+            g_kdr = setup[3]
+            g_kdg = setup[4]
+            g_kdb = setup[5]
+            g_edo = setup[6]
+            g_inv = setup[7]
+            g_pspec = setup[14]
+
         # Next-event estimation: a triangle picked by power, a uniform point on it.
-        if n_lights > 0:
+        if n_lights > 0 and mis_mode != MIS_BSDF_ONLY:
             u_pick = uniform(key, pkey, dim0)
             lo = 0
             hi = n_lights - 1
@@ -320,13 +472,45 @@ def shade_kernel(
                 cos_light = -(tri_ng[lt, 0] * wx + tri_ng[lt, 1] * wy + tri_ng[lt, 2] * wz)
                 if cos_surf > 0.0 and cos_geom > 0.0 and cos_light > 0.0:
                     pdf_light = tri_light_pdf[lt] * dist * dist / cos_light
-                    pdf_bsdf = cos_surf * INV_PI
-                    weight = pdf_light * pdf_light / (pdf_light * pdf_light + pdf_bsdf * pdf_bsdf)
-                    scale = cos_surf * INV_PI * weight / pdf_light
-                    lm = tri_mat[lt]
-                    shadow_value[i, 0] = tp0 * ar * mat_ke[lm, 0] * scale
-                    shadow_value[i, 1] = tp1 * ag * mat_ke[lm, 1] * scale
-                    shadow_value[i, 2] = tp2 * ab * mat_ke[lm, 2] * scale
+                    if glossy:
+                        fd0, fd1, fd2, fs0, fs1, fs2, pdf_bsdf = glossy_eval(
+                            wox, woy, woz,
+                            t1x * wx + t1y * wy + t1z * wz, t2x * wx + t2y * wy + t2z * wz,
+                            cos_surf, rough, alpha, f0d, g_f0r, g_f0g, g_f0b,
+                            g_kdr, g_kdg, g_kdb, g_edo, g_inv, g_pspec, tab_e1, tab_e2,
+                        )  # fmt: skip
+                        f0 = fd0 + fs0
+                        f1 = fd1 + fs1
+                        f2 = fd2 + fs2
+                        if depth == 0:
+                            shadow_frac[i, 0] = _diffuse_share(fd0, fs0)
+                            shadow_frac[i, 1] = _diffuse_share(fd1, fs1)
+                            shadow_frac[i, 2] = _diffuse_share(fd2, fs2)
+                    else:
+                        pdf_bsdf = cos_surf * INV_PI
+                        f0 = ar
+                        f1 = ag
+                        f2 = ab
+                        if depth == 0:
+                            shadow_frac[i, 0] = 1.0
+                            shadow_frac[i, 1] = 1.0
+                            shadow_frac[i, 2] = 1.0
+                    if depth > 0:
+                        shadow_frac[i, 0] = fr0
+                        shadow_frac[i, 1] = fr1
+                        shadow_frac[i, 2] = fr2
+                    if mis_mode == MIS_POWER:
+                        weight = pdf_light * pdf_light / (pdf_light * pdf_light
+                                                          + pdf_bsdf * pdf_bsdf)  # fmt: skip
+                    else:
+                        weight = 1.0
+                    if glossy:
+                        scale = cos_surf * weight / pdf_light
+                    else:
+                        scale = cos_surf * INV_PI * weight / pdf_light
+                    shadow_value[i, 0] = tp0 * f0 * tri_ke[lt, 0] * scale
+                    shadow_value[i, 1] = tp1 * f1 * tri_ke[lt, 1] * scale
+                    shadow_value[i, 2] = tp2 * f2 * tri_ke[lt, 2] * scale
                     shadow_org[i, 0] = ox
                     shadow_org[i, 1] = oy
                     shadow_org[i, 2] = oz
@@ -334,34 +518,48 @@ def shade_kernel(
                     shadow_dir[i, 1] = wy
                     shadow_dir[i, 2] = wz
                     shadow_dist[i] = dist - 2.0 * eps
-                    shadow_on[i] = True
+                    shadow_on[i] = (f0 > 0.0 or f1 > 0.0 or f2 > 0.0) or not glossy
 
-        # Continue the path: cosine-weighted direction about the shading normal.
+        # Continue the path: a direction from the BSDF (cosine-weighted for Lambertian).
         u1 = uniform(key, pkey, dim0 + 3)
         u2 = uniform(key, pkey, dim0 + 4)
-        radius = math.sqrt(u1)
-        phi = 2.0 * math.pi * u2
-        lx = radius * math.cos(phi)
-        ly = radius * math.sin(phi)
-        lz = math.sqrt(max(0.0, 1.0 - u1))
-        # Orthonormal basis around the shading normal (Duff et al. 2017, branchless).
-        sign = 1.0 if sz >= 0.0 else -1.0
-        a = -1.0 / (sign + sz)
-        bb = sx * sy * a
-        t1x = 1.0 + sign * sx * sx * a
-        t1y = sign * bb
-        t1z = -sign * sx
-        t2x = bb
-        t2y = sign + sy * sy * a
-        t2z = -sy
+        if glossy:
+            u_lobe = uniform(key, pkey | LOBE_STREAM, dim0)
+            lx, ly, lz = glossy_sample(wox, woy, woz, alpha, g_pspec, u_lobe, u1, u2)
+        else:
+            radius = math.sqrt(u1)
+            phi = 2.0 * math.pi * u2
+            lx = radius * math.cos(phi)
+            ly = radius * math.sin(phi)
+            lz = math.sqrt(max(0.0, 1.0 - u1))
         nx = lx * t1x + ly * t2x + lz * sx
         ny = lx * t1y + ly * t2y + lz * sy
         nz = lx * t1z + ly * t2z + lz * sz
         if nx * gx + ny * gy + nz * gz <= 0.0 or lz <= 0.0:
             continue  # below the geometric surface (shading-normal artefact): stop
-        tp0 *= ar
-        tp1 *= ag
-        tp2 *= ab
+        if glossy:
+            fd0, fd1, fd2, fs0, fs1, fs2, pdf = glossy_eval(
+                wox, woy, woz, lx, ly, lz, rough, alpha, f0d, g_f0r, g_f0g, g_f0b,
+                g_kdr, g_kdg, g_kdb, g_edo, g_inv, g_pspec, tab_e1, tab_e2,
+            )  # fmt: skip
+            if pdf <= 0.0:
+                continue
+            tp0 *= (fd0 + fs0) * lz / pdf
+            tp1 *= (fd1 + fs1) * lz / pdf
+            tp2 *= (fd2 + fs2) * lz / pdf
+            if depth == 0:
+                fr0 = _diffuse_share(fd0, fs0)
+                fr1 = _diffuse_share(fd1, fs1)
+                fr2 = _diffuse_share(fd2, fs2)
+        else:
+            pdf = lz * INV_PI
+            tp0 *= ar
+            tp1 *= ag
+            tp2 *= ab
+            if depth == 0:
+                fr0 = 1.0
+                fr1 = 1.0
+                fr2 = 1.0
         if depth + 1 >= rr_depth:
             survive = min(0.95, max(tp0, max(tp1, tp2)))
             if survive <= 0.0 or uniform(key, pkey, dim0 + 5) >= survive:
@@ -380,24 +578,34 @@ def shade_kernel(
         next_dir[i, 0] = nx
         next_dir[i, 1] = ny
         next_dir[i, 2] = nz
-        next_pdf[i] = lz * INV_PI
+        next_pdf[i] = pdf
+        next_frac[i, 0] = fr0
+        next_frac[i, 1] = fr1
+        next_frac[i, 2] = fr2
         alive[i] = True
 
 
 @njit(cache=True)
-def add_shadow_kernel(depth, path_id, shadow_value, visible, acc_direct, acc_indirect):
-    """Add the unoccluded next-event contributions to the paths' accumulators."""
+def add_shadow_kernel(depth, path_id, shadow_value, shadow_frac, visible, acc_direct,
+                      acc_indirect, acc_lobes, lobes):  # fmt: skip
+    """Add the unoccluded next-event contributions to the paths' accumulators (and, with
+    ``lobes``, to the lobe passes in the shares ``shadow_frac``)."""
     target = acc_direct if depth == 0 else acc_indirect
+    slot = 0 if depth == 0 else 1
     for k in range(path_id.shape[0]):
         if visible[k]:
             pid = path_id[k]
             target[pid, 0] += shadow_value[k, 0]
             target[pid, 1] += shadow_value[k, 1]
             target[pid, 2] += shadow_value[k, 2]
+            if lobes:
+                _add_split(acc_lobes, pid, slot, shadow_value[k, 0], shadow_value[k, 1],
+                           shadow_value[k, 2], shadow_frac[k, 0], shadow_frac[k, 1],
+                           shadow_frac[k, 2])  # fmt: skip
 
 
 @njit(cache=True)
-def compact_paths(alive, path_id, path_key, throughput, next_pdf, next_org, next_dir):
+def compact_paths(alive, path_id, path_key, throughput, next_pdf, next_frac, next_org, next_dir):
     """The surviving paths' state, gathered into fresh contiguous arrays (one pass)."""
     count = 0
     for i in range(alive.shape[0]):
@@ -407,6 +615,7 @@ def compact_paths(alive, path_id, path_key, throughput, next_pdf, next_org, next
     out_key = np.empty(count, path_key.dtype)
     out_tp = np.empty((count, 3), throughput.dtype)
     out_pdf = np.empty(count, next_pdf.dtype)
+    out_frac = np.empty((count, 3), next_frac.dtype)
     out_org = np.empty((count, 3), next_org.dtype)
     out_dir = np.empty((count, 3), next_dir.dtype)
     k = 0
@@ -417,14 +626,16 @@ def compact_paths(alive, path_id, path_key, throughput, next_pdf, next_org, next
             out_pdf[k] = next_pdf[i]
             for c in range(3):
                 out_tp[k, c] = throughput[i, c]
+                out_frac[k, c] = next_frac[i, c]
                 out_org[k, c] = next_org[i, c]
                 out_dir[k, c] = next_dir[i, c]
             k += 1
-    return out_id, out_key, out_tp, out_pdf, out_org, out_dir
+    return out_id, out_key, out_tp, out_pdf, out_frac, out_org, out_dir
 
 
 @njit(cache=True)
-def compact_shadow_rays(shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value):
+def compact_shadow_rays(shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value,
+                        shadow_frac):  # fmt: skip
     """The shadow rays that were generated, gathered into contiguous arrays."""
     count = 0
     for i in range(shadow_on.shape[0]):
@@ -435,6 +646,7 @@ def compact_shadow_rays(shadow_on, path_id, shadow_org, shadow_dir, shadow_dist,
     out_dir = np.empty((count, 3), shadow_dir.dtype)
     out_dist = np.empty(count, shadow_dist.dtype)
     out_value = np.empty((count, 3), shadow_value.dtype)
+    out_frac = np.empty((count, 3), shadow_frac.dtype)
     k = 0
     for i in range(shadow_on.shape[0]):
         if shadow_on[i]:
@@ -444,5 +656,23 @@ def compact_shadow_rays(shadow_on, path_id, shadow_org, shadow_dir, shadow_dist,
                 out_org[k, c] = shadow_org[i, c]
                 out_dir[k, c] = shadow_dir[i, c]
                 out_value[k, c] = shadow_value[i, c]
+                out_frac[k, c] = shadow_frac[i, c]
             k += 1
-    return out_id, out_org, out_dir, out_dist, out_value
+    return out_id, out_org, out_dir, out_dist, out_value, out_frac
+
+
+@njit(cache=True)
+def stratum_pixels(key, width, height, size):
+    """One pixel index per ``size`` x ``size`` stratum of the image, in stratum order (row
+    by row), chosen by hashing (key, stratum); border strata are clipped to the image."""
+    sx = (width + size - 1) // size
+    sy = (height + size - 1) // size
+    out = np.empty(sx * sy, np.int64)
+    for j in range(sy):
+        for i in range(sx):
+            s = j * sx + i
+            w = min(size, width - i * size)
+            h = min(size, height - j * size)
+            pick = min(int(uniform(key, np.uint64(s), 0) * (w * h)), w * h - 1)
+            out[s] = (j * size + pick // w) * width + i * size + pick % w
+    return out

@@ -7,8 +7,9 @@ active path (numba), trace all shadow rays (Embree OCCLUDED), trace all continua
 (Embree INTERSECT), compact. Embree calls are split across threads (embreex releases the GIL).
 
 Seeds: the frame key is ``SeedSequence([seed, frame, stream])`` (stream 0 for the noisy
-input, 1 for the reference, so the reference's samples are independent of the input's);
-each path's numbers come from hashing (frame key, sample index, pixel, dimension).
+input, 1 for the reference, so the reference's samples are independent of the input's, 2
+for the choice of gradient-sample pixels); each path's numbers come from hashing (frame
+key, sample index, pixel, dimension).
 """
 
 from __future__ import annotations
@@ -18,12 +19,13 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from svgf_trace import kernels
+from svgf_trace import bsdf, kernels
 from svgf_trace.animation import Animation
 from svgf_trace.camera import Camera, default_camera
 from svgf_trace.scene import Scene
@@ -36,6 +38,7 @@ MIN_RAYS_PER_THREAD = 16384
 
 STREAM_INPUT = 0
 STREAM_REFERENCE = 1
+STREAM_GRADIENT = 2
 
 
 @dataclass
@@ -133,6 +136,24 @@ class EmbreeTracer:
 
 
 @dataclass
+class MaterialArrays:
+    """Per-material parameters as the kernels take them, plus the BSDF albedo tables."""
+
+    kd: np.ndarray  # (M, 3)
+    ke: np.ndarray  # (M, 3)
+    gloss: np.ndarray  # (M,) int32: 1 = GGX specular lobe (bsdf module), 0 = Lambertian
+    rough: np.ndarray  # (M,) perceptual roughness
+    alpha: np.ndarray  # (M,) GGX alpha = max(roughness^2, MIN_ALPHA)
+    metal: np.ndarray  # (M,)
+    f0: np.ndarray  # (M,) dielectric reflectance at normal incidence
+    tex_off: np.ndarray
+    tex_w: np.ndarray
+    tex_h: np.ndarray
+    tex_data: np.ndarray
+    tables: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # E1, E2, A1, A2
+
+
+@dataclass
 class FrameGeometry:
     """Everything the kernels need for one frame, in world space."""
 
@@ -147,17 +168,17 @@ class FrameGeometry:
     tri_uv: np.ndarray
     tri_mat: np.ndarray
     tri_obj: np.ndarray
-    mat_kd: np.ndarray
-    mat_ke: np.ndarray
-    tex_off: np.ndarray
-    tex_w: np.ndarray
-    tex_h: np.ndarray
-    tex_data: np.ndarray
+    tri_ke: np.ndarray  # (T, 3) emission of each triangle this frame (Ke x emission_scale)
+    materials: MaterialArrays
     light_tri: np.ndarray
     light_cdf: np.ndarray
     tri_light_pdf: np.ndarray
     eps: float
     tracer: EmbreeTracer
+
+    @property
+    def has_glossy(self) -> bool:
+        return bool(np.any(self.materials.gloss[self.tri_mat] != 0))
 
 
 def _object_pivots(scene: Scene) -> dict[str, np.ndarray]:
@@ -182,6 +203,18 @@ def world_vertices(scene: Scene, animation: Animation, frame: float) -> tuple[np
     return out, matrices
 
 
+def triangle_emission(scene: Scene, animation: Animation, frame: float) -> np.ndarray:
+    """(T, 3) emission of every triangle at ``frame``: its material's ``Ke`` times its
+    object's ``emission_scale``."""
+    ke = np.array([m.ke for m in scene.materials], dtype=np.float64).reshape(-1, 3)
+    tri_ke = ke[scene.material]
+    for obj in scene.objects:
+        scale = animation.emission_scale(obj.name, frame)
+        if not np.array_equal(scale, np.ones(3)):
+            tri_ke[obj.start : obj.stop] = tri_ke[obj.start : obj.stop] * scale
+    return tri_ke
+
+
 def frame_camera(
     scene: Scene, animation: Animation, frame: float, width: int, height: int
 ) -> Camera:
@@ -191,23 +224,42 @@ def frame_camera(
     return default_camera(lo, hi, width, height)
 
 
-def _pack_materials(scene: Scene) -> tuple[np.ndarray, ...]:
+_NO_TABLES = (np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(2), np.zeros(2))
+
+
+def pack_materials(scene: Scene) -> MaterialArrays:
     count = len(scene.materials)
-    kd = np.array([m.kd for m in scene.materials], dtype=np.float64).reshape(count, 3)
-    ke = np.array([m.ke for m in scene.materials], dtype=np.float64).reshape(count, 3)
+    mats = scene.materials
+    kd = np.array([m.kd for m in mats], dtype=np.float64).reshape(count, 3)
+    ke = np.array([m.ke for m in mats], dtype=np.float64).reshape(count, 3)
+    rough = np.array([m.roughness for m in mats], dtype=np.float64)
     off = np.full(count, -1, dtype=np.int64)
     tw = np.zeros(count, dtype=np.int64)
     th = np.zeros(count, dtype=np.int64)
     chunks = []
     cursor = 0
-    for i, m in enumerate(scene.materials):
+    for i, m in enumerate(mats):
         if m.texture is not None:
             off[i] = cursor
             th[i], tw[i] = m.texture.shape[:2]
             chunks.append(m.texture.reshape(-1))
             cursor += m.texture.size
     data = np.concatenate(chunks) if chunks else np.zeros(3, dtype=np.float32)
-    return kd, ke, off, tw, th, np.ascontiguousarray(data, dtype=np.float32)
+    return MaterialArrays(
+        kd=kd,
+        ke=ke,
+        gloss=np.array([1 if m.glossy else 0 for m in mats], dtype=np.int32),
+        rough=rough,
+        alpha=np.maximum(rough * rough, bsdf.MIN_ALPHA),
+        metal=np.array([m.metallic for m in mats], dtype=np.float64),
+        f0=np.array([m.dielectric_f0 for m in mats], dtype=np.float64),
+        tex_off=off,
+        tex_w=tw,
+        tex_h=th,
+        tex_data=np.ascontiguousarray(data, dtype=np.float32),
+        # The tables cost about a second to build: only scenes with a glossy material pay.
+        tables=bsdf.albedo_tables() if any(m.glossy for m in mats) else _NO_TABLES,
+    )
 
 
 def prepare_frame(
@@ -239,8 +291,8 @@ def prepare_frame(
             normal_matrix = np.linalg.inv(linear).T
             tri_ns[obj.start : obj.stop] = scene.normals[obj.start : obj.stop] @ normal_matrix.T
 
-    kd, ke, tex_off, tex_w, tex_h, tex_data = _pack_materials(scene)
-    tri_ke = ke[scene.material]
+    materials = pack_materials(scene)
+    tri_ke = triangle_emission(scene, animation, frame)
     luminance = tri_ke @ np.array([0.2126, 0.7152, 0.0722])
     power = np.where(luminance > 0, area * luminance, 0.0)
     light_tri = np.flatnonzero(power > 0).astype(np.int32)
@@ -269,12 +321,8 @@ def prepare_frame(
         tri_uv=scene.uvs,
         tri_mat=scene.material,
         tri_obj=scene.object_index,
-        mat_kd=kd,
-        mat_ke=ke,
-        tex_off=tex_off,
-        tex_w=tex_w,
-        tex_h=tex_h,
-        tex_data=tex_data,
+        tri_ke=np.ascontiguousarray(tri_ke),
+        materials=materials,
         light_tri=light_tri,
         light_cdf=light_cdf,
         tri_light_pdf=tri_light_pdf,
@@ -293,6 +341,36 @@ class PrimaryHits:
     directions: np.ndarray  # float32 (HW, 3)
 
 
+@dataclass
+class PathStarts:
+    """Where paths start: a primary hit per entry and the pixel whose random numbers the
+    entry's paths use (path key = sample index x ``stride`` + ``pixel``)."""
+
+    pixel: np.ndarray  # int64
+    prim: np.ndarray  # int32, -1 = nothing hit (no path)
+    u: np.ndarray
+    v: np.ndarray
+    t: np.ndarray
+    directions: np.ndarray  # float32 (n, 3), the primary ray's direction
+    stride: int
+
+    @classmethod
+    def from_hits(cls, hits: PrimaryHits) -> PathStarts:
+        n = hits.prim.shape[0]
+        return cls(np.arange(n, dtype=np.int64), hits.prim, hits.u, hits.v, hits.t,
+                   hits.directions, n)  # fmt: skip
+
+
+class Radiance(NamedTuple):
+    """Radiance per path start (or per sample and start): ``direct``, ``indirect`` ``(..., n,
+    3)`` and, when asked for, ``lobes`` ``(..., n, 4, 3)``: the diffuse-direct,
+    diffuse-indirect, glossy-direct and glossy-indirect radiance (not divided by colour)."""
+
+    direct: np.ndarray
+    indirect: np.ndarray
+    lobes: np.ndarray | None
+
+
 def trace_primary(geo: FrameGeometry) -> PrimaryHits:
     dirs, eye = geo.camera.primary_rays()
     directions = np.ascontiguousarray(dirs, dtype=np.float32)
@@ -301,9 +379,19 @@ def trace_primary(geo: FrameGeometry) -> PrimaryHits:
     return PrimaryHits(prim, u, v, t, origins, directions)
 
 
-def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
-    """The noise-free primary-hit layers, each ``(H, W)`` or ``(H, W, k)`` float32."""
+def gbuffer(
+    geo: FrameGeometry, hits: PrimaryHits, *, lobe_colours: bool = False,
+    next_frame: tuple[np.ndarray, Camera] | None = None,
+) -> dict[str, np.ndarray]:  # fmt: skip
+    """The noise-free primary-hit layers, each ``(H, W)`` or ``(H, W, k)`` float32.
+
+    ``albedo`` is the total directional albedo ``DiffCol + GlossCol`` where a glossy
+    material is seen (``Kd`` x texture on Lambertian ones). With ``lobe_colours`` also
+    ``DiffCol`` and ``GlossCol``; with ``next_frame`` (the next frame's vertices and camera)
+    also ``motion_next``.
+    """
     cam = geo.camera
+    mats = geo.materials
     n = hits.prim.shape[0]
     f32 = np.float32
     out_p = np.empty((n, 3), f32)
@@ -322,8 +410,8 @@ def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
         kernels.gbuffer_kernel(
             hits.prim[r], hits.u[r], hits.v[r], hits.directions[r], eye, forward,
             geo.tri_v, geo.tri_prev_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv,
-            geo.tri_mat, geo.tri_obj, geo.mat_kd, geo.mat_ke,
-            geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
+            geo.tri_mat, geo.tri_obj, geo.tri_ke, mats.kd,
+            mats.tex_off, mats.tex_w, mats.tex_h, mats.tex_data,
             ndc_now, ndc_prev, cam.width, cam.height,
             out_p[r], out_n[r], out_albedo[r], out_emission[r], out_z[r], out_id[r], out_motion[r],
         )  # fmt: skip
@@ -334,7 +422,7 @@ def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
     def img(a: np.ndarray) -> np.ndarray:
         return a.reshape(h, w, -1)
 
-    return {
+    layers = {
         "P": img(out_p),
         "N": img(out_n),
         "albedo": img(out_albedo),
@@ -343,6 +431,30 @@ def gbuffer(geo: FrameGeometry, hits: PrimaryHits) -> dict[str, np.ndarray]:
         "id": out_id.reshape(h, w),
         "motion": img(out_motion),
     }
+    if lobe_colours or geo.has_glossy:
+        diff = np.empty((n, 3))
+        gloss = np.empty((n, 3))
+        geo.tracer.map_rows(n, lambda r: kernels.lobe_colours_kernel(
+            hits.prim[r], hits.u[r], hits.v[r], hits.directions[r], geo.tri_ng, geo.tri_ns,
+            geo.tri_has_ns, geo.tri_uv, geo.tri_mat, mats.kd, mats.gloss, mats.rough,
+            mats.alpha, mats.metal, mats.f0, mats.tex_off, mats.tex_w, mats.tex_h,
+            mats.tex_data, *mats.tables, diff[r], gloss[r],
+        ))  # fmt: skip
+        if geo.has_glossy:
+            layers["albedo"] = img((diff + gloss).astype(f32))
+        if lobe_colours:
+            layers["DiffCol"] = img(diff.astype(f32))
+            layers["GlossCol"] = img(gloss.astype(f32))
+    if next_frame is not None:
+        next_v, next_camera = next_frame
+        motion_next = np.empty((n, 2), f32)
+        ndc_next = next_camera.world_to_ndc()
+        geo.tracer.map_rows(n, lambda r: kernels.reproject_kernel(
+            hits.prim[r], hits.u[r], hits.v[r], geo.tri_v, next_v, ndc_now, ndc_next,
+            cam.width, cam.height, motion_next[r],
+        ))  # fmt: skip
+        layers["motion_next"] = img(motion_next)
+    return layers
 
 
 def frame_key(seed: int, frame: int, stream: int) -> np.uint64:
@@ -351,29 +463,45 @@ def frame_key(seed: int, frame: int, stream: int) -> np.uint64:
     return np.uint64(state[0])
 
 
+def _as_starts(source: PrimaryHits | PathStarts) -> PathStarts:
+    return PathStarts.from_hits(source) if isinstance(source, PrimaryHits) else source
+
+
 def trace_samples(
     geo: FrameGeometry,
-    hits: PrimaryHits,
+    source: PrimaryHits | PathStarts,
     spp: int,
     max_depth: int,
     key: np.uint64,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Mean direct and indirect radiance per pixel over ``spp`` samples, ``(HW, 3)`` float64.
+    *,
+    lobes: bool = False,
+    mis_mode: int = kernels.MIS_POWER,
+) -> Radiance:
+    """Mean radiance per path start over ``spp`` samples, float64 (``Radiance``).
 
-    Samples are traced in batches of whole sample passes; the per-pixel sums are formed in
+    Samples are traced in batches of whole sample passes; the per-start sums are formed in
     sample order, so the result does not depend on the batch size.
     """
-    hw = hits.prim.shape[0]
-    sum_direct = np.zeros((hw, 3))
-    sum_indirect = np.zeros((hw, 3))
-    samples_per_batch = max(1, min(spp, MAX_PATHS_PER_BATCH // max(hw, 1)))
+    starts = _as_starts(source)
+    n = starts.prim.shape[0]
+    sum_direct = np.zeros((n, 3))
+    sum_indirect = np.zeros((n, 3))
+    sum_lobes = np.zeros((n, 4, 3)) if lobes else None
+    samples_per_batch = max(1, min(spp, MAX_PATHS_PER_BATCH // max(n, 1)))
     for first in range(0, spp, samples_per_batch):
         count = min(samples_per_batch, spp - first)
-        direct, indirect = trace_batch(geo, hits, first, count, max_depth, key)
+        batch = trace_batch(geo, starts, first, count, max_depth, key, lobes=lobes,
+                            mis_mode=mis_mode)  # fmt: skip
         for s in range(count):
-            sum_direct += direct[s]
-            sum_indirect += indirect[s]
-    return sum_direct / spp, sum_indirect / spp
+            sum_direct += batch.direct[s]
+            sum_indirect += batch.indirect[s]
+            if sum_lobes is not None and batch.lobes is not None:
+                sum_lobes += batch.lobes[s]
+    return Radiance(
+        sum_direct / spp,
+        sum_indirect / spp,
+        None if sum_lobes is None else sum_lobes / spp,
+    )
 
 
 def _shade_rows(
@@ -381,18 +509,21 @@ def _shade_rows(
     depth: int,
     max_depth: int,
     key: np.uint64,
+    mis_mode: int,
+    lobes: bool,
     rows: tuple[np.ndarray, ...],
+    accumulators: tuple[np.ndarray, ...],
     outs: tuple[np.ndarray, ...],
-    acc_direct: np.ndarray,
-    acc_indirect: np.ndarray,
     r: slice,
 ) -> None:
     """shade_kernel over rows ``r`` of the path state (``rows``) and outputs (``outs``)."""
+    mats = geo.materials
     kernels.shade_kernel(
-        depth, max_depth, RR_DEPTH, key, geo.eps,
-        *(a[r] for a in rows), acc_direct, acc_indirect,
-        geo.tri_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv, geo.tri_mat,
-        geo.mat_kd, geo.mat_ke, geo.tex_off, geo.tex_w, geo.tex_h, geo.tex_data,
+        depth, max_depth, RR_DEPTH, key, geo.eps, mis_mode, lobes,
+        *(a[r] for a in rows), *accumulators,
+        geo.tri_v, geo.tri_ng, geo.tri_ns, geo.tri_has_ns, geo.tri_uv, geo.tri_mat, geo.tri_ke,
+        mats.kd, mats.gloss, mats.rough, mats.alpha, mats.metal, mats.f0,
+        mats.tex_off, mats.tex_w, mats.tex_h, mats.tex_data, *mats.tables,
         geo.light_tri, geo.light_cdf, geo.tri_light_pdf,
         *(a[r] for a in outs),
     )  # fmt: skip
@@ -400,28 +531,36 @@ def _shade_rows(
 
 def trace_batch(
     geo: FrameGeometry,
-    hits: PrimaryHits,
+    source: PrimaryHits | PathStarts,
     first_sample: int,
     count: int,
     max_depth: int,
     key: np.uint64,
-) -> tuple[np.ndarray, np.ndarray]:
-    hw = hits.prim.shape[0]
-    n = hw * count
+    *,
+    lobes: bool = False,
+    mis_mode: int = kernels.MIS_POWER,
+) -> Radiance:
+    """Samples ``first_sample .. first_sample + count - 1`` of every path start:
+    ``Radiance`` with arrays ``(count, n, ...)``."""
+    starts = _as_starts(source)
+    n_starts = starts.prim.shape[0]
+    n = n_starts * count
     acc_direct = np.zeros((n, 3))
     acc_indirect = np.zeros((n, 3))
+    acc_lobes = np.zeros((n if lobes else 1, 4, 3))
     # Only rays that hit something start a path; background stays black.
-    hit_pixels = np.flatnonzero(hits.prim >= 0).astype(np.int64)
-    samples = np.repeat(np.arange(count, dtype=np.int64), hit_pixels.size)
-    pixels = np.tile(hit_pixels, count)
-    path_id = samples * hw + pixels
-    path_key = ((samples + first_sample) * hw + pixels).astype(np.uint64)
-    org = hits.origins[pixels]
-    dirs = hits.directions[pixels]
-    prim, bu, bv, tfar = hits.prim[pixels], hits.u[pixels], hits.v[pixels], hits.t[pixels]
+    hit_starts = np.flatnonzero(starts.prim >= 0).astype(np.int64)
+    samples = np.repeat(np.arange(count, dtype=np.int64), hit_starts.size)
+    index = np.tile(hit_starts, count)
+    path_id = samples * n_starts + index
+    path_key = ((samples + first_sample) * starts.stride + starts.pixel[index]).astype(np.uint64)
+    dirs = starts.directions[index]
+    prim, bu, bv, tfar = starts.prim[index], starts.u[index], starts.v[index], starts.t[index]
     throughput = np.ones((path_id.size, 3))
     prev_pdf = np.zeros(path_id.size)
+    lobe_frac = np.ones((path_id.size, 3))
     tracer = geo.tracer
+    accumulators = (acc_direct, acc_indirect, acc_lobes)
     for depth in range(max_depth + 1):
         m = prim.shape[0]
         if m == 0:
@@ -430,34 +569,40 @@ def trace_batch(
         shadow_dir = np.empty((m, 3), np.float32)
         shadow_dist = np.empty(m, np.float32)
         shadow_value = np.empty((m, 3))
+        shadow_frac = np.empty((m, 3))
         shadow_on = np.empty(m, np.bool_)
         next_org = np.empty((m, 3), np.float32)
         next_dir = np.empty((m, 3), np.float32)
         next_pdf = np.empty(m)
+        next_frac = np.empty((m, 3))
         alive = np.empty(m, np.bool_)
-        rows = (path_id, path_key, org, dirs, prim, bu, bv, tfar, throughput, prev_pdf)
-        outs = (shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_on,
-                next_org, next_dir, next_pdf, alive)  # fmt: skip
-        accumulators = (acc_direct, acc_indirect)
-        tracer.map_rows(m, partial(_shade_rows, geo, depth, max_depth, key, rows, outs,
-                                   *accumulators))  # fmt: skip
-        s_id, s_org, s_dir, s_dist, s_value = kernels.compact_shadow_rays(
-            shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value
+        rows = (path_id, path_key, dirs, prim, bu, bv, tfar, throughput, prev_pdf, lobe_frac)
+        outs = (shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_frac, shadow_on,
+                next_org, next_dir, next_pdf, next_frac, alive)  # fmt: skip
+        tracer.map_rows(m, partial(_shade_rows, geo, depth, max_depth, key, mis_mode, lobes,
+                                   rows, accumulators, outs))  # fmt: skip
+        s_id, s_org, s_dir, s_dist, s_value, s_frac = kernels.compact_shadow_rays(
+            shadow_on, path_id, shadow_org, shadow_dir, shadow_dist, shadow_value, shadow_frac
         )
         if s_id.size:
             blocked = tracer.occluded(s_org, s_dir, s_dist)
             kernels.add_shadow_kernel(
-                depth, s_id, s_value, ~blocked, acc_direct, acc_indirect
+                depth, s_id, s_value, s_frac, ~blocked, acc_direct, acc_indirect, acc_lobes,
+                lobes,
             )
         if depth == max_depth:
             break
-        path_id, path_key, throughput, prev_pdf, org, dirs = kernels.compact_paths(
-            alive, path_id, path_key, throughput, next_pdf, next_org, next_dir
+        path_id, path_key, throughput, prev_pdf, lobe_frac, org, dirs = kernels.compact_paths(
+            alive, path_id, path_key, throughput, next_pdf, next_frac, next_org, next_dir
         )
         if path_id.size == 0:
             break
         prim, bu, bv, tfar = tracer.intersect(org, dirs)
-    return acc_direct.reshape(count, hw, 3), acc_indirect.reshape(count, hw, 3)
+    return Radiance(
+        acc_direct.reshape(count, n_starts, 3),
+        acc_indirect.reshape(count, n_starts, 3),
+        acc_lobes.reshape(count, n_starts, 4, 3) if lobes else None,
+    )
 
 
 @dataclass
@@ -469,6 +614,8 @@ class FrameResult:
     indirect: np.ndarray
     camera: Camera
     prev_camera: Camera
+    lobes: np.ndarray | None = None  # (H, W, 4, 3) float32 lobe radiance (Radiance.lobes)
+    gradient: dict[str, np.ndarray] | None = None  # (H, W) float32 planes, gradients module
 
 
 def render_frame(
@@ -484,29 +631,53 @@ def render_frame(
     reference_spp: int = 0,
     threads: int = 1,
     stats: TraceStats | None = None,
+    lobes: bool = False,
+    motion_next: bool = False,
+    gradient_samples: bool = False,
 ) -> tuple[FrameResult, FrameResult | None]:
-    """Render one frame (and its reference when ``reference_spp`` > 0)."""
+    """Render one frame (and its reference when ``reference_spp`` > 0).
+
+    ``lobes``: also the per-lobe light passes and colours; ``motion_next``: the motion to
+    frame + 1; ``gradient_samples``: A-SVGF temporal gradient samples against frame - 1
+    (``svgf_trace.gradients``).
+    """
     geo = prepare_frame(scene, animation, frame, width, height, threads=threads, stats=stats)
     try:
         hits = trace_primary(geo)
-        layers = gbuffer(geo, hits)
+        next_frame = None
+        if motion_next:
+            next_v, _ = world_vertices(scene, animation, frame + 1)
+            next_frame = (next_v, frame_camera(scene, animation, frame + 1, width, height))
+        layers = gbuffer(geo, hits, lobe_colours=lobes, next_frame=next_frame)
         key = frame_key(seed, frame, STREAM_INPUT)
-        direct, indirect = trace_samples(geo, hits, spp, max_depth, key)
+        radiance = trace_samples(geo, hits, spp, max_depth, key, lobes=lobes)
+        gradient = None
+        if gradient_samples:
+            from svgf_trace.gradients import gradient_layers
+
+            gradient = gradient_layers(
+                scene, animation, geo, spp=spp, max_depth=max_depth, seed=seed, lobes=lobes,
+                threads=threads, stats=stats,
+            )  # fmt: skip
         result = FrameResult(
             layers=layers,
-            direct=direct.reshape(height, width, 3).astype(np.float32),
-            indirect=indirect.reshape(height, width, 3).astype(np.float32),
+            direct=radiance.direct.reshape(height, width, 3).astype(np.float32),
+            indirect=radiance.indirect.reshape(height, width, 3).astype(np.float32),
             camera=geo.camera,
             prev_camera=geo.prev_camera,
+            lobes=None
+            if radiance.lobes is None
+            else radiance.lobes.reshape(height, width, 4, 3).astype(np.float32),
+            gradient=gradient,
         )
         reference = None
         if reference_spp > 0:
             ref_key = frame_key(seed, frame, STREAM_REFERENCE)
-            ref_direct, ref_indirect = trace_samples(geo, hits, reference_spp, max_depth, ref_key)
+            ref = trace_samples(geo, hits, reference_spp, max_depth, ref_key)
             reference = FrameResult(
                 layers={},
-                direct=ref_direct.reshape(height, width, 3).astype(np.float32),
-                indirect=ref_indirect.reshape(height, width, 3).astype(np.float32),
+                direct=ref.direct.reshape(height, width, 3).astype(np.float32),
+                indirect=ref.indirect.reshape(height, width, 3).astype(np.float32),
                 camera=geo.camera,
                 prev_camera=geo.prev_camera,
             )

@@ -10,7 +10,22 @@ object names that animation keyframes and mesh ids refer to). The format subset 
 * ``o NAME`` / ``g NAME`` start (or resume) the object called NAME; faces before either
   belong to an object named after the file;
 * ``mtllib FILE...`` and ``usemtl NAME``; in the MTL: ``newmtl``, ``Kd``, ``Ke``, ``map_Kd``
-  (the last token is the file; options before it are ignored). Everything else is ignored.
+  (the last token is the file; options before it are ignored), and for glossy materials
+  ``Pr``, ``Pm``, ``Ns``, ``Ks``, ``illum`` (below). Everything else is ignored.
+
+Materials are Lambertian unless they ask for a specular lobe (``svgf_trace.bsdf``):
+
+* ``Pr`` (roughness, 0-1) or ``Pm`` (metallic, 0-1), the PBR extension of the MTL format
+  that Blender's and other exporters write, make a material glossy: base colour ``Kd`` (x
+  ``map_Kd``), roughness ``Pr`` (else from ``Ns`` if given, else 0.5), metallic ``Pm``
+  (default 0).
+* Without them, a material with a nonzero ``Ks`` and ``illum`` absent or >= 2 (the MTL
+  illumination models with highlights) is a glossy dielectric with roughness from ``Ns``:
+  ``r = 1 - sqrt(clamp(Ns, 0, 1000) / 1000)`` (Blender's OBJ importer's mapping; ``Ns``
+  absent counts as 0, i.e. r = 1).
+* Dielectric specular level: ``s = mean(Ks)`` when ``Ks`` is given, else 0.5; the
+  dielectric reflectance at normal incidence is ``F0 = 0.08 s`` (0.04 for the default,
+  IOR 1.5), as in Blender's Principled BSDF.
 
 Triangles keep their winding: an emissive triangle emits on the side its counter-clockwise
 winding faces, ``n = (v1 - v0) x (v2 - v0)``.
@@ -28,19 +43,70 @@ from svgf_cli.errors import InputError
 DEFAULT_KD = (0.8, 0.8, 0.8)
 
 
+DEFAULT_ROUGHNESS = 0.5
+DEFAULT_SPECULAR = 0.5
+# Blender's Principled BSDF: F0 = ((ior - 1) / (ior + 1))^2 * 2 * specular = 0.08 specular
+# at the default IOR 1.5.
+SPECULAR_TO_F0 = 0.08
+
+
 @dataclass
 class Material:
-    """A Lambertian material with optional emission and an optional albedo texture."""
+    """A Lambertian material, or a glossy one (GGX specular over a diffuse base, or a
+    metal), with optional emission and an optional base-colour texture."""
 
     name: str
     kd: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_KD))
     ke: np.ndarray = field(default_factory=lambda: np.zeros(3))
     texture: np.ndarray | None = None  # (H, W, 3) float32, linear, row 0 = top of image
     texture_path: Path | None = None
+    glossy: bool = False
+    roughness: float = DEFAULT_ROUGHNESS  # perceptual: GGX alpha = roughness^2
+    metallic: float = 0.0
+    specular: float = DEFAULT_SPECULAR  # dielectric F0 = 0.08 specular
 
     @property
     def emissive(self) -> bool:
         return bool(np.any(self.ke > 0.0))
+
+    @property
+    def dielectric_f0(self) -> float:
+        return min(SPECULAR_TO_F0 * self.specular, 1.0)
+
+
+@dataclass
+class _MtlKeys:
+    """The glossy-related keys of one MTL material as read, resolved by ``_resolve``."""
+
+    pr: float | None = None
+    pm: float | None = None
+    ns: float | None = None
+    ks: np.ndarray | None = None
+    illum: int | None = None
+
+
+def _resolve(material: Material, keys: _MtlKeys) -> None:
+    """Decide whether a material is glossy and with which parameters (module docstring)."""
+    from_ns = None
+    if keys.ns is not None:
+        from_ns = 1.0 - float(np.sqrt(min(max(keys.ns, 0.0), 1000.0) / 1000.0))
+    if keys.ks is not None:
+        material.specular = float(np.mean(keys.ks))
+    if keys.pr is not None or keys.pm is not None:
+        material.glossy = True
+        if keys.pr is not None:
+            material.roughness = keys.pr
+        elif from_ns is not None:
+            material.roughness = from_ns
+        material.metallic = keys.pm if keys.pm is not None else 0.0
+    elif (
+        keys.ks is not None
+        and float(np.max(keys.ks)) > 0.0
+        and (keys.illum is None or keys.illum >= 2)
+    ):
+        material.glossy = True
+        material.roughness = from_ns if from_ns is not None else 1.0
+        material.metallic = 0.0
 
 
 @dataclass
@@ -137,6 +203,13 @@ def parse_mtl(path: Path, materials: dict[str, Material]) -> None:
         raise InputError("material library not found", str(path))
     current: Material | None = None
     textures: dict[str, Path] = {}
+    glossy_keys: dict[str, _MtlKeys] = {}
+
+    def unit(args: list[str], line_no: int, what: str) -> float:
+        value = _floats(args, 1, path, line_no, what)[0]
+        if not 0.0 <= value <= 1.0:
+            raise InputError(f"line {line_no}: {what} {value} is not in [0, 1]", str(path))
+        return value
     for line_no, raw in enumerate(path.read_text(errors="replace").splitlines(), start=1):
         tokens = raw.split("#", 1)[0].split()
         if not tokens:
@@ -146,16 +219,36 @@ def parse_mtl(path: Path, materials: dict[str, Material]) -> None:
             name = " ".join(args)
             current = Material(name=name)
             materials[name] = current
+            glossy_keys[name] = _MtlKeys()
         elif current is None:
             continue
         elif key == "Kd":
             current.kd = np.array(_floats(args, 3, path, line_no, "Kd"))
         elif key == "Ke":
             current.ke = np.array(_floats(args, 3, path, line_no, "Ke"))
+        elif key == "Pr":
+            glossy_keys[current.name].pr = unit(args, line_no, "Pr")
+        elif key == "Pm":
+            glossy_keys[current.name].pm = unit(args, line_no, "Pm")
+        elif key == "Ns":
+            glossy_keys[current.name].ns = _floats(args, 1, path, line_no, "Ns")[0]
+        elif key == "Ks":
+            ks = np.array(_floats(args[:3] if len(args) >= 3 else args * 3, 3, path, line_no,
+                                  "Ks"))  # fmt: skip
+            if np.any(ks < 0.0):
+                raise InputError(f"line {line_no}: Ks must not be negative", str(path))
+            glossy_keys[current.name].ks = ks
+        elif key == "illum":
+            try:
+                glossy_keys[current.name].illum = int(args[0])
+            except (IndexError, ValueError):
+                raise InputError(f"line {line_no}: bad illum", str(path)) from None
         elif key == "map_Kd":
             if not args:
                 raise InputError(f"line {line_no}: map_Kd without a file name", str(path))
             textures[current.name] = path.parent / args[-1]
+    for name, keys in glossy_keys.items():
+        _resolve(materials[name], keys)
     for name, texture_path in textures.items():
         material = materials[name]
         material.texture_path = texture_path

@@ -109,12 +109,20 @@ def ceiling_with_hole(ceiling: list[np.ndarray], light: list[np.ndarray]) -> lis
     ]
 
 
-def scene_objects() -> list[tuple[str, str, list[list[np.ndarray]]]]:
-    """(object name, material, quads) in the rotated frame, wound as documented."""
+def scene_objects(
+    ceiling_hole: bool = True, light_drop: float = 0.0
+) -> list[tuple[str, str, list[list[np.ndarray]]]]:
+    """(object name, material, quads) in the rotated frame, wound as documented.
+
+    ``ceiling_hole=False`` keeps the ceiling whole and ``light_drop`` lowers the light
+    below it (mm), so the light can slide along the ceiling (``make_lag.py``).
+    """
     centre = rotate(tuple(BOX_CENTRE))
     down = np.array([0.0, -1.0, 0.0])
-    light = oriented([rotate(p) for p in LIGHT], down)
-    ceiling = [oriented(q, down) for q in ceiling_with_hole([rotate(p) for p in CEILING], light)]
+    light = oriented([rotate(p) - np.array([0.0, light_drop, 0.0]) for p in LIGHT], down)
+    ceiling_quad = [rotate(p) for p in CEILING]
+    holed = ceiling_with_hole(ceiling_quad, light) if ceiling_hole else [ceiling_quad]
+    ceiling = [oriented(q, down) for q in holed]
     objects = [
         ("floor", "white", [quad_facing_point(FLOOR, centre, inward=True)]),
         ("ceiling", "white", ceiling),

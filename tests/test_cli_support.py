@@ -1,5 +1,7 @@
-"""Helpers for the CLI and farm tests: tiny synthetic EXR sequences and in-process CLI runs.
+"""Helpers for the CLI and farm tests: tiny synthetic EXR sequences, in-process CLI runs, the
+uninterrupted reference run, and `svgf` as a real process (signal and kill tests).
 
+Outputs are read by channel name with ``exr_fixtures.read_exr``.
 (Named test_cli_* so it sits with the CLI tests; it defines no tests itself.)
 """
 
@@ -12,23 +14,28 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
 from svgf_cli.cli import main
 from svgf_cli.io.exr import write_exr
 
-REPO = Path(__file__).resolve().parents[1]
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
 INPUT_ATTRIBUTES = {"shot/name": "sq010_sh020", "framesPerSecond_note": "24"}
 
 
 def frame_channels(
-    frame: int, width: int = 32, height: int = 24, *, seed: int = 7
+    frame: int, width: int = 32, height: int = 24, *, seed: int = 7, noise: bool = True
 ) -> dict[str, np.ndarray]:
     """One frame of a small scene: two depth planes, a slowly moving camera, 1-spp noise.
 
-    The camera pans one pixel per frame to the right, so the backward motion is -1 px in x
-    everywhere (static scene, moving camera).
+    The camera pans one pixel per frame to the right: pixel x of frame f shows scene point
+    ``x + f``, so the scene slides left on screen and the point seen at x was at x + 1 in the
+    previous frame. The backward motion (``svgf_cli.frame``: previous position minus
+    current) is therefore +1 px in x everywhere, in every frame (the scene before frame 1
+    moved the same way). Depth, albedo, light and ids are functions of the scene point, so
+    the whole G-buffer moves with the motion (``test_cli_ground_truth`` checks it).
+    ``noise=False`` gives the noise-free frame (every Exp(1) draw replaced by its mean, 1).
     """
     rng = np.random.default_rng(seed * 100_003 + frame)
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
@@ -38,8 +45,11 @@ def frame_channels(
     albedo_base = 0.5 + 0.3 * np.sin(world_x * 0.4)[None] * np.array([1.0, 0.7, 0.4])[:, None, None]
     albedo = np.broadcast_to(albedo_base, (3, height, width)).astype(np.float32)
     light = np.where(left, 1.0, 0.4).astype(np.float32)
-    direct = light[None] * albedo * rng.exponential(1.0, (3, height, width)).astype(np.float32)
-    indirect = 0.3 * albedo * rng.exponential(1.0, (3, height, width)).astype(np.float32)
+    draws = rng.exponential(1.0, (2, 3, height, width)).astype(np.float32)
+    if not noise:
+        draws[:] = 1.0
+    direct = light[None] * albedo * draws[0]
+    indirect = 0.3 * albedo * draws[1]
     channels: dict[str, np.ndarray] = {}
     for i, c in enumerate("RGB"):
         channels[f"direct.{c}"] = direct[i]
@@ -49,7 +59,7 @@ def frame_channels(
     channels["N.Y"] = np.zeros((height, width), np.float32)
     channels["N.Z"] = np.ones((height, width), np.float32)
     channels["Z"] = depth
-    channels["motion.X"] = np.full((height, width), -1.0 if frame > 1 else 0.0, np.float32)
+    channels["motion.X"] = np.full((height, width), 1.0, np.float32)
     channels["motion.Y"] = np.zeros((height, width), np.float32)
     channels["id"] = np.where(left, 1.0, 2.0).astype(np.float32)
     channels["A"] = np.ones((height, width), np.float32)
@@ -79,20 +89,55 @@ def write_sequence(
     return paths
 
 
-def run_cli(args: Sequence[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """Run `svgf ARGS` in-process; return (exit code, stdout, stderr)."""
+def exit_code(args: Sequence[object]) -> int:
+    """Run `svgf ARGS` in-process and return its exit code (its output goes to pytest's
+    capture, shown when a test fails)."""
     with pytest.raises(SystemExit) as exited:
         main([str(a) for a in args])
-    captured = capsys.readouterr()
     code = exited.value.code
-    return (code if isinstance(code, int) else 1), captured.out, captured.err
+    return code if isinstance(code, int) else 1
 
 
-def svgf_subprocess(args: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
-    """Start `python -m svgf_cli ARGS` as a real process (for signal and kill tests)."""
+def run_cli(args: Sequence[object], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Run `svgf ARGS` in-process; return (exit code, stdout, stderr)."""
+    code = exit_code(args)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def sequence_folder(
+    tmp_path_factory: pytest.TempPathFactory, frames: Sequence[int], width: int = 32,
+    height: int = 24,
+) -> Path:
+    """A fresh folder holding `write_sequence` (``in.####.exr``): a module fixture's input."""
+    folder = tmp_path_factory.mktemp("seq")
+    write_sequence(folder, frames, width=width, height=height)
+    return folder
+
+
+def reference_run(
+    tmp_path_factory: pytest.TempPathFactory, sequence: Path, *options: object
+) -> dict[int, Path]:
+    """One uninterrupted `svgf denoise -q` of every frame of ``sequence`` (``in.####.exr``)
+    into ``o.####.exr`` in a fresh folder: what chunked, resumed, interrupted and retried runs
+    must reproduce. Returns frame -> output."""
+    out = tmp_path_factory.mktemp("reference")
+    args = ["denoise", sequence / "in.####.exr", "-o", out / "o.####.exr", "-q", *options]
+    assert exit_code(args) == 0
+    frames = sorted(int(p.name.split(".")[1]) for p in sequence.glob("in.*.exr"))
+    return {f: out / f"o.{f:04d}.exr" for f in frames}
+
+
+def svgf_subprocess(
+    args: Sequence[object], *, pause_before: int | None = None, **kwargs: object
+) -> subprocess.Popen[str]:
+    """Start `python -m svgf_cli ARGS` as a real process (for signal and kill tests), with
+    default SIGINT/SIGTERM dispositions; ``pause_before`` N stops it before it filters its
+    frame N (0-based) until it is signalled (see ``svgf_child.py``)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    pause = [] if pause_before is None else ["--pause-before", str(pause_before)]
     return subprocess.Popen(  # noqa: S603 - our own interpreter and module
-        [sys.executable, "-m", "svgf_cli", *map(str, args)],
+        [sys.executable, str(TESTS / "svgf_child.py"), *pause, *map(str, args)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -100,18 +145,6 @@ def svgf_subprocess(args: Sequence[str], **kwargs: object) -> subprocess.Popen[s
         env=env,
         **kwargs,  # type: ignore[arg-type]
     )
-
-
-def read_pixels(path: Path) -> tuple[np.ndarray, oiio.ImageSpec]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    try:
-        spec = image.spec().copy()
-        pixels = image.read_image("float")
-        assert pixels is not None, image.geterror()
-    finally:
-        image.close()
-    return np.asarray(pixels), spec
 
 
 def outputs(folder: Path, name: str = "out") -> list[Path]:

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_support import run_cli
 
-from svgf_cli.cli import main
 from svgf_cli.evaluate.synthetic import write_synthetic_sequence
 from svgf_cli.io.exr import read_rgb, write_exr
 
@@ -39,10 +39,7 @@ def seq(tmp_path: Path) -> dict[str, str]:
 
 
 def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exc:
-        main(["evaluate", "--quiet", *args])
-    captured = capsys.readouterr()
-    return int(exc.value.code or 0), captured.out, captured.err
+    return run_cli(["evaluate", "--quiet", *args], capsys)
 
 
 def _png_size(path: Path) -> tuple[int, int]:

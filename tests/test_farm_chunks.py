@@ -6,47 +6,33 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli_support import read_pixels, run_cli, write_sequence
+from exr_fixtures import ExrImage, read_exr
+from test_cli_support import reference_run, run_cli, sequence_folder, write_sequence
 
 FRAMES = range(1, 17)
 
 
 @pytest.fixture(scope="module")
 def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("seq16")
-    write_sequence(folder, FRAMES)
-    return folder
+    return sequence_folder(tmp_path_factory, FRAMES)
 
 
 @pytest.fixture(scope="module")
-def reference(sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[int, np.ndarray]:
-    out = tmp_path_factory.mktemp("ref16")
-    from svgf_cli.cli import main
-
-    with pytest.raises(SystemExit) as exited:
-        main(
-            [
-                "denoise",
-                str(sequence / "in.####.exr"),
-                "-o",
-                str(out / "o.####.exr"),
-                "-q",
-                "--float",
-            ]
-        )
-    assert exited.value.code == 0
-    return {f: read_pixels(out / f"o.{f:04d}.exr")[0] for f in FRAMES}
+def reference(sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[int, ExrImage]:
+    """The full sequential run (float colour): frame -> its output."""
+    outputs = reference_run(tmp_path_factory, sequence, "--float")
+    return {f: read_exr(p) for f, p in outputs.items()}
 
 
-def relative_error(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.abs(a[..., :3] - b[..., :3]).mean() / np.abs(b[..., :3]).mean())
+def relative_error(a: ExrImage, b: ExrImage) -> float:
+    return float(np.abs(a.rgb() - b.rgb()).mean() / np.abs(b.rgb()).mean())
 
 
 def test_chunks_with_warmup_all_equal_the_sequential_run(
     sequence: Path,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
-    reference: dict[int, np.ndarray],
+    reference: dict[int, ExrImage],
 ) -> None:
     code, stdout, err = run_cli(
         [
@@ -65,14 +51,14 @@ def test_chunks_with_warmup_all_equal_the_sequential_run(
     assert code == 0, err
     assert stdout.count("Progress: ") == 16 and "Progress: 100% (frame 16, 16/16" in stdout
     for f in FRAMES:
-        assert np.array_equal(read_pixels(tmp_path / f"o.{f:04d}.exr")[0], reference[f]), f
+        assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(reference[f]), f
 
 
 def test_warmup_n_is_within_the_leftover_weight_bound(
     sequence: Path,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
-    reference: dict[int, np.ndarray],
+    reference: dict[int, ExrImage],
 ) -> None:
     errors = {}
     for warmup in (0, 8):
@@ -93,7 +79,7 @@ def test_warmup_n_is_within_the_leftover_weight_bound(
             capsys,
         )
         assert code == 0, err
-        errors[warmup] = relative_error(read_pixels(out / "o.0013.exr")[0], reference[13])
+        errors[warmup] = relative_error(read_exr(out / "o.0013.exr"), reference[13])
     # Cold start differs visibly. After 8 warm-up frames the chunk's first frame is within
     # 1 % of the sequential run (measured 0.5 %, i.e. 0.20x the cold-start difference; the
     # 0.8^8 = 0.17 leftover-weight rule of thumb is not exact while the sequential run's own
@@ -107,7 +93,7 @@ def test_save_and_load_history_continue_exactly(
     sequence: Path,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
-    reference: dict[int, np.ndarray],
+    reference: dict[int, ExrImage],
 ) -> None:
     history = tmp_path / "hist" / "h.npz"
     base = ["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr", "--float", "-q"]
@@ -119,7 +105,7 @@ def test_save_and_load_history_continue_exactly(
     code, _, err = run_cli([*base, "--frames", "9-12", "--load-history", history], capsys)
     assert code == 0, err
     for f in (1, 6, 9, 12):
-        assert np.array_equal(read_pixels(tmp_path / f"o.{f:04d}.exr")[0], reference[f]), f
+        assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(reference[f]), f
     assert not (tmp_path / "o.0007.exr").exists()
 
     code, _, err = run_cli(

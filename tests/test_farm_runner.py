@@ -18,13 +18,17 @@ import numpy as np
 import pytest
 
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, UsageError
-from svgf_cli.farm.progress import Progress
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame, Frame
+from svgf_cli.progress import Progress
 from svgf_cli.runner import (
     FrameTask,
     Interrupted,
+    OutputFrame,
+    ReadAhead,
     RunConfig,
+    RunStats,
+    WriteBehind,
     load_history,
     pending_tasks,
     run_sequence,
@@ -155,6 +159,9 @@ def test_signal_finishes_the_frame_in_flight(tmp_path: Path, signum: int, code: 
         d.on_process = lambda n: os.kill(os.getpid(), signum) if n == 3 else None
         return d
 
+    # What the test process was started with: Python's handler for SIGINT, or SIG_IGN for a
+    # background job of a non-interactive shell (stop_on_signals catches it either way).
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     with stop_on_signals() as stop, pytest.raises(Interrupted) as raised:
         run(tasks_for(tmp_path, range(1, 11)), factory=factory, stop=stop)
     assert raised.value.exit_code == code
@@ -162,7 +169,7 @@ def test_signal_finishes_the_frame_in_flight(tmp_path: Path, signum: int, code: 
     written = sorted(p.name for p in (tmp_path / "out").iterdir())
     # Frame 4 was in flight: it is finished and complete; nothing after it; no temp files.
     assert written == [f"out.{f:04d}.exr" for f in range(1, 5)]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert {s: signal.getsignal(s) for s in before} == before  # handlers given back
 
 
 def test_bad_frame_stops_with_earlier_frames_written(tmp_path: Path) -> None:
@@ -229,3 +236,56 @@ def test_pending_tasks_skip_existing_outputs(tmp_path: Path) -> None:
     todo = pending_tasks(tasks, overwrite=False)
     assert [t.output is None for t in todo] == [True, False, False]
     assert pending_tasks(tasks, overwrite=True) == tasks
+
+
+def test_read_ahead_and_write_behind_serve_a_reversed_pass(tmp_path: Path) -> None:
+    """The parts a backward pass reuses: reads in the order given, one frame ahead; writes
+    one in flight, each reported once and in order."""
+    tasks = tasks_for(tmp_path, range(1, 6))[::-1]
+    reader = FakeReader()
+    stats = RunStats()
+    progress = Progress("lines", len(tasks), out=io.StringIO(), err=io.StringIO())
+    in_flight: list[int] = []
+    most_in_flight = 0
+
+    def write(task: FrameTask, output: OutputFrame) -> list[str]:
+        nonlocal most_in_flight
+        in_flight.append(task.frame)
+        most_in_flight = max(most_in_flight, len(in_flight))
+        threading.Event().wait(0.01)  # a write that takes a moment
+        in_flight.remove(task.frame)
+        return [f"note {task.frame}"]
+
+    ahead = []
+    with (
+        ReadAhead(tasks, lambda t: reader(t.input, None), stats) as reads,
+        WriteBehind(write, progress, stats) as writes,
+    ):
+        for position, (task, _, _) in enumerate(reads):
+            ahead.append(len(reader.started) - position)
+            output = OutputFrame(None, 0, {}, {}, None, [])
+            writes.submit(task, output, 0.0)
+        writes.finish()
+    assert reader.started == [5, 4, 3, 2, 1] and max(ahead) <= 2
+    assert most_in_flight == 1
+    assert stats.written == [5, 4, 3, 2, 1] and stats.frames_written == 5
+    lines = progress.out.getvalue().splitlines()
+    assert [line.split("(frame ")[1].split(",")[0] for line in lines] == ["5", "4", "3", "2", "1"]
+    assert progress.err.getvalue().splitlines()[0] == f"WARNING: {tasks[0].output}: note 5"
+
+
+def test_write_behind_finishes_the_write_in_flight_when_an_error_unwinds(tmp_path: Path) -> None:
+    finished: list[int] = []
+
+    def slow_write(task: FrameTask, output: OutputFrame) -> list[str]:
+        threading.Event().wait(0.2)
+        finished.append(task.frame)
+        return []
+
+    task = tasks_for(tmp_path, range(1, 2))[0]
+    progress = quiet()
+    with pytest.raises(InputError), WriteBehind(slow_write, progress, RunStats()) as writes:
+        writes.submit(task, OutputFrame(None, 0, {}, {}, None, []), 0.0)
+        raise InputError("a later frame is bad", "in.0002.exr")
+    assert finished == [1]  # waited for, not abandoned
+    assert progress.done == 0  # and not reported: the error is what the run reports

@@ -1,21 +1,22 @@
-"""The a-trous kernel against a direct float64 transcription of the paper's equations 1-5.
+"""The a-trous kernel against the float64 reference of the paper's equations 1-5.
 
 The fast kernel is register-blocked, splits each row into tap-validity segments and gives
-out-of-image taps weight 0 at the centre's address; this reference loops over pixels and
-taps the obvious way, so every border, background and step case is checked independently.
+out-of-image taps weight 0 at the centre's address; the reference
+(``reference_svgf.atrous_iteration``, shared with the whole-denoiser comparison) sums the
+in-image taps of each pixel the obvious way, so every border, background and step case is
+checked independently.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import reference_svgf as ref
 
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
-from svgf_cli.filters.edges import DEPTH_EPSILON
 from svgf_cli.filters.fastmath import REC709, fast_exp, fast_log2, fma
 
 F32 = np.float32
-B3 = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
 
 
 def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np.ndarray]:
@@ -38,6 +39,8 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     ddy = np.gradient(depth, axis=0)
     illumination = rng.gamma(1.5, 0.7, (num_signals, 3, height, width))
     variance = rng.gamma(1.0, 0.3, (num_signals, height, width))
+    # A noise-free patch: zero variance, so the luminance stop's floor (1e-5 l) decides.
+    variance[:, 3:7, 2:6] = 0.0
     # Radiance-mode pixels (mode mask bits): a block in signal 0, scattered pixels in the
     # last signal, and a bit of an unrelated signal (2) that must not matter.
     mode = np.zeros((height, width), dtype=np.uint16)
@@ -51,54 +54,9 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     }
 
 
-def _luminance(illumination: np.ndarray, weights=REC709) -> np.ndarray:
-    c = illumination.astype(np.float64)
-    return np.maximum(weights[0] * c[:, 0] + weights[1] * c[:, 1] + weights[2] * c[:, 2], 0.0)
-
-
-def _reference(scene: dict[str, np.ndarray], luminance: np.ndarray, inverse_scale: np.ndarray,
-               step: int, sigma_depth: float, sigma_normal: float) -> tuple[np.ndarray, ...]:
-    """Equations 1-5 for every pixel and signal, in float64, one tap at a time; weight 0
-    between pixels of different modes."""
-    mode = np.stack([(scene["mode"] >> s) & 1 for s in range(scene["illumination"].shape[0])])
-    c_in = scene["illumination"].astype(np.float64)
-    v_in = scene["variance"].astype(np.float64)
-    z, gx, gy = (scene[k].astype(np.float64) for k in ("depth", "ddx", "ddy"))
-    n = scene["normal"].astype(np.float64)
-    num_signals, _, height, width = c_in.shape
-    c_out = np.empty_like(c_in)
-    v_out = np.empty_like(v_in)
-    for s in range(num_signals):
-        for py in range(height):
-            for px in range(width):
-                sum_w = sum_w2v = 0.0
-                sum_c = np.zeros(3)
-                for j in range(5):
-                    for i in range(5):
-                        qy, qx = py + (j - 2) * step, px + (i - 2) * step
-                        if not (0 <= qy < height and 0 <= qx < width):
-                            continue
-                        h = B3[i] * B3[j]
-                        if (qy, qx) == (py, px):
-                            w = h
-                        elif mode[s, qy, qx] != mode[s, py, px]:
-                            w = 0.0
-                        else:
-                            projected = abs(gx[py, px] * (qx - px) + gy[py, px] * (qy - py))
-                            w_z = abs(z[py, px] - z[qy, qx]) / (
-                                sigma_depth * projected + float(DEPTH_EPSILON) * z[py, px]
-                                + 1e-20
-                            )
-                            cosine = max(0.0, float(n[:, py, px] @ n[:, qy, qx]))
-                            w_l = abs(luminance[s, py, px] - luminance[s, qy, qx])
-                            w_l *= inverse_scale[s, py, px]
-                            w = h * cosine**sigma_normal * np.exp(-(w_z + w_l))
-                        sum_w += w
-                        sum_c += w * c_in[s, :, qy, qx]
-                        sum_w2v += w * w * v_in[s, qy, qx]
-                c_out[s, :, py, px] = sum_c / sum_w
-                v_out[s, py, px] = sum_w2v / sum_w**2
-    return c_out, v_out
+def _radiance_mode(mode: np.ndarray, num_signals: int, first: int = 0) -> np.ndarray:
+    """(S, H, W) booleans: bit ``first + s`` of the mode mask (signal s filtered as radiance)."""
+    return np.stack([(mode >> (first + s)) & 1 == 1 for s in range(num_signals)])
 
 
 @pytest.mark.parametrize(
@@ -122,9 +80,22 @@ def test_atrous_iteration_matches_the_equations(
         scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, sigma_normal, True, out_c,
         out_v,
     )
-    want_c, want_v = _reference(scene, _luminance(scene["illumination"]),
-                                inverse_scale.astype(np.float64), step, 1.0, sigma_normal)
-    # fast_exp (4e-6) and fast_unit_pow (~1e-4 at sigma_n = 128) set the tolerance.
+    # The stage alone: the reference filters with the kernel's guides (the luminance is the
+    # guide's magnitude, the mode its sign).
+    want_c, want_v = ref.atrous_iteration(
+        scene["illumination"], scene["variance"], np.abs(luminance), luminance < 0,
+        inverse_scale, scene["depth"], scene["ddx"], scene["ddy"], scene["normal"], step, 1.0,
+        sigma_normal,
+    )
+    # The mode test matters here: without it the result moves by far more than the tolerance.
+    mixed_c, _ = ref.atrous_iteration(
+        scene["illumination"], scene["variance"], np.abs(luminance),
+        np.zeros_like(luminance, dtype=bool), inverse_scale, scene["depth"], scene["ddx"],
+        scene["ddy"], scene["normal"], step, 1.0, sigma_normal,
+    )
+    assert np.max(np.abs(mixed_c - want_c)) > 0.05
+    # fast_exp (relative error 4e-6) and fast_log2 (absolute error 1e-6 on log2(cos), so up
+    # to sigma_n ln2 1e-6 = 9e-5 relative on w_n at sigma_n = 128) set the tolerance.
     np.testing.assert_allclose(out_c, want_c, rtol=2e-4, atol=1e-6)
     np.testing.assert_allclose(out_v, want_v, rtol=4e-4, atol=1e-7)
     # Background keeps its value: outside a row's surface span it is copied, a hole inside
@@ -146,28 +117,30 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     inverse_scale = np.empty_like(luminance)
     luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
                           scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
-    lum = _luminance(scene["illumination"])
-    # The mode rides in the sign: radiance-mode guides are -(l + 1e-30).
-    radiance_mode = np.stack([(scene["mode"] >> s) & 1 for s in range(num_signals)]) == 1
+    radiance_mode = _radiance_mode(scene["mode"], num_signals)
+    want_luminance, want_inverse_scale = ref.luminance_stop_guides(
+        scene["illumination"], scene["variance"], scene["depth"], 4.0, ref.REC709)
+    # The mode rides in the sign: radiance-mode guides are -(l + 1e-30), so even l = 0 is
+    # negative there.
     assert np.all((luminance < 0) == radiance_mode)
-    np.testing.assert_allclose(np.abs(luminance), lum, rtol=1e-6)
+    assert radiance_mode.any() or width < 7
+    np.testing.assert_allclose(np.abs(luminance), want_luminance, rtol=1e-6)
+    np.testing.assert_allclose(inverse_scale, want_inverse_scale, rtol=1e-5)
+    # The inputs reach the renormalisation: without it (zero weight outside the image and on
+    # background, no division) the scale would differ at borders and next to background.
     g = np.array([0.25, 0.5, 0.25])
-    surface = scene["depth"] > 0
-    v = scene["variance"].astype(np.float64)
-    for s in range(num_signals):
-        for y in range(height):
-            for x in range(width):
-                total = weight = 0.0
-                for j in range(3):
-                    for i in range(3):
-                        qy, qx = y + j - 1, x + i - 1
-                        if 0 <= qy < height and 0 <= qx < width and surface[qy, qx]:
-                            weight += g[i] * g[j]
-                            total += g[i] * g[j] * v[s, qy, qx]
-                filtered = total / weight if weight > 0 else v[s, y, x]
-                floor = 1e-5 * lum[s, y, x]
-                want = 1.0 / max(4.0 * np.sqrt(max(filtered, 0.0) + floor**2), 1e-20)
-                np.testing.assert_allclose(inverse_scale[s, y, x], want, rtol=1e-5)
+    padded = np.pad(np.where(scene["depth"] > 0, scene["variance"], 0.0), ((0, 0), (1, 1), (1, 1)))
+    plain = sum(g[i] * g[j] * padded[:, j:j + height, i:i + width]
+                for j in range(3) for i in range(3))
+    unnormalised = 1.0 / (4.0 * np.sqrt(plain + (1e-5 * want_luminance) ** 2))
+    assert np.mean(np.abs(unnormalised / want_inverse_scale - 1.0) > 0.01) > 0.2
+    # Where the variance is 0 the floor is relative to l (1e-5 l, so scaling the input
+    # scales the output), not absolute: 1 / (4e-5 l), far from 1 / 4e-5 unless l = 1.
+    flat = (slice(None), slice(4, 6), slice(3, 5))
+    if width >= 5:
+        np.testing.assert_allclose(want_inverse_scale[flat],
+                                   1.0 / (4e-5 * want_luminance[flat]), rtol=1e-9)
+        assert np.all(np.abs(want_luminance[flat] - 1.0) > 0.01)
 
 
 def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing() -> None:

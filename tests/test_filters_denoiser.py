@@ -84,13 +84,19 @@ def test_no_temporal_leakage_across_mesh_id_change() -> None:
 
 
 def test_static_noisy_sequence_converges_and_variance_tracks_truth() -> None:
-    h, w, n, noise, alpha = 24, 24, 30, 0.25, 0.2
+    """Plain accumulation of a static scene against the exponential moving average's
+    statistics. Measured over 6 seeds: the output's rms error is 0.970-1.003 of the
+    prediction, the final variance 0.997-1.014 and the frame-4 variance 0.982-1.004, so the
+    bounds (7 %, 4 %, 5 %) sit at about 3 sigma; the effects they guard are larger (the
+    (1 - sum w^2) factor of the moments is 11 %, dropping the 1/h ramp of the moments
+    shrinks the frame-4 variance by 12.5 %)."""
+    h, w, n, noise, alpha = 48, 48, 30, 0.25, 0.2
     frames = static_sequence(n, w, h, split=False, illumination=1.0, albedo=0.5, noise=noise)
     params = resolve_params("paper", atrous_iterations=0)
     outputs, _ = _run(params, frames, debug=True)
     truth = 0.5  # albedo * illumination
     error = outputs[-1].color - truth
-    assert abs(float(error.mean())) < 0.01
+    assert abs(float(error.mean())) < 0.005
     # An exponential moving average keeps sum(w_i^2) of the per-frame noise.
     weight_sq = 0.0
     for h_len in range(1, n + 1):
@@ -98,12 +104,16 @@ def test_static_noisy_sequence_converges_and_variance_tracks_truth() -> None:
         weight_sq = (1.0 - a) ** 2 * weight_sq + a**2
     expected_rms = 0.5 * noise * np.sqrt(weight_sq)
     rms = float(np.sqrt(np.mean(error**2)))
-    assert 0.85 < rms / expected_rms < 1.15
+    assert 0.93 < rms / expected_rms < 1.07
     assert float(np.sqrt(np.mean((_radiance(frames[-1]) - truth) ** 2))) > 2.5 * rms
     # Integrated moments: E[m2 - m1^2] = sigma^2 (1 - sum w^2) (illumination luminance).
     variance = outputs[-1].layers["variance.color"]
     expected_variance = noise**2 * (1.0 - weight_sq)
-    assert abs(float(variance.mean()) / expected_variance - 1.0) < 0.1
+    assert abs(float(variance.mean()) / expected_variance - 1.0) < 0.04
+    # Frame 4 (h = 4, the first temporal estimate): with the 1/h ramp the moments are the
+    # plain mean of 4 frames, whose population variance is sigma^2 (1 - 1/4).
+    early = outputs[3].layers["variance.color"]
+    assert abs(float(early.mean()) / (noise**2 * 0.75) - 1.0) < 0.05
     np.testing.assert_array_equal(outputs[-1].layers["history_length.color"], float(n))
 
 

@@ -242,6 +242,57 @@ def test_spatial_variance_matches_true_noise_variance(scale: float) -> None:
     assert np.all(temporal < 1e-6 * scale**2)  # one sample: no temporal information yet
 
 
+def _spatial_variance_ratio(radius: int, frames: int, sigma_luminance: float,
+                            noise: float = 0.3) -> tuple[float, np.ndarray, np.ndarray]:
+    """The spatial estimate on a flat grey scene whose moments average ``frames`` frames of
+    N(0, noise^2) luminance noise. Returns the interior mean of the estimate over this
+    realization's own per-frame sample variance (so the test does not wait for the noise
+    to average out), the estimate and the temporal variance."""
+    h, w = 64, 96
+    samples = [make_frame(w, h, split=False, noise=noise, seed=11 + i, albedo=1.0,
+                          illumination=2.0) for i in range(frames)]
+    colours = [f.signal("color").radiance for f in samples]
+    luminance = np.stack([0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+                          for c in colours]).astype(np.float64)
+    moments = np.stack([luminance.mean(0), (luminance**2).mean(0)])[None].astype(F32)
+    illumination = colours[-1][None].copy()
+    history_length = np.full((1, h, w), float(frames), dtype=F32)
+    mode = np.zeros((h, w), dtype=np.uint16)
+    ddx = np.zeros((h, w), dtype=F32)
+    variance = np.full((1, h, w), -1.0, dtype=F32)
+    spatial_variance(illumination, moments, history_length, mode, samples[0].depth, ddx, ddx,
+                     samples[0].normal, F32(4.0), radius, F32(1.0), F32(sigma_luminance), 7,
+                     F32(128.0), False, variance, illumination)
+    temporal = np.empty_like(variance)
+    temporal_variance(moments, temporal)
+    per_frame = float(luminance.var(axis=(1, 2), ddof=1).mean())
+    interior = variance[0, radius:-radius, radius:-radius]
+    return float(interior.mean()) / per_frame, variance[0], temporal[0]
+
+
+def test_spatial_variance_is_unbiased_for_the_noise_variance() -> None:
+    """The reliability-weights (Bessel) correction, ``1 / (1 - sum w^2 / (h (sum w)^2))``,
+    makes the estimate of the per-frame noise variance unbiased. It is worth 1/9 (11 %) for
+    a 3x3 window of single frames and 1/27 (3.7 %) for 3-frame averages, where forgetting
+    the h would make it 8 % high. With the luminance stop off the weights are exactly 1;
+    measured over 8 seeds the ratio to the sample variance is 1.000 +- 0.003 (h = 1) and
+    1.000 +- 0.001 (h = 3). Bounds: 1.5 % and 1 %."""
+    ratio, _, _ = _spatial_variance_ratio(1, 1, 1e6)
+    assert abs(ratio - 1.0) < 0.015
+    ratio, _, _ = _spatial_variance_ratio(1, 3, 1e6)
+    assert abs(ratio - 1.0) < 0.01
+    # The production setting (7x7, weak relative luminance stop sigma 10, here at luminance
+    # 2): the data-dependent stop favours neighbours of similar luminance and biases the
+    # estimate slightly low (measured 0.995 +- 0.005 over 8 seeds; 0.984 with the absolute
+    # stop this replaced).
+    ratio, variance, temporal = _spatial_variance_ratio(3, 1, 10.0)
+    assert 0.975 < ratio < 1.015
+    # Corners see only 16 neighbours: the correction keeps them positive.
+    corners = np.concatenate([variance[:2, :2].ravel(), variance[-2:, -2:].ravel()])
+    assert np.all(corners > 0.0)
+    assert np.all(temporal < 1e-6)  # one sample: no temporal information yet
+
+
 def test_firefly_clamp_scales_outliers_only() -> None:
     h, w = 7, 7
     rng = np.random.default_rng(5)

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_support import run_cli
 
-from svgf_cli.cli import main
 from svgf_cli.io.exr import write_exr
 
 H, W = 4, 5
@@ -29,16 +29,9 @@ SVGF = ["R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", 
 SVGF += ["motion.X", "motion.Y"]
 
 
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    captured = capsys.readouterr()
-    return int(exit_info.value.code or 0), captured.out, captured.err
-
-
 def test_text_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _write(tmp_path / "f.0001.exr", SVGF)
-    code, out, _ = run(["inspect", str(path)], capsys)
+    code, out, _ = run_cli(["inspect", str(path)], capsys)
     assert code == 0
     assert f"resolution {W}x{H}, 1 part(s), compression piz" in out
     assert "R                            half" in out
@@ -55,7 +48,7 @@ def test_json_report_with_cycles_override(
     names = [n for n in SVGF if not n.startswith("motion")] + ["Vector.X", "Vector.Y"]
     path = _write(tmp_path / "c.exr", names)
     argv = ["inspect", str(path), "--json", "--aov", "motion=Vector.X,Vector.Y"]
-    code, out, _ = run([*argv, "--motion-convention", "cycles"], capsys)
+    code, out, _ = run_cli([*argv, "--motion-convention", "cycles"], capsys)
     assert code == 0
     report = json.loads(out)["files"][0]
     assert report["width"] == W and report["height"] == H
@@ -72,12 +65,12 @@ def test_missing_roles_reported_and_check_exits_3(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = _write(tmp_path / "beauty.exr", ["R", "G", "B"])
-    code, out, _ = run(["inspect", str(path), "--json"], capsys)
+    code, out, _ = run_cli(["inspect", str(path), "--json"], capsys)
     assert code == 0
     missing = json.loads(out)["files"][0]["missing"]
     assert set(missing) == {"albedo", "normal", "depth", "motion"}
     assert "N.X,N.Y,N.Z or N.R,N.G,N.B" in missing["normal"]
-    code, out, err = run(["inspect", str(path), "--check"], capsys)
+    code, out, err = run_cli(["inspect", str(path), "--check"], capsys)
     assert code == 3
     assert "MISSING" in out
     assert err.strip() == f"ERROR: {path}: missing channel(s) for albedo, normal, depth, motion"
@@ -86,14 +79,40 @@ def test_missing_roles_reported_and_check_exits_3(
 def test_unreadable_file_exits_3(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bogus = tmp_path / "bogus.exr"
     bogus.write_text("hello")
-    code, _, err = run(["inspect", str(bogus)], capsys)
+    code, _, err = run_cli(["inspect", str(bogus)], capsys)
     assert code == 3
     assert err.startswith(f"ERROR: {bogus}: not an OpenEXR file")
-    code, _, err = run(["inspect", str(tmp_path / "absent.exr")], capsys)
+    code, _, err = run_cli(["inspect", str(tmp_path / "absent.exr")], capsys)
     assert code == 3 and "file not found" in err
 
 
 def test_bad_override_is_a_usage_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _write(tmp_path / "f.exr", SVGF)
-    code, _, err = run(["inspect", str(path), "--aov", "wobble=a"], capsys)
+    code, _, err = run_cli(["inspect", str(path), "--aov", "wobble=a"], capsys)
     assert code == 2 and "unknown role" in err
+
+
+def test_luminance_weights_windows_and_views_are_reported(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from exr_fixtures import PartSpec, box, gbuffer, write_parts
+
+    acescg = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+    header = {"chromaticities": acescg, "dataWindow": box(-2, -1, 12, 8),
+              "displayWindow": box(0, 0, 8, 6)}
+    path = write_parts(tmp_path / "aces.exr", [PartSpec(gbuffer(), header=header)])
+    code, out, _ = run_cli(["inspect", str(path)], capsys)
+    assert code == 0
+    assert "luminance weights R 0.2722, G 0.6741, B 0.0537 (from chromaticities ACEScg" in out
+    assert "display window 8x6+0+0" in out and "data window 12x8+-2+-1" in out
+    assert "denoised colour written as: R, G, B" in out
+    code, out, _ = run_cli(["inspect", str(path), "--json"], capsys)
+    report = json.loads(out)["files"][0]
+    assert np.allclose(report["luminance_weights"], (0.2722, 0.6741, 0.0537), atol=1e-4)
+    assert report["views"] == [] and report["display_window"] == [0, 0, 8, 6]
+
+    stereo = write_parts(
+        tmp_path / "stereo.exr", [PartSpec(gbuffer(), header={"multiView": ["left", "right"]})]
+    )
+    code, out, _ = run_cli(["inspect", str(stereo)], capsys)
+    assert code == 0 and "views: left, right (multi-view: svgf denoise refuses it)" in out

@@ -149,7 +149,9 @@ def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
     assert f"{path}: 1 NaN/Inf values in albedo scrubbed to 0" in joined
     assert f"{path}: 1 NaN/Inf values in motion scrubbed to 0" in joined
     assert f"{path}: 1 NaN/Inf values in normal scrubbed to 0" in joined
-    assert len(result.warnings) == 5
+    # NaN depth is a broken pixel, not a background convention: counted (Inf, <= 0 are not).
+    assert f"{path}: 1 NaN values in depth treated as background" in joined
+    assert len(result.warnings) == 6
     direct, indirect = (s.radiance for s in frame.signals)
     for plane in (direct, indirect, frame.albedo, frame.motion, frame.normal):
         assert np.isfinite(plane).all()

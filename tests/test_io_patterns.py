@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_cli_support import run_cli
 
 from svgf_cli.errors import InputError, UsageError
 from svgf_cli.io.patterns import (
@@ -28,6 +29,11 @@ from svgf_cli.io.patterns import (
         ("9,1,5,1", [1, 5, 9]),
         (" 3 - 4 , 1 ", [1, 3, 4]),
         ("0", [0]),
+        # what fileseq users expect
+        ("-3--1", [-3, -2, -1]),
+        ("-2-1", [-2, -1, 0, 1]),
+        ("1-10y3", [2, 3, 5, 6, 8, 9]),  # the frames x3 leaves out
+        ("10-1", list(range(1, 11))),  # order is irrelevant: frames run in timeline order
     ],
 )
 def test_parse_frame_spec(spec: str, frames: list[int]) -> None:
@@ -39,21 +45,33 @@ def test_parse_frame_spec(spec: str, frames: list[int]) -> None:
     [
         ("", "empty"),
         ("abc", "'abc'"),
-        ("1-", "'1-'"),
-        ("10-1", "backwards"),
-        ("1-10x0", "step"),
-        ("1,,2", "''"),
-        ("-5", "'-5'"),
+        ("1-,5", "'1-'"),
+        ("1-10x0", "'1-10x0'"),
+        ("1-10x-2", "'1-10x-2'"),
+        ("1.5", "sub-frames"),
+        ("1-999999999", "more than 1000000"),
+        ("1-1000001", "1000001 frames"),
     ],
 )
 def test_parse_frame_spec_errors_quote_the_bad_part(spec: str, fragment: str) -> None:
     with pytest.raises(ValueError, match="frame spec") as err:
         parse_frame_spec(spec)
     assert fragment in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_huge_frame_range_is_a_one_line_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _touch(tmp_path, "in.0001.exr")
+    args = ["denoise", str(tmp_path / "in.####.exr"), "-o", str(tmp_path / "o.####.exr")]
+    code, out, err = run_cli([*args, "--frames", "1-999999999"], capsys)
+    assert code == 2
+    assert err == "ERROR: --frames: frame spec '1-999999999' names more than 1000000 frames\n"
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.sets(st.integers(min_value=0, max_value=5000), min_size=1, max_size=40))
+@given(st.sets(st.integers(min_value=-5000, max_value=5000), min_size=1, max_size=40))
 def test_frame_spec_round_trip(frames: set[int]) -> None:
     assert parse_frame_spec(format_frame_spec(frames)) == sorted(frames)
 
@@ -73,6 +91,10 @@ def test_frame_spec_round_trip(frames: set[int]) -> None:
         ("shot.1001.exr", 7, "shot.0007.exr"),  # concrete path: padding from its width
         ("shot_v2_0042.exr", 12345, "shot_v2_12345.exr"),  # last digit group, overflow
         ("dir/beauty.####.exr", 1, "dir/beauty.0001.exr"),
+        ("shot_####_v2.exr", 7, "shot_0007_v2.exr"),  # a token mid-name
+        ("in.####.exr", -5, "in.-005.exr"),  # the sign counts as a digit (printf, fileseq)
+        ("in.@.exr", -5, "in.-5.exr"),
+        ("shot.-005.exr", -12, "shot.-012.exr"),  # a signed concrete frame after a dot
     ],
 )
 def test_pattern_path(text: str, frame: int, expected: str) -> None:
@@ -170,3 +192,10 @@ def test_expand_errors_name_the_input(tmp_path: Path) -> None:
         expand_inputs([str(tmp_path / "a_1.exr"), pattern])
     with pytest.raises(UsageError):
         expand_inputs([])
+
+
+def test_negative_frames_on_disk(tmp_path: Path) -> None:
+    _touch(tmp_path, "r.-002.exr", "r.-001.exr", "r.0000.exr", "r.0001.exr", "r.-01.exr")
+    pattern = SequencePattern.parse(str(tmp_path / "r.####.exr"))
+    assert pattern.frames_on_disk() == [-2, -1, 0, 1]  # "-01" is not what #### writes
+    assert [f for f, _ in expand_inputs([str(tmp_path / "r.-002.exr")])] == [-2, -1, 0, 1]

@@ -111,6 +111,13 @@ def test_same_seed_gives_identical_files_whatever_the_range_or_threads(
                capsys)[0] == 0  # fmt: skip
     assert (tmp_path / "a.0002.exr").read_bytes() == (tmp_path / "b.0002.exr").read_bytes()
     assert (tmp_path / "a.0001.exr").read_bytes() != (tmp_path / "a.0002.exr").read_bytes()
+    # The optional layers too (lobes, motion to the next frame, gradient samples).
+    extra = ("--lobes", "--motion-next", "--gradient-samples")
+    assert run(small(str(tmp_path / "x.####.exr"), "--frames", "1-2", "--threads", "2",
+                     *extra), capsys)[0] == 0  # fmt: skip
+    assert run(small(str(tmp_path / "y.####.exr"), "--frames", "2", "--threads", "1", *extra),
+               capsys)[0] == 0  # fmt: skip
+    assert (tmp_path / "x.0002.exr").read_bytes() == (tmp_path / "y.0002.exr").read_bytes()
     assert run(small(str(tmp_path / "c.####.exr"), "--frames", "2", "--seed", "1"),
                capsys)[0] == 0  # fmt: skip
     seed0, _ = read_exr(tmp_path / "a.0002.exr")
@@ -150,9 +157,11 @@ def test_existing_output_needs_overwrite(
         (["missing.obj", "-o", "x.####.exr"], 3, "missing.obj: scene file not found"),
         ([SCENE, "-o", "x.####.exr", "--resolution", "big"], 2, "WIDTHxHEIGHT"),
         ([SCENE, "-o", "x.exr", "--frames", "1-2"], 2, "no frame token"),
-        ([SCENE, "-o", "x.####.exr", "--frames", "3-1"], 2, "--frames"),
-        ([SCENE, "-o", "x.####.exr", "--spp", "0"], 2, "--spp 0"),
+        ([SCENE, "-o", "x.####.exr", "--frames", "1-3x0"], 2, "--frames"),
+        ([SCENE, "-o", "x.####.exr", "--spp", "0"], 2, "'--spp': 0 is not in the range x>=1"),
         ([SCENE, "-o", "x.####.exr", "--animation", "nope.json"], 3, "nope.json"),
+        ([SCENE, "-o", "x.####.exr", "--reference-half"], 2, "need --reference"),
+        ([SCENE, "-o", "x.####.exr", "--skip-layer", "N"], 2, "--skip-layer"),
     ],
 )
 def test_bad_arguments_fail_with_one_line(
@@ -199,3 +208,18 @@ def test_bundled_sequence_is_complete_and_reproducible(
         np.testing.assert_allclose(fresh[name], bundled[name], rtol=1e-4, atol=1e-4, err_msg=name)
     same = np.isclose(fresh["R"], bundled["R"], rtol=2e-3, atol=1e-3)
     assert same.mean() > 0.99
+
+
+def test_slimmer_files_for_fixtures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out, ref = tmp_path / "s.####.exr", tmp_path / "r.####.exr"
+    code, _, _ = run(small(str(out), "--skip-layer", "P", "--skip-layer", "id", "--compression",
+                           "zip", "--reference", str(ref), "--reference-spp", "4",
+                           "--reference-channels", "rgb", "--reference-half"), capsys)  # fmt: skip
+    assert code == 0
+    layers, spec = read_exr(tmp_path / "s.0001.exr")
+    assert set(layers) == INPUT_CHANNELS - {"P.X", "P.Y", "P.Z", "id"}
+    assert spec.getattribute("compression") == "zip"
+    reference, ref_spec = read_exr(tmp_path / "r.0001.exr")
+    assert set(reference) == {"R", "G", "B"}
+    assert {str(ref_spec.channelformat(k)) for k in range(3)} == {"half"}
+    assert ref_spec.getattribute("compression") == "zip"

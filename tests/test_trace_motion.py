@@ -49,33 +49,43 @@ def animated_frames(tmp_path_factory: pytest.TempPathFactory) -> Path:
         main([
             "trace", str(TESTDATA / "cornell.obj"), "-o", str(out / "m.####.exr"),
             "--frames", "1,6", "--resolution", f"{WIDTH}x{HEIGHT}", "--spp", "1",
-            "--max-depth", "0", "--animation", str(TESTDATA / "anim.json"), "-q",
+            "--max-depth", "0", "--animation", str(TESTDATA / "anim.json"), "--motion-next",
+            "-q",
         ])  # fmt: skip
     assert info.value.code == 0
     return out
 
 
-def test_motion_matches_reprojection_of_world_positions(animated_frames: Path) -> None:
-    layers, _ = read_exr(animated_frames / "m.0006.exr")
+def expected_motion(layers: dict[str, np.ndarray], frame: int, other: int) -> np.ndarray:
+    """Pixel offsets, written out independently: each pixel's world point (P layer) carried
+    by its object's transforms from ``frame`` to ``other`` and projected with ``other``'s
+    camera, minus the pixel centre."""
     scene = load_obj(TESTDATA / "cornell.obj")
     anim = load_animation(TESTDATA / "anim.json", [o.name for o in scene.objects])
     ids = layers["id"].astype(int)
-    hit = ids >= 0
-    assert hit.mean() > 0.5
     points = np.stack([layers["P.X"], layers["P.Y"], layers["P.Z"]], axis=-1).astype(np.float64)
-    prev_points = points.copy()
+    moved = points.copy()
     for obj in scene.objects:
         pts = scene.positions[obj.start : obj.stop].reshape(-1, 3)
         pivot = (pts.min(0) + pts.max(0)) / 2
-        now = anim.object_matrix(obj.name, 6, pivot)
-        before = anim.object_matrix(obj.name, 5, pivot)
-        to_prev = before @ np.linalg.inv(now)
+        now = anim.object_matrix(obj.name, frame, pivot)
+        then = anim.object_matrix(obj.name, other, pivot)
+        carry = then @ np.linalg.inv(now)
         mask = ids == obj.index
-        prev_points[mask] = points[mask] @ to_prev[:3, :3].T + to_prev[:3, 3]
-    cam5 = anim.camera(5, WIDTH, HEIGHT)
-    prev_pixels = project(cam5.position, cam5.look_at, cam5.up, cam5.fov_y, prev_points)
+        moved[mask] = points[mask] @ carry[:3, :3].T + carry[:3, 3]
+    cam = anim.camera(other, WIDTH, HEIGHT)
+    pixels = project(cam.position, cam.look_at, cam.up, cam.fov_y, moved)
     ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH]
-    expected = prev_pixels - np.stack([xs + 0.5, ys + 0.5], axis=-1)
+    return pixels - np.stack([xs + 0.5, ys + 0.5], axis=-1)
+
+
+def test_motion_matches_reprojection_of_world_positions(animated_frames: Path) -> None:
+    layers, _ = read_exr(animated_frames / "m.0006.exr")
+    scene = load_obj(TESTDATA / "cornell.obj")
+    ids = layers["id"].astype(int)
+    hit = ids >= 0
+    assert hit.mean() > 0.5
+    expected = expected_motion(layers, 6, 5)
     motion = np.stack([layers["motion.X"], layers["motion.Y"]], axis=-1)
     error = np.abs(motion - expected)[hit]
     assert error.max() < 0.01, error.max()
@@ -121,3 +131,32 @@ def test_first_frame_and_static_scenes_have_zero_motion(
     static, _ = read_exr(tmp_path / "s.0003.exr")
     assert np.all(static["motion.X"] == 0) and np.all(static["motion.Y"] == 0)
     assert (static["id"] >= 0).any()
+
+
+def test_motion_next_matches_reprojection_into_the_next_frame(animated_frames: Path) -> None:
+    layers, spec = read_exr(animated_frames / "m.0006.exr")
+    assert spec.getattribute("svgf/motion_next_convention") == "forward-pixels"
+    hit = layers["id"] >= 0
+    expected = expected_motion(layers, 6, 7)
+    motion_next = np.stack([layers["motion_next.X"], layers["motion_next.Y"]], axis=-1)
+    error = np.abs(motion_next - expected)[hit]
+    assert error.max() < 0.01, error.max()
+    # It really is the other direction: between frames 5, 6 and 7 the motion is nearly
+    # uniform, so forward motion is close to minus the backward motion, not equal to it.
+    motion = np.stack([layers["motion.X"], layers["motion.Y"]], axis=-1)
+    opposite = np.median(np.linalg.norm(motion_next + motion, axis=-1)[hit])
+    same = np.median(np.linalg.norm(motion_next - motion, axis=-1)[hit])
+    assert opposite < 0.1 * same, (opposite, same)
+    assert np.all(motion_next[~hit] == 0)
+
+
+def test_motion_next_is_zero_where_nothing_moves_on(tmp_path: Path) -> None:
+    # Frame 48 is the animation's last key: the next frame holds still.
+    with pytest.raises(SystemExit) as info:
+        main(["trace", str(TESTDATA / "cornell.obj"), "-o", str(tmp_path / "e.####.exr"),
+              "--frames", "48", "--resolution", "16x9", "--max-depth", "0", "--motion-next",
+              "--animation", str(TESTDATA / "anim.json"), "-q"])  # fmt: skip
+    assert info.value.code == 0
+    last, _ = read_exr(tmp_path / "e.0048.exr")
+    assert np.all(last["motion_next.X"] == 0) and np.all(last["motion_next.Y"] == 0)
+    assert np.any(last["motion.X"] != 0)

@@ -7,11 +7,13 @@ do not depend on magic tolerances.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from tracescenes import plane_and_lamp
 
 from svgf_trace.animation import Animation, CameraKey, load_animation
 from svgf_trace.render import (
@@ -40,7 +42,7 @@ def per_sample_radiance(scene_path: Path, anim: Animation, size: tuple[int, int]
     geo = prepare_frame(scene, anim, 0, size[0], size[1])
     try:
         hits = trace_primary(geo)
-        direct, indirect = trace_batch(geo, hits, 0, spp, max_depth, frame_key(seed, 0, 0))
+        direct, indirect, _ = trace_batch(geo, hits, 0, spp, max_depth, frame_key(seed, 0, 0))
     finally:
         geo.tracer.close()
     return direct + indirect, direct, indirect, hits
@@ -173,3 +175,45 @@ def test_mean_of_one_spp_frames_matches_the_reference() -> None:
     assert reference.mean() > 0.01  # a lit image, not zeros on both sides
     # Reference and frames are different sample streams.
     assert not np.array_equal(frames[0], reference)
+
+
+def test_moving_and_dimming_a_light_moves_and_scales_what_it_lights(tmp_path: Path) -> None:
+    """Next-event estimation samples the light where the animation puts it, with the
+    animated emission: the lit spot follows the lamp and scales with emission_scale."""
+    rho, le, half, height, shift = 0.7, 5.0, 0.25, 1.0, 0.8
+    path = plane_and_lamp(tmp_path, floor_mtl=f"Kd {rho} {rho} {rho}", le=le, half=half,
+                          height=height)  # fmt: skip
+    scene = load_obj(path)
+    (tmp_path / "a.json").write_text(json.dumps({
+        "camera": [{"frame": 0, "position": [0.4, 3.0, 2.5], "look_at": [0.4, 0.0, 0.0],
+                    "fov_y": 55.0}],
+        "objects": {"lamp": [{"frame": 0, "translate": [0, 0, 0]},
+                             {"frame": 1, "translate": [shift, 0, 0], "emission_scale": 1.0},
+                             {"frame": 2, "emission_scale": 0.45}]},
+    }))  # fmt: skip
+    anim = load_animation(tmp_path / "a.json", [o.name for o in scene.objects])
+    for frame, offset, scale in ((0, 0.0, 1.0), (1, shift, 1.0), (2, shift, 0.45)):
+        geo = prepare_frame(scene, anim, frame, 24, 20)
+        try:
+            hits = trace_primary(geo)
+            direct, indirect, _ = trace_batch(geo, hits, 0, 48, 1, frame_key(0, frame, 0))
+        finally:
+            geo.tracer.close()
+        floor = np.flatnonzero((hits.prim >= 0) & (hits.prim < 2))
+        points = hits.origins[floor] + hits.directions[floor] * hits.t[floor, None]
+        irradiance = scale * le * _rectangle_irradiance(
+            points[:, 0], points[:, 2], height, offset - half, offset + half, -half, half
+        )
+        expected = rho / math.pi * irradiance
+        values = direct[:, floor, 0]
+        means = values.mean(axis=0)
+        errors = values.std(axis=0) / math.sqrt(values.shape[0])
+        assert np.all(np.abs(means - expected) <= SIGMAS * errors + 1e-6 * expected), frame
+        if frame == 1:
+            # ... and not where the lamp was: the unmoved lamp's image is far off.
+            unmoved = rho / math.pi * le * _rectangle_irradiance(
+                points[:, 0], points[:, 2], height, -half, half, -half, half
+            )
+            assert np.mean(np.abs(means - unmoved) > SIGMAS * errors + 0.01 * unmoved) > 0.5
+        # The lamp's own emission (what a camera facing it, and the emission layer, see).
+        assert np.array_equal(geo.tri_ke[2:], np.full((2, 3), scale * le))

@@ -11,6 +11,7 @@ import OpenImageIO as oiio
 import pytest
 
 from svgf_cli.errors import InputError
+from svgf_trace import render
 from svgf_trace.animation import Animation, CameraKey, load_animation
 from svgf_trace.render import gbuffer, prepare_frame, trace_primary, world_vertices
 from svgf_trace.scene import load_obj
@@ -203,3 +204,47 @@ def test_bad_animation_files(tmp_path: Path, content: str, message: str) -> None
     with pytest.raises(InputError) as info:
         load_animation(path, ["floor"])
     assert message in str(info.value) and "a.json" in str(info.value)
+
+
+def test_emission_keys_are_their_own_track(tmp_path: Path) -> None:
+    path = TESTDATA / "cornell.obj"
+    scene = load_obj(path)
+    names = [o.name for o in scene.objects]
+    data = {"objects": {"light": [
+        {"frame": 1, "translate": [0, 0, 0]},
+        {"frame": 9, "emission_scale": 1.0},
+        {"frame": 10, "emission_scale": 0.45},
+        {"frame": 17, "translate": [-160, 0, 0], "emission_scale": [0.45, 0.45, 0.9]},
+    ]}}  # fmt: skip
+    (tmp_path / "a.json").write_text(json.dumps(data))
+    anim = load_animation(tmp_path / "a.json", names)
+    pivot = np.zeros(3)
+    # The emission-only keys leave the slide alone: linear from frame 1 to frame 17.
+    assert np.allclose(anim.object_matrix("light", 9, pivot)[:3, 3], [-80, 0, 0])
+    # A step between consecutive keys; before the first key the first holds; linear after.
+    assert np.array_equal(anim.emission_scale("light", 1), np.ones(3))
+    assert np.array_equal(anim.emission_scale("light", 9), np.ones(3))
+    assert np.allclose(anim.emission_scale("light", 10), 0.45)
+    assert np.allclose(anim.emission_scale("light", 13.5), [0.45, 0.45, 0.675])
+    assert np.allclose(anim.emission_scale("light", 30), [0.45, 0.45, 0.9])
+    assert np.array_equal(anim.emission_scale("floor", 10), np.ones(3))
+    # The frame's triangles carry it (only the light's).
+    tri_ke = render.triangle_emission(scene, anim, 10)
+    light = scene.object_by_name("light")
+    assert light is not None
+    assert np.allclose(tri_ke[light.start : light.stop], [17 * 0.45, 12 * 0.45, 4 * 0.45])
+    assert np.all(tri_ke[: light.start] == 0)
+
+
+@pytest.mark.parametrize(
+    ("key", "message"),
+    [('{"frame": 1, "emission_scale": -1}', "must not be negative"),
+     ('{"frame": 1, "emission_scale": [1, 2]}', "emission_scale: expected 3"),
+     ('{"frame": 1, "emission_scale": "dim"}', "emission_scale")],
+)  # fmt: skip
+def test_bad_emission_keys(tmp_path: Path, key: str, message: str) -> None:
+    path = tmp_path / "a.json"
+    path.write_text('{"objects": {"light": [' + key + "]}}")
+    with pytest.raises(InputError) as info:
+        load_animation(path, ["light"])
+    assert message in str(info.value) and "objects.light[0]" in str(info.value)

@@ -13,46 +13,52 @@ from typing import Any
 import click
 
 from svgf_cli import __version__
-from svgf_cli.commands.options import describe_params, params_from_options, svgf_param_options
-from svgf_cli.errors import UsageError
-from svgf_cli.farm.progress import PROGRESS_MODES, Progress
+from svgf_cli.commands.options import (
+    WARMUP,
+    SectionedCommand,
+    describe_params,
+    params_from_options,
+    svgf_param_options,
+    warmup_label,
+)
+from svgf_cli.errors import InputError, SvgfError, UsageError
+from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS
+from svgf_cli.progress import PROGRESS_MODES, Progress
 
 DEBUG_CHANNEL_EXAMPLE = ("variance", "history_length")  # data layers, for the codec check
-
-
-def parse_warmup(text: str) -> int | None:
-    """``all`` -> None (replay from the first frame), else a frame count >= 0."""
-    if text.strip().lower() == "all":
-        return None
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"--warmup {text!r}: expected a number of frames or 'all'") from None
-    if value < 0:
-        raise UsageError(f"--warmup {value}: must be >= 0")
-    return value
 
 
 def _check_combinations(o: dict[str, Any]) -> None:
     if o["workers"] is not None and o["scheduler"] is not None:
         raise UsageError("--workers and --scheduler contradict each other; give one")
-    if o["workers"] is not None and o["workers"] < 1:
-        raise UsageError(f"--workers {o['workers']}: must be at least 1")
-    if o["chunk_size"] is not None and o["chunk_size"] < 1:
-        raise UsageError(f"--chunk-size {o['chunk_size']}: must be at least 1")
     distributed = o["workers"] is not None or o["scheduler"] is not None
     if (o["save_history"] or o["load_history"]) and (distributed or o["chunk_size"]):
         raise UsageError(
             "--save-history/--load-history continue one sequential run; they cannot be "
             "combined with --chunk-size, --workers or --scheduler"
         )
-    if o["threads"] is not None and o["threads"] < 0:
-        raise UsageError(f"--threads {o['threads']}: must be >= 0 (0 = all cores)")
+
+
+# --help sections, everyday options first; an option named nowhere lands in "Other options",
+# the SVGF parameters (and --preset) in the filter section at the end.
+SECTIONS = [
+    ("Input and output", ["output", "colour_only", "float_output", "compression", "debug_aovs"]),
+    (
+        "Frames, warm-up and resume",
+        ["frames_spec", "warmup", "skip_existing", "overwrite", "allow_gaps", "save_history",
+         "load_history"],
+    ),  # fmt: skip
+    ("Presets and layers", ["preset", "preset_aovs", "aovs", "motion_convention"]),
+    ("Run and progress", ["threads", "progress_mode", "quiet", "verbose", "dry_run", "check_only"]),
+    ("Farm chunks and Dask", ["chunk_size", "workers", "scheduler"]),
+]
 
 
 @click.command(
     "denoise",
+    cls=SectionedCommand,
+    sections=SECTIONS,
     short_help="Denoise an EXR sequence with SVGF.",
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
@@ -94,11 +100,12 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option(
     "--warmup",
-    default="all",
-    show_default=True,
+    type=WARMUP,
+    default=None,
     metavar="N|all",
     help="Frames processed, not written, before the first output frame; 'all' replays from "
-    "the first frame (bit-identical to one sequential run).",
+    f"the first frame (bit-identical to one sequential run) [default: {DEFAULT_WARMUP} with "
+    "--frames, else all].",
 )
 @click.option("--allow-gaps", is_flag=True, help="A missing frame resets history (WARNING).")
 @click.option(
@@ -107,7 +114,17 @@ def _check_combinations(o: dict[str, Any]) -> None:
     help="Keep existing outputs; rebuild history for the first missing one by warm-up.",
 )
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
-@click.option("--float", "float_output", is_flag=True, help="Write float RGBA (default half).")
+@click.option(
+    "--float",
+    "float_output",
+    is_flag=True,
+    help="Write the denoised colour as float [default: the input colour's pixel type].",
+)
+@click.option(
+    "--colour-only",
+    is_flag=True,
+    help="Write only the colour layer and its alpha [default: every input channel too].",
+)
 @click.option(
     "--compression",
     metavar="CODEC",
@@ -131,7 +148,7 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option(
     "--threads",
-    type=int,
+    type=click.IntRange(min=0),
     default=None,
     metavar="N",
     help="Compute and I/O threads (0 = all cores) [default: all].",
@@ -148,8 +165,14 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option("--dry-run", is_flag=True, help="Check everything, print the plan, write nothing.")
 @click.option(
+    "--check-only",
+    is_flag=True,
+    help="Pre-flight: read every input frame in full (headers, channels, resolution, "
+    "pixels); exit 3 if any is bad. Writes nothing.",
+)
+@click.option(
     "--workers",
-    type=int,
+    type=click.IntRange(min=1),
     default=None,
     metavar="N",
     help="Run chunks on a local Dask cluster of N worker processes.",
@@ -161,7 +184,7 @@ def _check_combinations(o: dict[str, Any]) -> None:
 )
 @click.option(
     "--chunk-size",
-    type=int,
+    type=click.IntRange(min=1),
     default=None,
     metavar="N",
     help="Output frames per chunk; each chunk replays its own warm-up.",
@@ -173,19 +196,20 @@ def command(**options: Any) -> None:
     frame such as in.1001.exr) or a list of files.
     """
     from svgf_cli.farm.job import build_job
-    from svgf_cli.io.exr import check_compression, compression_name, read_info
-    from svgf_cli.io.layers import build_mapping, resolve_layers
+    from svgf_cli.io.atomic import remove_stale_temporaries
+    from svgf_cli.io.exr import check_compression, compression_name, read_info, refuse_multiview
+    from svgf_cli.io.layers import build_mapping, resolve_layers, resolve_output_colour
     from svgf_cli.runner import RunConfig, RunStats, load_history, run_sequence, stop_on_signals
 
     params = params_from_options(options["preset"], options)
-    warmup = parse_warmup(options["warmup"])
+    warmup, warmup_note = _resolve_warmup(options)
     _check_combinations(options)
     mapping = build_mapping(options["preset_aovs"], options["aovs"], options["motion_convention"])
     compression = options["compression"]
+    debug_names = [f"svgf.{n}" for n in DEBUG_CHANNEL_EXAMPLE] if options["debug_aovs"] else []
     if compression is not None:
-        names = ["R", "G", "B", "A", *(DEBUG_CHANNEL_EXAMPLE if options["debug_aovs"] else ())]
         compression_name(compression)
-        check_compression(compression, names)
+        check_compression(compression, ["R", "G", "B", "A", *debug_names])
 
     history = load_history(options["load_history"]) if options["load_history"] else None
     distributed = options["workers"] is not None or options["scheduler"] is not None
@@ -210,33 +234,55 @@ def command(**options: Any) -> None:
 
     first_input = job.chunk_tasks[0][0].input if job.chunk_tasks else job.timeline[0][1]
     info = read_info(first_input)
+    refuse_multiview(info)
     resolved = resolve_layers(mapping, info.channels, str(first_input))
+    colour = resolve_output_colour(mapping, info.channels)
+    if compression is not None and not options["colour_only"]:
+        # Every input channel is written too: a lossy codec must not touch its data layers.
+        check_compression(compression, [*info.channels, *debug_names])
     progress.info(f"svgf {__version__} denoise")
     progress.info(f"Threads: {threads}")
     progress.info(f"Preset: {options['preset']}")
     progress.info(f"Parameters: {describe_params(params)}")
     progress.info(
         f"Layers ({options['preset_aovs']} AOVs, motion {mapping.motion_convention}, "
-        f"from {first_input}):\n{resolved.describe()}"
+        f"from {first_input}):\n{resolved.describe()}\n  {info.luminance_weights.describe()}"
+    )
+    progress.info(
+        f"Output: denoised colour as {', '.join(colour or ('R', 'G', 'B'))}"
+        + ("" if colour else " (the input has no colour layer)")
+        + ("; colour layer only" if options["colour_only"] else "; every other channel as read")
     )
     selected = len(job.selected)
     progress.info(
         f"Frames: {job.frames_to_write} to write of {selected} selected, "
-        f"{len(job.timeline)} on disk; warm-up {options['warmup']}"
+        f"{len(job.timeline)} on disk; warm-up {warmup_label(warmup)}{warmup_note}"
         + (f"; {len(job.skipped_existing)} existing skipped" if job.skipped_existing else "")
         + (f"; history from {history.path} (frame {history.last_frame})" if history else "")
     )
     for warning in job.warnings:
         progress.warning(warning)
+    if options["check_only"]:
+        _check_inputs(job, mapping, progress)
+        return
     if options["dry_run"]:
         for line in job.describe():
             click.echo(line)
         return
+    # Temporaries of these outputs left by dead runs (a SIGKILL inside a write); never
+    # a live writer's, here or on another host (see svgf_cli.io.atomic).
+    removed = remove_stale_temporaries(job.outputs.values())
+    if removed:
+        progress.info(f"Removed {len(removed)} temporary file(s) left by dead runs")
     if not job.chunks:
         progress.finish(f"Nothing to do: all {selected} outputs exist")
         return
-    for path in {p.parent for p in job.outputs.values()}:
-        path.mkdir(parents=True, exist_ok=True)
+    for path in sorted({p.parent for p in job.outputs.values()}):
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            reason = "a file is in the way" if isinstance(exc, FileExistsError) else exc.strerror
+            raise SvgfError(f"cannot create the output folder: {reason}", str(path)) from None
     for line in job.describe():
         progress.detail(line)
 
@@ -244,10 +290,11 @@ def command(**options: Any) -> None:
         params=params,
         preset=options["preset"],
         mapping=mapping,
-        half=not options["float_output"],
+        float_colour=options["float_output"],
+        colour_only=options["colour_only"],
         compression=compression,
         debug_aovs=options["debug_aovs"],
-        warmup_label=options["warmup"].strip().lower(),
+        warmup_label=warmup_label(warmup),
         # Dask workers set their own threads; a remote scheduler's workers keep theirs
         # unless --threads was given.
         threads=(threads if options["workers"] else options["threads"]) if distributed else None,
@@ -285,6 +332,53 @@ def command(**options: Any) -> None:
         f"{stats.read_seconds:.1f} s, compute {stats.compute_seconds:.1f} s, write "
         f"{stats.write_seconds:.1f} s)"
     )
+
+
+def _resolve_warmup(options: dict[str, Any]) -> tuple[int | None, str]:
+    """The warm-up and a note for the log: a frame range without --warmup gets the bounded
+    default (a farm task must not replay the whole shot); the whole sequence stays exact."""
+    source = click.get_current_context().get_parameter_source("warmup")
+    if source is not click.core.ParameterSource.DEFAULT:
+        return options["warmup"], ""
+    if options["frames_spec"] is None:
+        return None, ""
+    return DEFAULT_WARMUP, f" (the default with --frames; {WARMUP_ERROR_NOTE})"
+
+
+def _check_inputs(job: Any, mapping: Any, progress: Progress) -> None:
+    """--check-only: read every input frame the job would read, in full, as the run would
+    (header, channels, resolution, every pixel chunk). Each bad frame is one ``ERROR:``
+    line; any bad frame makes the command exit 3 after all were checked."""
+    from svgf_cli.io.exr import read_frame
+
+    frames = sorted({(t.frame, t.input) for tasks in job.chunk_tasks for t in tasks})
+    bad: list[SvgfError] = []
+    size: tuple[int, int] | None = None
+    size_source = None
+    for _, path in frames:
+        try:
+            result = read_frame(path, mapping)
+            shape = (result.frame.width, result.frame.height)
+            if size is None:
+                size, size_source = shape, path
+            elif shape != size:
+                raise InputError(
+                    f"resolution {shape[0]}x{shape[1]} differs from {size[0]}x{size[1]} "
+                    f"({size_source})",
+                    str(path),
+                )
+            for message in result.warnings:
+                progress.warning(str(message))
+        except SvgfError as exc:
+            bad.append(exc)
+            click.echo(f"ERROR: {exc}", err=True)
+    if bad:
+        raise CheckFailed(f"check failed: {len(bad)} of {len(frames)} input frame(s) are bad")
+    progress.finish(f"Check passed: {len(frames)} input frame(s) read in full")
+
+
+class CheckFailed(InputError):
+    """--check-only found bad frames (each already reported on its own line)."""
 
 
 def _apply_threads(threads: int | None, workers: int | None) -> int:

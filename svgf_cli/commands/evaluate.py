@@ -5,13 +5,16 @@ Wiring only: options -> EvaluationRequest -> run_evaluation -> table / JSON / pl
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import click
 
-from svgf_cli.commands.options import params_from_options, svgf_param_options
+from svgf_cli.commands.options import (
+    SectionedCommand,
+    params_from_options,
+    svgf_param_options,
+)
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.evaluate.baselines import BASELINES
 from svgf_cli.io.layers import AOV_PRESETS
@@ -29,17 +32,22 @@ def _frames(spec: str | None, option: str) -> list[int] | None:
 
 
 def _write_text(path: str, text: str) -> None:
-    target = Path(path)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    """Atomically (hidden unique temporary, then rename; see svgf_cli.io.atomic)."""
+    from svgf_cli.io.atomic import write_atomically
+
     try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, target)
+        write_atomically(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from exc
+        raise SvgfError(f"cannot write: {exc.strerror or exc}", path) from None
 
 
-@click.command("evaluate", short_help="Score denoised frames against references and baselines.")
+@click.command(
+    "evaluate",
+    cls=SectionedCommand,
+    default_section="Options",
+    short_help="Score denoised frames against references and baselines.",
+    context_settings={"max_content_width": 100},
+)
 @click.argument("denoised", metavar="DENOISED_PATTERN")
 @click.option(
     "--reference", "-r", required=True, metavar="PATTERN", help="Converged reference frames."

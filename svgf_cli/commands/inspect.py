@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from svgf_cli.errors import InputError
-from svgf_cli.io.exr import ExrInfo, TypedAttribute, read_info
+from svgf_cli.io.exr import ExrInfo, TypedAttribute, io_threads, read_info, refuse_multiview
 from svgf_cli.io.layers import (
     AOV_PRESETS,
     MOTION_CONVENTIONS,
@@ -18,7 +18,9 @@ from svgf_cli.io.layers import (
     ResolvedLayers,
     build_mapping,
     resolve_layers,
+    resolve_output_colour,
 )
+from svgf_cli.io.source import decode_source
 
 
 def _json_value(value: Any) -> Any:
@@ -44,6 +46,7 @@ def _report(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> d
                 "index": part.index,
                 "name": part.name,
                 "compression": part.compression,
+                "tiled": part.tiled,
                 "data_window": list(part.data_window),
                 "channels": [
                     {"name": name, "type": kind}
@@ -52,6 +55,11 @@ def _report(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> d
             }
             for part in info.part_info
         ],
+        "display_window": list(info.display_window),
+        "views": list(info.views),
+        "luminance_weights": list(info.luminance_weights.weights),
+        "luminance_weights_source": info.luminance_weights.source,
+        "output_colour": list(resolve_output_colour(mapping, info.channels) or ("R", "G", "B")),
         "preset": mapping.preset,
         "motion_convention": mapping.motion_convention,
         "roles": {role: list(resolved[role] or ()) or None for role in ROLES},
@@ -63,22 +71,31 @@ def _report(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> d
 
 
 def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str:
+    dx, dy, dw, dh = info.display_window
     lines = [
         f"{info.path}",
         f"  resolution {info.width}x{info.height}, {len(info.part_info)} part(s), "
-        f"compression {info.compression}",
+        f"compression {info.compression}, display window {dw}x{dh}+{dx}+{dy}",
     ]
+    if info.views:
+        lines.append(f"  views: {', '.join(info.views)} (multi-view: svgf denoise refuses it)")
     for part in info.part_info:
         label = f"part {part.index}" + (f" ({part.name})" if part.name else "")
         x, y, w, h = part.data_window
         lines.append(
             f"  {label}: {len(part.channels)} channel(s), {part.compression}, "
-            f"data window {w}x{h}+{x}+{y}"
+            f"{'tiled' if part.tiled else 'scanline'}, data window {w}x{h}+{x}+{y}"
         )
         for name, kind in zip(part.channels, part.channel_types, strict=True):
             lines.append(f"    {name:<28} {kind}")
     lines.append(f"  roles ({mapping.preset} preset, motion {mapping.motion_convention}):")
     lines.extend(f"  {line}" for line in resolved.describe().splitlines())
+    lines.append(f"  {info.luminance_weights.describe()}")
+    colour = resolve_output_colour(mapping, info.channels)
+    lines.append(
+        f"  denoised colour written as: {', '.join(colour or ('R', 'G', 'B'))}"
+        + ("" if colour else " (added: the file has no colour layer)")
+    )
     if resolved.missing:
         lines.append(f"  missing: {', '.join(resolved.missing)}")
     else:
@@ -114,7 +131,8 @@ def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str
 @click.option(
     "--check",
     is_flag=True,
-    help="Exit 3 when a file lacks a required role (pre-flight for farm jobs).",
+    help="Pre-flight for farm jobs: also decode every pixel chunk; exit 3 when a file is "
+    "truncated or corrupt, lacks a required role, or is multi-view.",
 )
 def command(
     files: tuple[str, ...],
@@ -127,14 +145,30 @@ def command(
     """Show the parts, channels, compression and role mapping of EXR FILES."""
     mapping = build_mapping(preset_aovs, aovs, motion_convention=motion_convention)
     reports: list[dict[str, Any]] = []
-    first_missing: InputError | None = None
+    failures: list[InputError] = []
+
+    def fail(exc: InputError) -> None:
+        failures.append(exc)
+        if len(files) > 1:  # one line per bad file, then a summary
+            click.echo(f"ERROR: {exc}", err=True)
+
     for index, name in enumerate(files):
+        if check:
+            try:
+                info = read_info(name)
+                refuse_multiview(info)
+                # Every pixel chunk, as the denoiser will read it: truncation and corruption
+                # show here, with the decoder's reason, not on the farm.
+                decode_source(name, threads=io_threads(), expected_parts=len(info.parts))
+            except InputError as exc:
+                if len(files) == 1:
+                    raise
+                fail(exc)
+                continue
         info = read_info(name)
         resolved = resolve_layers(mapping, info.channels, name, strict=False)
-        if resolved.missing and first_missing is None:
-            first_missing = InputError(
-                f"missing channel(s) for {', '.join(resolved.missing)}", name
-            )
+        if check and resolved.missing:
+            fail(InputError(f"missing channel(s) for {', '.join(resolved.missing)}", name))
         if as_json:
             reports.append(_report(info, mapping, resolved))
         else:
@@ -143,5 +177,7 @@ def command(
             click.echo(_text(info, mapping, resolved))
     if as_json:
         click.echo(json.dumps({"files": reports}, indent=2))
-    if check and first_missing is not None:
-        raise first_missing
+    if failures:
+        if len(files) == 1:
+            raise failures[0]
+        raise InputError(f"check failed: {len(failures)} of {len(files)} file(s) are not ready")

@@ -9,7 +9,7 @@ value and an explicit option overrides it.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 import click
@@ -21,10 +21,112 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 _CLICK_TYPES: dict[str, click.ParamType] = {"float": click.FLOAT, "int": click.INT}
 
+# The valid range of each numeric SVGF parameter; click refuses a value outside it (exit 2)
+# and shows the range in --help. A parameter missing here takes any number.
+PARAM_RANGES: dict[str, click.ParamType] = {
+    "alpha": click.FloatRange(0.0, 1.0, min_open=True),
+    "moments_alpha": click.FloatRange(0.0, 1.0, min_open=True),
+    "history_cap": click.IntRange(min=1),
+    "depth_tolerance": click.FloatRange(min=0.0),
+    "depth_slack": click.FloatRange(min=0.0),
+    "normal_tolerance": click.FloatRange(min=0.0),
+    "variance_history_threshold": click.IntRange(min=0),
+    "spatial_variance_radius": click.IntRange(min=0),
+    "spatial_variance_sigma_luminance": click.FloatRange(min=0.0, min_open=True),
+    "atrous_iterations": click.IntRange(0, 12),  # step 4096 at most
+    "feedback_iteration": click.IntRange(min=-1),
+    "sigma_luminance": click.FloatRange(min=0.0, min_open=True),
+    "sigma_normal": click.FloatRange(min=0.0, min_open=True),
+    "sigma_depth": click.FloatRange(min=0.0, min_open=True),
+    "albedo_epsilon": click.FloatRange(min=0.0, min_open=True),
+    "firefly_clamp": click.FloatRange(min=0.0),
+    "history_clamp": click.FloatRange(min=0.0),
+    "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
+}
+
+FILTER_SECTION = "Filter parameters (each overrides its --preset value)"
+
+
+class WarmupType(click.ParamType):
+    """``N`` (a frame count >= 0) or ``all`` (None: replay from the first frame)."""
+
+    name = "N|all"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if value is None or isinstance(value, int):
+            return value
+        text = str(value).strip().lower()
+        if text == "all":
+            return None
+        try:
+            count = int(text)
+        except ValueError:
+            self.fail(f"{value!r}: expected a number of frames or 'all'", param, ctx)
+        if count < 0:
+            self.fail(f"{count}: must be >= 0 or 'all'", param, ctx)
+        return count
+
+
+WARMUP = WarmupType()
+
+
+def warmup_label(warmup: int | None) -> str:
+    """The ``--warmup`` value as written in logs, plans and ``svgf/warmup``."""
+    return "all" if warmup is None else str(warmup)
+
+
+class SectionedCommand(click.Command):
+    """A click command whose --help lists its options in titled sections.
+
+    ``sections`` is a list of ``(title, [parameter names])`` in display order; options named
+    nowhere fall into ``default_section``, shown after the named sections except the ones in
+    ``trailing`` (e.g. the filter parameters, which come last). Adding an option therefore
+    needs at most one line here, or none.
+    """
+
+    def __init__(
+        self,
+        *args: Any,
+        sections: Sequence[tuple[str, Sequence[str]]] = (),
+        trailing: Sequence[str] = (FILTER_SECTION,),
+        default_section: str = "Other options",
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(*args, **kwargs)
+        self.sections = list(sections)
+        self.trailing = list(trailing)
+        self.default_section = default_section
+
+    def format_options(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        section_of = {name: title for title, names in self.sections for name in names}
+        for param in self.params:
+            if param.name and param.name in PARAM_FIELD_NAMES | {"preset"}:
+                section_of.setdefault(param.name, FILTER_SECTION)
+        titles = [t for t, _ in self.sections if t not in self.trailing]
+        titles += [self.default_section, *self.trailing]
+        rows: dict[str, list[tuple[str, str]]] = {title: [] for title in titles}
+        order = {name: i for _, names in self.sections for i, name in enumerate(names)}
+        params = sorted(
+            (p for p in self.get_params(ctx) if isinstance(p, click.Option)),
+            key=lambda p: order.get(p.name or "", len(order)),
+        )
+        for param in params:
+            record = param.get_help_record(ctx)
+            if record is not None:
+                title = section_of.get(param.name or "", self.default_section)
+                rows.setdefault(title, []).append(record)
+        for title, records in rows.items():
+            if records:
+                with formatter.section(title):
+                    formatter.write_dl(records)
+
 
 def param_fields() -> list[dataclasses.Field[Any]]:
     """The SVGFParams fields, in declaration order."""
     return list(dataclasses.fields(SVGFParams))
+
+
+PARAM_FIELD_NAMES = frozenset(f.name for f in param_fields())
 
 
 def option_name(field_name: str) -> str:
@@ -46,7 +148,7 @@ def _param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
     if type_name == "bool":
         negative = "--no-" + f.name.replace("_", "-")
         return click.option(f"{flag}/{negative}", f.name, default=None, help=help_text)
-    click_type = _CLICK_TYPES.get(type_name)
+    click_type = PARAM_RANGES.get(f.name, _CLICK_TYPES.get(type_name))
     if click_type is None:
         raise TypeError(f"SVGFParams.{f.name}: unsupported type {type_name}")
     return click.option(
@@ -92,31 +194,12 @@ def params_from_options(preset: str, kwargs: Mapping[str, Any]) -> SVGFParams:
 
 
 def _check_ranges(params: SVGFParams) -> None:
-    """Refuse values that would make the filter meaningless, naming the option."""
-    problems: list[str] = []
-
-    def need(ok: bool, field_name: str, what: str) -> None:
-        if not ok:
-            problems.append(f"{option_name(field_name)} {getattr(params, field_name)}: {what}")
-
-    need(0.0 < params.alpha <= 1.0, "alpha", "must be in (0, 1]")
-    need(0.0 < params.moments_alpha <= 1.0, "moments_alpha", "must be in (0, 1]")
-    need(params.history_cap >= 1, "history_cap", "must be at least 1")
-    need(params.atrous_iterations >= 0, "atrous_iterations", "must be >= 0")
-    need(
-        -1 <= params.feedback_iteration < max(params.atrous_iterations, 1),
-        "feedback_iteration",
-        "must be -1 or an iteration index below --atrous-iterations",
-    )
-    need(params.sigma_luminance > 0, "sigma_luminance", "must be > 0")
-    need(params.sigma_normal >= 0, "sigma_normal", "must be >= 0")
-    need(params.sigma_depth > 0, "sigma_depth", "must be > 0")
-    need(params.albedo_epsilon > 0, "albedo_epsilon", "must be > 0")
-    need(params.firefly_clamp >= 0, "firefly_clamp", "must be >= 0 (0 = off)")
-    need(params.history_clamp >= 0, "history_clamp", "must be >= 0 (0 = off)")
-    need(0.0 < params.taa_alpha <= 1.0, "taa_alpha", "must be in (0, 1]")
-    if problems:
-        raise UsageError("; ".join(problems))
+    """The one check click's range types cannot make: it involves two options."""
+    if not -1 <= params.feedback_iteration < max(params.atrous_iterations, 1):
+        raise UsageError(
+            f"--feedback-iteration {params.feedback_iteration}: must be -1 or an iteration "
+            f"index below --atrous-iterations ({params.atrous_iterations})"
+        )
 
 
 def describe_params(params: SVGFParams) -> str:

@@ -1,16 +1,26 @@
-"""`svgf plan`: print the chunk list of a farm submission (JSON or one command per chunk)."""
+"""`svgf plan`: the chunk list of a farm submission: JSON, one command per chunk, the job
+parameters of the OpenJD template, or a Deadline 10 job info / plugin info pair."""
 
 from __future__ import annotations
 
 import json
 import shlex
+from collections.abc import Sequence
+from pathlib import Path
 
 import click
 
-from svgf_cli.commands.denoise import parse_warmup
+from svgf_cli.commands.options import WARMUP, warmup_label
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.plan import format_frame_spec, plan_chunks
-from svgf_cli.io.patterns import parse_frame_spec
+from svgf_cli.farm.plan import DEFAULT_WARMUP, plan_chunks
+from svgf_cli.farm.submit import (
+    OPENJD_TEMPLATE,
+    FarmJob,
+    deadline_files,
+    openjd_job_parameters,
+    write_key_values,
+)
+from svgf_cli.io.patterns import format_frame_spec, parse_frame_spec
 
 # Options `plan` sets on every chunk's command line; passing them after `--` would conflict.
 _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "--scheduler")
@@ -31,14 +41,15 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
 )
 @click.option(
     "--chunk-size",
-    type=int,
+    type=click.IntRange(min=1),
     required=True,
     metavar="N",
     help="Output frames per chunk (one farm task each).",
 )
 @click.option(
     "--warmup",
-    default="16",
+    type=WARMUP,
+    default=DEFAULT_WARMUP,
     show_default=True,
     metavar="N|all",
     help="Frames each chunk replays before its first output frame.",
@@ -54,28 +65,41 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
 @click.option(
     "--format",
     "output_format",
-    type=click.Choice(["json", "commands"]),
+    type=click.Choice(["json", "commands", "openjd", "deadline"]),
     default="json",
     show_default=True,
-    help="A JSON list, or one command per chunk.",
+    help="A JSON list, one command per chunk, the OpenJD template's job parameters (JSON), "
+    "or Deadline 10 job info / plugin info files (written to --out).",
+)
+@click.option(
+    "--executable",
+    default="svgf",
+    show_default=True,
+    help="The svgf command on the farm workers (openjd, deadline).",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the Deadline submission files (--format deadline).",
 )
 @click.argument("denoise_args", nargs=-1, type=click.UNPROCESSED, metavar="[-- DENOISE_ARGS...]")
 def command(
     frames_spec: str,
     chunk_size: int,
-    warmup: str,
+    warmup: int | None,
     first_frame: int | None,
     output_format: str,
+    executable: str,
+    out_dir: Path | None,
     denoise_args: tuple[str, ...],
 ) -> None:
     """Split FRAMES into chunks with a causal warm-up, for farm submission.
 
-    Each chunk reads [first - W, last] and writes [first, last]. With --format commands,
-    the arguments after `--` (inputs, -o, options) are put into one `svgf denoise` command
-    per chunk.
+    Each chunk reads [first - W, last] and writes [first, last]. The arguments after `--`
+    (inputs, -o, options) go into every chunk's `svgf denoise` command (--format commands,
+    deadline) or into the OpenJD template's job parameters (--format openjd).
     """
-    if chunk_size < 1:
-        raise UsageError(f"--chunk-size {chunk_size}: must be at least 1")
     try:
         frames = parse_frame_spec(frames_spec)
     except ValueError as exc:
@@ -86,15 +110,29 @@ def command(
     clashes = [a for a in denoise_args if a.split("=")[0] in _PLANNED_OPTIONS]
     if clashes:
         raise UsageError(f"{clashes[0]} is set by the plan; remove it from the denoise arguments")
-    warmup_frames = parse_warmup(warmup)
+    warmup_frames = warmup
     # The timeline is every frame from the sequence start; the plan does not look at disk.
     timeline = list(range(start, frames[-1] + 1))
     chunks = plan_chunks(frames, timeline, chunk_size=chunk_size, warmup=warmup_frames)
     if output_format == "json":
         click.echo(json.dumps([c.to_json() for c in chunks], indent=None))
         return
+    if output_format in ("openjd", "deadline"):
+        job = _farm_job(frames, chunk_size, warmup_label(warmup), executable, denoise_args)
+        if output_format == "openjd":
+            unmapped = _openjd_unmapped(denoise_args)
+            if unmapped:
+                option = unmapped[0]
+                raise UsageError(
+                    f"{OPENJD_TEMPLATE} has no job parameter for {option}; add it to the "
+                    "template's args, or use --format deadline or commands"
+                )
+            click.echo(json.dumps(openjd_job_parameters(job), indent=2))
+        else:
+            _write_deadline(job, denoise_args, frames, out_dir)
+        return
     for chunk in chunks:
-        warm = "all" if warmup_frames is None else str(warmup_frames)
+        warm = warmup_label(warmup_frames)
         words = [
             "svgf",
             "denoise",
@@ -105,3 +143,67 @@ def command(
             warm,
         ]
         click.echo(shlex.join(words))
+
+
+# The denoise options the OpenJD template has a job parameter for (the rest must be added to
+# the template's args by whoever needs them).
+_OPENJD_OPTIONS = {"inputs", "output", "preset", "preset_aovs"}
+
+
+def _farm_job(
+    frames: list[int],
+    chunk_size: int,
+    warmup: str,
+    executable: str,
+    denoise_args: Sequence[str],
+) -> FarmJob:
+    """The job a farm repeats per chunk, from the denoise arguments (parsed by `denoise`)."""
+    from svgf_cli.commands.denoise import command as denoise
+
+    if not denoise_args:
+        raise UsageError("give the denoise arguments after `--` (the input pattern and -o)")
+    ctx = denoise.make_context("denoise", list(denoise_args))
+    inputs = ctx.params["inputs"]
+    if len(inputs) != 1:
+        raise UsageError("a farm job needs one input pattern (e.g. in.####.exr), not a list")
+    return FarmJob(
+        input_pattern=inputs[0],
+        output=ctx.params["output"],
+        frames=format_frame_spec(frames).replace("x", ":"),  # OpenJD's step syntax
+        chunk_size=chunk_size,
+        warmup=warmup,
+        preset=ctx.params["preset"],
+        preset_aovs=ctx.params["preset_aovs"],
+        executable=executable,
+    )
+
+
+def _openjd_unmapped(denoise_args: Sequence[str]) -> list[str]:
+    from svgf_cli.commands.denoise import command as denoise
+
+    ctx = denoise.make_context("denoise", list(denoise_args))
+    given = [
+        name
+        for name in ctx.params
+        if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE
+    ]
+    flags = {p.name: max(p.opts, key=len) for p in denoise.params}
+    return [flags[name] for name in given if name not in _OPENJD_OPTIONS]
+
+
+def _write_deadline(
+    job: FarmJob, denoise_args: Sequence[str], frames: list[int], out_dir: Path | None
+) -> None:
+    if out_dir is None:
+        raise UsageError("--format deadline writes two files: give the folder with --out DIR")
+    if frames != list(range(frames[0], frames[-1] + 1)):
+        raise UsageError(
+            "--format deadline: Deadline passes each task as <STARTFRAME>-<ENDFRAME>, so the "
+            "frames must be one contiguous range (use --format openjd or commands for steps)"
+        )
+    files = deadline_files(job, denoise_args, name=f"svgf denoise {job.input_pattern}")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = {kind: out_dir / f"svgf_{kind}.job" for kind in files}
+    for kind, values in files.items():
+        write_key_values(paths[kind], values)
+    click.echo(f"deadlinecommand {shlex.join(str(p) for p in paths.values())}")

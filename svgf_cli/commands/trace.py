@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import re
-import sys
 import time
 from pathlib import Path
 
@@ -12,6 +11,7 @@ import click
 
 from svgf_cli.errors import OutputExistsError, UsageError
 from svgf_cli.io.patterns import SequencePattern, parse_frame_spec
+from svgf_cli.progress import Progress
 
 _RESOLUTION = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
 
@@ -51,8 +51,9 @@ def resolve_threads(threads: int) -> int:
               help="Frames to render: 1-48, 1,5,7-9, 1-10x2.")
 @click.option("--resolution", default="640x360", show_default=True, metavar="WxH",
               help="Image size in pixels.")
-@click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
-@click.option("--max-depth", type=int, default=5, show_default=True,
+@click.option("--spp", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Samples per pixel.")
+@click.option("--max-depth", type=click.IntRange(min=0), default=5, show_default=True,
               help="Maximum bounces (1 = direct lighting only; pbrt's convention).")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Base seed; each frame's seed derives from (seed, frame).")
@@ -60,12 +61,33 @@ def resolve_threads(threads: int) -> int:
               help="Camera/object keyframes (JSON); default: a static camera framing the scene.")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Also write converged reference frames (R,G,B + direct/indirect, float).")
-@click.option("--reference-spp", type=int, default=512, show_default=True,
+@click.option("--reference-spp", type=click.IntRange(min=1), default=512, show_default=True,
               help="Samples per pixel of the references (traced in memory-bounded batches).")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @click.option("--float", "float_radiance", is_flag=True,
               help="Write radiance layers as float instead of half.")
-@click.option("--threads", type=int, default=0, show_default=True, help="Threads (0 = all cores).")
+@click.option("--lobes", is_flag=True,
+              help="Also write Cycles-style light passes: DiffDir/DiffInd/DiffCol, "
+                   "GlossDir/GlossInd/GlossCol.")
+@click.option("--motion-next", is_flag=True,
+              help="Also write motion_next.X/Y: forward motion to the next frame, pixels.")
+@click.option("--gradient-samples", is_flag=True,
+              help="Also write A-SVGF temporal gradient samples against the previous frame "
+                   "(gradient.*).")
+@click.option("--skip-layer", "skip_layers", multiple=True,
+              type=click.Choice(["P", "emission", "id"]),
+              help="Leave this layer out of the input frames (repeatable); none is read by "
+                   "svgf denoise.")
+@click.option("--compression", default="piz", show_default=True,
+              type=click.Choice(["piz", "zip", "zips", "rle", "none"]),
+              help="EXR compression of all written files (lossless codecs only).")
+@click.option("--reference-channels", "reference_layers", type=click.Choice(["full", "rgb"]),
+              default="full",
+              show_default=True,
+              help="Reference layers: R,G,B + direct.* + indirect.* (full) or R,G,B only.")
+@click.option("--reference-half", is_flag=True, help="Write references as half instead of float.")
+@click.option("--threads", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Threads (0 = all cores).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress output.")
 def command(
     scene: Path,
@@ -80,6 +102,13 @@ def command(
     reference_spp: int,
     overwrite: bool,
     float_radiance: bool,
+    lobes: bool,
+    motion_next: bool,
+    gradient_samples: bool,
+    skip_layers: tuple[str, ...],
+    compression: str,
+    reference_layers: str,
+    reference_half: bool,
     threads: int,
     quiet: bool,
 ) -> None:
@@ -87,19 +116,16 @@ def command(
 
     Each frame holds R,G,B = direct + indirect, direct.*, indirect.*, emission.*, albedo.*,
     N.*, Z, P.*, motion.X/Y (backward, pixels) and id; primary rays go through pixel centres
-    so the G-buffer is noise-free.
+    so the G-buffer is noise-free. Optional: lobe passes (--lobes), motion to the next
+    frame (--motion-next), A-SVGF gradient samples (--gradient-samples). See docs/trace.md.
     """
     width, height = parse_resolution(resolution)
     try:
         frame_list = parse_frame_spec(frames)
     except ValueError as exc:
         raise UsageError(f"--frames: {exc}") from exc
-    if spp < 1:
-        raise UsageError(f"--spp {spp}: must be at least 1")
-    if max_depth < 0:
-        raise UsageError(f"--max-depth {max_depth}: must be >= 0")
-    if reference is not None and reference_spp < 1:
-        raise UsageError(f"--reference-spp {reference_spp}: must be at least 1")
+    if reference is None and (reference_half or reference_layers != "full"):
+        raise UsageError("--reference-half and --reference-channels need --reference")
 
     out_paths = _output_paths(output, frame_list, "--output")
     ref_paths = _output_paths(reference, frame_list, "--reference") if reference else []
@@ -114,7 +140,12 @@ def command(
     # Heavy imports only once the arguments are known to be good.
     from svgf_cli.io.exr import write_exr
     from svgf_trace.animation import Animation, load_animation
-    from svgf_trace.output import frame_attributes, input_channels, reference_channels
+    from svgf_trace.output import (
+        frame_attributes,
+        input_attributes,
+        input_channels,
+        reference_channels,
+    )
     from svgf_trace.render import TraceStats, render_frame
     from svgf_trace.scene import load_obj
 
@@ -126,53 +157,47 @@ def command(
     for path in out_paths + ref_paths:
         path.parent.mkdir(parents=True, exist_ok=True)
 
-    say = (lambda _msg: None) if quiet else (lambda msg: click.echo(msg))
-    say(
+    progress = Progress("auto", len(frame_list), quiet=quiet)
+    progress.info(
         f"Tracing {scene} ({loaded.triangle_count} triangles, {len(loaded.objects)} objects) "
         f"at {width}x{height}, {spp} spp, max depth {max_depth}, seed {seed}"
         + (f", reference {reference_spp} spp" if reference else "")
+        + "".join(f", {name}" for name, on in (("lobe passes", lobes),
+                  ("motion_next", motion_next), ("gradient samples", gradient_samples)) if on)
         + f"; using {n_threads} threads on cpu"
-    )
+    )  # fmt: skip
+    extra = input_attributes(lobes=lobes, motion_next=motion_next,
+                             gradient_samples=gradient_samples)  # fmt: skip
     stats = TraceStats()
-    use_bar = not quiet and sys.stdout.isatty()
     started = time.perf_counter()
-    bar = click.progressbar(length=len(frame_list), label="Tracing") if use_bar else None
-    try:
-        if bar is not None:
-            bar.__enter__()
-        for done, frame in enumerate(frame_list, start=1):
-            result, ref = render_frame(
-                loaded, anim, frame, width, height, spp, max_depth, seed,
-                reference_spp=reference_spp if reference else 0,
-                threads=n_threads, stats=stats,
-            )  # fmt: skip
-            channels, half = input_channels(result, half_radiance=not float_radiance)
-            attrs = frame_attributes(
-                result, frame=frame, spp=spp, seed=seed, max_depth=max_depth, kind="input"
+    for index, frame in enumerate(frame_list):
+        frame_started = time.perf_counter()
+        result, ref = render_frame(
+            loaded, anim, frame, width, height, spp, max_depth, seed,
+            reference_spp=reference_spp if reference else 0,
+            threads=n_threads, stats=stats, lobes=lobes, motion_next=motion_next,
+            gradient_samples=gradient_samples,
+        )  # fmt: skip
+        channels, half = input_channels(result, half_radiance=not float_radiance,
+                                        skip=skip_layers)  # fmt: skip
+        attrs = frame_attributes(
+            result, frame=frame, spp=spp, seed=seed, max_depth=max_depth, kind="input",
+            extra=extra,
+        )
+        write_exr(out_paths[index], channels, attributes=attrs, half=half,
+                  compression=compression)
+        if ref is not None:
+            ref_attrs = frame_attributes(
+                ref, frame=frame, spp=reference_spp, seed=seed, max_depth=max_depth,
+                kind="reference",
             )
-            write_exr(out_paths[done - 1], channels, attributes=attrs, half=half,
-                      compression="piz")
-            if ref is not None:
-                ref_attrs = frame_attributes(
-                    ref, frame=frame, spp=reference_spp, seed=seed, max_depth=max_depth,
-                    kind="reference",
-                )
-                write_exr(ref_paths[done - 1], reference_channels(ref), attributes=ref_attrs,
-                          half=False, compression="piz")
-            if bar is not None:
-                bar.update(1)
-            elif not quiet:
-                per_frame = (time.perf_counter() - started) / done
-                percent = int(100 * done / len(frame_list))
-                click.echo(
-                    f"Progress: {percent}% (frame {frame}, {done}/{len(frame_list)}, "
-                    f"{per_frame:.1f} s/frame)"
-                )
-    finally:
-        if bar is not None:
-            bar.__exit__(None, None, None)
+            write_exr(ref_paths[index],
+                      reference_channels(ref, rgb_only=reference_layers == "rgb"),
+                      attributes=ref_attrs, half=reference_half,
+                      compression=compression)  # fmt: skip
+        progress.frame_done(frame, time.perf_counter() - frame_started)
     elapsed = time.perf_counter() - started
-    say(
+    progress.finish(
         f"Wrote {len(frame_list)} frame(s) to {output}"
         + (f" and references to {reference}" if reference else "")
         + f" in {elapsed:.1f} s ({stats.rays / max(elapsed, 1e-9) / 1e6:.2f} Mrays/s)"

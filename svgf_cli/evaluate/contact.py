@@ -39,13 +39,17 @@ def write_contact_sheet(
     report: EvaluationReport,
     contacts: Sequence[ContactFrame],
     path: str | os.PathLike[str],
+    *,
+    error_map: bool = True,
+    dpi: float | None = None,
 ) -> None:
-    """Write a labelled PNG grid: one row per contact frame."""
+    """Write a labelled PNG grid: one row per contact frame (without the FLIP column when
+    ``error_map`` is False)."""
     if not contacts:
         raise ValueError("no contact frames to draw")
     plt = pyplot()
     methods = column_order(report)
-    columns = [*methods, "reference", "FLIP error (svgf)"]
+    columns = [*methods, "reference", *(["FLIP error (svgf)"] if error_map else [])]
     height, width = contacts[0].reference.shape[1:]
     cell_h = CELL_INCHES * height / width
     figure, axes = plt.subplots(
@@ -77,7 +81,7 @@ def write_contact_sheet(
                 if col == 0:
                     ax.set_ylabel(f"frame {contact.frame}", fontsize=9)
         figure.tight_layout()
-        save_png(figure, path, dpi=max(100.0, min(width / CELL_INCHES, 300.0)))
+        save_png(figure, path, dpi=dpi or max(100.0, min(width / CELL_INCHES, 300.0)))
     finally:
         plt.close(figure)
 

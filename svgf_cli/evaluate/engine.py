@@ -203,7 +203,7 @@ def run_evaluation(
             continue
         say(f"frame {frame} ({index + 1}/{len(fed)})")
         ref_path = ref_pattern.path(frame)
-        reference, _ = read_rgb(ref_path)
+        reference, _ = read_rgb(ref_path, mapping)
         bad = metrics.nonfinite_pixels(reference)
         if bad:
             raise InputError(f"reference has {bad} NaN or infinite pixel(s)", str(ref_path))
@@ -214,7 +214,7 @@ def run_evaluation(
         for track in tracks:
             if track.method is None:
                 path = out_pattern.path(frame)
-                image, _ = read_rgb(path)
+                image, _ = read_rgb(path, mapping)
                 _check_shape(image, reference, path, ref_path)
                 file = str(path)
             else:

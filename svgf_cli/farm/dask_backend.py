@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.progress import Progress
+from svgf_cli.progress import Progress
 from svgf_cli.runner import FrameTask, RunConfig, RunStats, pending_tasks, run_sequence, trim_tail
 
 # A failed task (a worker died, say) is resubmitted this many times before the job fails.

@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from svgf_cli.errors import InputError, OutputExistsError, UsageError
-from svgf_cli.farm.plan import Chunk, format_frame_spec, plan_chunks
+from svgf_cli.farm.plan import Chunk, plan_chunks
 from svgf_cli.io.patterns import (
     SequencePattern,
     expand_inputs,
+    format_frame_spec,
     has_frame_token,
     parse_frame_spec,
 )

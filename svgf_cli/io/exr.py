@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import re
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +23,18 @@ import OpenImageIO as oiio
 
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.frame import Frame
-from svgf_cli.io.layers import LayerMapping, ResolvedLayers, resolve_layers, to_backward_pixels
+from svgf_cli.io import atomic
+from svgf_cli.io.colour import LuminanceWeights, luminance_weights
+from svgf_cli.io.layers import (
+    LayerMapping,
+    ResolvedLayers,
+    build_mapping,
+    describe_output_colour,
+    resolve_layers,
+    resolve_output_colour,
+    to_backward_pixels,
+)
+from svgf_cli.io.source import SourceFile, SourcePart, decode_source, one_line
 
 
 class ExrWriteError(SvgfError):
@@ -32,12 +42,29 @@ class ExrWriteError(SvgfError):
 
 
 def temporary_path(path: Path) -> Path:
-    """Hidden sibling name used while writing; renamed onto ``path`` once complete.
+    """Hidden, unique sibling name used while writing (see `svgf_cli.io.atomic`)."""
+    return atomic.temporary_path(path)
 
-    It keeps the ``.exr`` extension so OpenImageIO picks the EXR writer, and starts with a
-    dot so a half-written file never matches a frame pattern.
-    """
-    return path.with_name(f".{path.name}.{os.getpid()}.tmp.exr")
+
+def check_output_path(path: Path) -> None:
+    """Refuse, with the real reason, an output path that cannot be written as a file."""
+    if path.is_dir():
+        raise ExrWriteError("cannot write: is a directory", str(path))
+    parent = path.parent
+    if not parent.exists():
+        raise ExrWriteError(f"cannot write: folder {parent} does not exist", str(path))
+    if not parent.is_dir():
+        raise ExrWriteError(f"cannot write: {parent} is not a directory", str(path))
+
+
+def output_error(exc: OSError, path: Path) -> ExrWriteError:
+    """An OSError while writing ``path`` as a one-line ExrWriteError naming the real cause."""
+    reason = exc.strerror or str(exc)
+    if isinstance(exc, IsADirectoryError) or path.is_dir():
+        reason = "is a directory"
+    elif isinstance(exc, FileNotFoundError) and not path.parent.is_dir():
+        reason = f"folder {path.parent} does not exist"
+    return ExrWriteError(f"cannot write: {reason}", str(path))
 
 
 def write_exr(
@@ -93,24 +120,27 @@ def write_exr(
     for key, value in (attributes or {}).items():
         _set_attribute(spec, key, value)
 
-    tmp = temporary_path(path)
-    out = oiio.ImageOutput.create(str(tmp))
-    if out is None:
-        raise ExrWriteError(f"cannot create EXR writer: {oiio.geterror()}", str(path))
-    try:
-        if not out.open(str(tmp), spec):
-            raise ExrWriteError(f"cannot open for writing: {out.geterror()}", str(path))
-        if not out.write_image(pixels):
-            raise ExrWriteError(f"write failed: {out.geterror()}", str(path))
-        if not out.close():
-            raise ExrWriteError(f"close failed: {out.geterror()}", str(path))
-        os.replace(tmp, path)
-    except BaseException:
+    check_output_path(path)
+
+    def write(tmp: Path) -> None:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None:
+            raise ExrWriteError(f"cannot create EXR writer: {oiio.geterror()}", str(path))
         try:
-            out.close()
+            if not out.open(str(tmp), spec):
+                raise ExrWriteError(f"cannot open for writing: {_one_line(out.geterror())}",
+                                    str(path))
+            if not out.write_image(pixels):
+                raise ExrWriteError(f"write failed: {_one_line(out.geterror())}", str(path))
         finally:
-            tmp.unlink(missing_ok=True)
-        raise
+            closed = out.close()
+        if not closed:
+            raise ExrWriteError(f"close failed: {_one_line(out.geterror())}", str(path))
+
+    try:
+        atomic.write_atomically(path, write)
+    except OSError as exc:
+        raise output_error(exc, path) from None
 
 
 def _set_attribute(spec: oiio.ImageSpec, key: str, value: Any) -> None:
@@ -257,38 +287,71 @@ class ExrInfo:
     parts: list[str]
     part_info: list[ExrPart] = field(default_factory=list)
     display_window: tuple[int, int, int, int] = (0, 0, 0, 0)
+    views: list[str] = field(default_factory=list)  # multi-view (stereo) files only
+    chromaticities: tuple[float, ...] | None = None
 
     def channel_type(self, name: str) -> str:
         return self.channel_types[self.channels.index(name)]
 
+    @property
+    def luminance_weights(self) -> LuminanceWeights:
+        return luminance_weights(self.chromaticities)
+
 
 @dataclass
 class ReadResult:
-    """A decoded frame plus everything a caller may want to log or pass through."""
+    """A decoded frame plus everything a caller may want to log or pass through.
+
+    ``source`` is the whole decoded file (every part and channel, as stored) for writing a
+    drop-in replacement; ``colour_channels`` are the names the denoised colour is written
+    under (the input's colour layer; None: the file has none, write ``R,G,B``).
+    """
 
     frame: Frame
     alpha: np.ndarray | None
     info: ExrInfo
     resolved: ResolvedLayers
     warnings: list[str]
+    source: SourceFile | None = None
+    colour_channels: tuple[str, str, str] | None = None
+    luminance_weights: LuminanceWeights = field(
+        default_factory=lambda: luminance_weights(None)
+    )
+
+
+# Threads the OpenEXR decoder may use per file (0: decode in the calling thread).
+_decode_threads = 0
 
 
 def set_io_threads(threads: int) -> None:
-    """Threads OpenImageIO may use (0 = all cores) for its own work and EXR decompression."""
+    """Threads for EXR decoding and encoding, in OpenImageIO and in the OpenEXR library's
+    global pool (0 = OpenImageIO's default of all cores; OpenEXR single-threaded)."""
+    global _decode_threads
     oiio.attribute("threads", int(threads))
     oiio.attribute("exr_threads", int(threads))
+    _decode_threads = max(0, int(threads))
+    if OpenEXR.global_thread_count() < _decode_threads:
+        OpenEXR.set_global_thread_count(_decode_threads)
+
+
+def io_threads() -> int:
+    """The thread count `set_io_threads` last set for the OpenEXR library (0: none)."""
+    return _decode_threads
 
 
 def _one_line(message: str) -> str:
     """OpenImageIO's (often repeated, multi-line) error text as one short line."""
-    text = " ".join(message.split())
-    # OpenEXR prefixes every message with "EXR Error (<path>): "; the path is already named.
-    pieces = [p.strip(" :") for p in re.split(r"EXR Error \([^)]*\):?", text)]
-    unique = list(dict.fromkeys(p for p in pieces if p))
-    text = "; ".join(unique)
-    if len(text) > 300:
-        text = text[:297] + "..."
-    return text or "unknown OpenImageIO error"
+    return one_line(message)
+
+
+def _oiio_error(source: Any = None) -> str:
+    """OpenImageIO's last error as one line; its bindings raise on undecodable bytes (a
+    corrupt header quoted in the message), which must not hide the error itself."""
+    try:
+        text = (source or oiio).geterror()
+    except UnicodeDecodeError:
+        return "corrupt header (its text is not UTF-8)"
+    return _one_line(text)
 
 
 def _open(path: Path) -> oiio.ImageInput:
@@ -306,7 +369,7 @@ def _open(path: Path) -> oiio.ImageInput:
         raise InputError("not an OpenEXR file (bad magic number)", str(path))
     image = oiio.ImageInput.open(str(path))
     if image is None:
-        raise InputError(f"cannot open EXR: {_one_line(oiio.geterror())}", str(path))
+        raise InputError(f"cannot open EXR: {_oiio_error()}", str(path))
     return image
 
 
@@ -338,20 +401,48 @@ def _channel_types(spec: oiio.ImageSpec) -> list[str]:
     return [str(f) for f in formats]
 
 
+def _not_utf8(text: str) -> bool:
+    """OpenImageIO hands undecodable header bytes over as lone surrogates."""
+    return any("\udc80" <= ch <= "\udcff" for ch in text)
+
+
+def _check_text(path: Path, what: str, text: Any) -> None:
+    values = text if isinstance(text, (tuple, list)) else (text,)
+    for value in values:
+        if isinstance(value, str) and _not_utf8(value):
+            shown = value.encode("utf-8", "surrogateescape").decode("latin-1")
+            raise InputError(f"header holds text that is not UTF-8 ({what} {shown!r})", str(path))
+
+
+def _views(specs: list[oiio.ImageSpec]) -> list[str]:
+    """The views of a multi-view file: ``multiView`` (single part) or the parts' ``view``."""
+    listed = specs[0].getattribute("multiView")
+    if isinstance(listed, (tuple, list)) and len(listed) > 1:
+        return [str(v) for v in listed]
+    views = [spec.get_string_attribute("view") for spec in specs]
+    distinct = list(dict.fromkeys(v for v in views if v))
+    return distinct if len(distinct) > 1 else []
+
+
 def _read_header(image: oiio.ImageInput, path: Path) -> ExrInfo:
     parts: list[ExrPart] = []
-    first_spec: oiio.ImageSpec | None = None
+    specs: list[oiio.ImageSpec] = []
     index = 0
     while image.seek_subimage(index, 0):
-        spec = image.spec()
+        spec = image.spec().copy()
+        name = spec.get_string_attribute("oiio:subimagename") or ""
         if spec.deep:
-            raise InputError("deep EXR parts are not supported", str(path))
-        if first_spec is None:
-            first_spec = spec.copy()
+            shown = f" (part {index}{f' {name!r}' if name else ''})"
+            raise InputError(f"deep EXR parts are not supported{shown}", str(path))
+        _check_text(path, "part name", name)
+        _check_text(path, "channel name", list(spec.channelnames))
+        for attr in spec.extra_attribs:
+            _check_text(path, f"attribute {attr.name}", attr.value)
+        specs.append(spec)
         parts.append(
             ExrPart(
                 index=index,
-                name=spec.get_string_attribute("oiio:subimagename") or "",
+                name=name,
                 channels=list(spec.channelnames),
                 channel_types=_channel_types(spec),
                 data_window=(spec.x, spec.y, spec.width, spec.height),
@@ -360,8 +451,10 @@ def _read_header(image: oiio.ImageInput, path: Path) -> ExrInfo:
             )
         )
         index += 1
-    if first_spec is None:
-        raise InputError(f"no readable part: {_one_line(image.geterror())}", str(path))
+    if not specs:
+        raise InputError(f"no readable part: {_oiio_error(image)}", str(path))
+    first_spec = specs[0]
+    chromaticities = first_spec.getattribute("chromaticities")
     channels = [name for part in parts for name in part.channels]
     types = [t for part in parts for t in part.channel_types]
     return ExrInfo(
@@ -380,6 +473,12 @@ def _read_header(image: oiio.ImageInput, path: Path) -> ExrInfo:
             first_spec.full_width,
             first_spec.full_height,
         ),
+        views=_views(specs),
+        chromaticities=(
+            tuple(float(v) for v in chromaticities)
+            if isinstance(chromaticities, (tuple, list)) and len(chromaticities) == 8
+            else None
+        ),
     )
 
 
@@ -389,144 +488,233 @@ def read_info(path: str | os.PathLike[str]) -> ExrInfo:
     image = _open(path)
     try:
         return _read_header(image, path)
+    except UnicodeError as exc:
+        raise InputError(f"header holds text that is not UTF-8 ({exc})", str(path)) from None
     finally:
         image.close()
 
 
-class _Planes:
-    """Decoded channels as float32 (H, W) planes, gathered into role arrays on request."""
+def refuse_multiview(info: ExrInfo) -> None:
+    """A stereo/multi-view file is refused rather than silently denoised for one view."""
+    if info.views:
+        raise InputError(
+            f"multi-view (stereo) file with views {', '.join(info.views)}: svgf denoises one "
+            "view per sequence; write one file per view (e.g. with oiiotool) and denoise each",
+            str(info.path),
+        )
 
-    def __init__(self, planes: dict[str, np.ndarray]) -> None:
-        self.planes = planes
+
+class _Planes:
+    """Role planes gathered from a decoded file, as float32 arrays."""
+
+    def __init__(self, source: SourceFile, located: dict[str, SourcePart]) -> None:
+        self.source = source
+        self.located = located
 
     def gather(self, names: tuple[str, ...]) -> np.ndarray:
-        """(len(names), H, W) float32, C-contiguous (a copy)."""
-        stacked = np.empty((len(names), *self.planes[names[0]].shape), dtype=np.float32)
+        """(len(names), H, W) float32, C-contiguous (a copy: the source stays as read)."""
+        first = self.located[names[0]].channels[names[0]].pixels
+        stacked = np.empty((len(names), *first.shape), dtype=np.float32)
         for index, name in enumerate(names):
-            stacked[index] = self.planes[name]
+            stacked[index] = self.located[name].channels[name].pixels
         return stacked
 
+    def share(self, names: tuple[str, ...], stacked: np.ndarray) -> None:
+        """The source's float32 channels ``names`` become views of ``stacked`` (which holds
+        the same values), so a frame's planes are not held twice while it is written.
 
-def _read_channels(info: ExrInfo, names: Iterable[str]) -> _Planes:
-    """Decode the file and keep ``names`` (each found in one part) as float32 planes.
+        The frame's planes are then also the bytes passed through to the output: consumers
+        must not modify a Frame in place (the Denoiser copies what it keeps).
+        """
+        for index, name in enumerate(names):
+            channel = self.located[name].channels[name]
+            if channel.pixels is not None and channel.pixels.dtype == np.float32:
+                channel.pixels = stacked[index]
+
+
+def _read_channels(
+    info: ExrInfo, names: Iterable[str], also_in_window: Iterable[str] = ()
+) -> _Planes:
+    """Decode the whole file (every part, every channel) and locate ``names`` in it.
 
     Pixels are decoded by the OpenEXR library's own reader, not OpenImageIO's: measured on
     a ZIP 1080p frame of 26 float channels, 0.47 CPU-seconds against 0.8 s for
     OpenImageIO's whole-image read and 1.3-2.0 s for its scanline-strip reads. EXR blocks
-    hold all channels, so decoding everything costs no more than decoding what is needed;
-    the planes not asked for are dropped as soon as the file is closed.
+    hold all channels, so decoding everything costs no more than decoding what is needed,
+    and the writer needs every channel anyway to pass them through. The parts holding
+    ``names`` (and ``also_in_window``, the output colour) must share one data window.
     """
     wanted = list(dict.fromkeys(names))
-    located: dict[int, list[str]] = {}
-    for name in wanted:
+    parts_of: dict[str, ExrPart] = {}
+    for name in [*wanted, *also_in_window]:
         for part in info.part_info:
             if name in part.channels:
-                located.setdefault(part.index, []).append(name)
+                parts_of[name] = part
                 break
         else:  # resolve_layers only returns channels the header listed
-            raise InputError(f"channel {name} not found in any part", str(info.path))
-
-    windows = {info.part_info[i].data_window for i in located}
+            if name in wanted:
+                raise InputError(f"channel {name} not found in any part", str(info.path))
+    windows = {part.data_window for part in parts_of.values()}
     if len(windows) > 1:
         shown = "; ".join(
-            f"part {info.part_info[i].name or i} {info.part_info[i].data_window}" for i in located
+            f"part {p.name or p.index} {p.data_window}"
+            for p in {p.index: p for p in parts_of.values()}.values()
         )
         raise InputError(
             f"parts holding the needed channels have different data windows ({shown})",
             str(info.path),
         )
-    _, _, width, height = windows.pop()
-
-    planes: dict[str, np.ndarray] = {}
-    try:
-        with OpenEXR.File(str(info.path), separate_channels=True) as exr:
-            for part_index, part_names in located.items():
-                channels = exr.parts[part_index].channels
-                for name in part_names:
-                    channel = channels[name]
-                    if channel.xSampling != 1 or channel.ySampling != 1:
-                        raise InputError(f"channel {name} is subsampled (not supported)",
-                                         str(info.path))
-                    pixels = channel.pixels
-                    if pixels.shape != (height, width):
-                        raise InputError(f"channel {name} has shape {pixels.shape}, expected "
-                                         f"{(height, width)}", str(info.path))
-                    planes[name] = np.asarray(pixels, dtype=np.float32)
-    except InputError:
-        raise
-    except Exception as exc:  # the bindings raise RuntimeError/ValueError/... on bad data
-        raise InputError(f"cannot read pixels: {_one_line(str(exc))}", str(info.path)) from exc
-    return _Planes(planes)
+    source = decode_source(info.path, threads=_decode_threads, expected_parts=len(info.parts))
+    located: dict[str, SourcePart] = {}
+    for name in wanted:
+        part = source.parts[parts_of[name].index]
+        channel = part.channels.get(name)
+        if channel is None:
+            raise InputError(f"channel {name} not found in part {part.index}", str(info.path))
+        if channel.x_sampling != 1 or channel.y_sampling != 1:
+            raise InputError(f"channel {name} is subsampled (not supported)", str(info.path))
+        _, _, width, height = part.data_window
+        if channel.pixels.shape != (height, width):
+            raise InputError(
+                f"channel {name} has shape {channel.pixels.shape}, expected {(height, width)}",
+                str(info.path),
+            )
+        located[name] = part
+    return _Planes(source, located)
 
 
 def _scrub(
     role: str, data: np.ndarray, path: Path, warnings: list[str], clamp_negative: bool
-) -> None:
-    """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem."""
+) -> int:
+    """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem.
+    Returns how many values were changed."""
     bad = ~np.isfinite(data)
     count = int(np.count_nonzero(bad))
     if count:
         data[bad] = 0.0
         warnings.append(f"{path}: {count} NaN/Inf values in {role} scrubbed to 0")
+    changed = count
     if clamp_negative:
         negative = data < 0
         count = int(np.count_nonzero(negative))
         if count:
             data[negative] = 0.0
             warnings.append(f"{path}: {count} negative values in {role} clamped to 0")
+        changed += count
+    return changed
+
+
+def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> int:
+    """In place: depth that marks background becomes 0 (Frame convention).
+
+    Background conventions are silent: +-Inf, <= 0, or >= FAR_DEPTH (Cycles writes 1e10).
+    NaN is no convention but a broken pixel: also background, with a counted warning.
+    """
+    nan = np.isnan(depth)
+    count = int(np.count_nonzero(nan))
+    if count:
+        warnings.append(f"{path}: {count} NaN values in depth treated as background")
+    with np.errstate(invalid="ignore"):
+        background = ~((depth > 0) & (depth < FAR_DEPTH))  # NaN compares False: included
+    changed = int(np.count_nonzero(background & (depth != 0)))
+    depth[background] = 0.0
+    return changed
+
+
+def _keep_colour_part_only(
+    source: SourceFile, colour: tuple[str, str, str] | None, resolved: ResolvedLayers
+) -> None:
+    """--colour-only: free every channel the writer will not write (all but the colour
+    layer's alpha, in the colour's part) as soon as the frame is read."""
+    anchor = colour[0] if colour else (resolved[resolved.signal_roles[0]] or ("",))[0]
+    part = source.part_holding(anchor) or source.parts[0]
+    layer, dot, _ = anchor.rpartition(".")
+    keep = {f"{layer}{dot}A", *(colour or ())}
+    part.channels = {n: c for n, c in part.channels.items() if n in keep}
+    source.parts = [p if p is part else SourcePart(p.index, p.name, p.header) for p in source.parts]
+
+
+def _renormalise(normal: np.ndarray) -> int:
+    """In place: non-zero normals to unit length. Normals already unit to 1e-5 (what
+    renderers store) are left as stored, so their bits can be shared with the output.
+    Returns how many normals were changed."""
+    length = np.sqrt(np.einsum("chw,chw->hw", normal, normal))
+    off = (length > 0) & (np.abs(length - 1.0) > 1e-5)
+    count = int(np.count_nonzero(off))
+    if count:
+        normal[:, off] /= length[off]
+    return count
 
 
 def read_frame(
     path: str | os.PathLike[str],
     mapping: LayerMapping,
     motion_convention: str | None = None,
+    *,
+    passthrough: bool = True,
 ) -> ReadResult:
     """Read the channels ``mapping`` resolves to and return them as a clean `Frame`.
 
     ``motion_convention`` None uses ``mapping.motion_convention`` (the preset's, or what
-    ``--motion-convention`` set). Cleaning rules: depth non-finite, <= 0 or >= FAR_DEPTH
-    -> 0 (background); normals non-finite -> 0 then renormalised; NaN/Inf in radiance,
-    albedo, emission, motion -> 0 with a counted warning; negative radiance/albedo -> 0 with
-    a counted warning; mesh id rounded to int32, NaN -> -1, absent -> -1 on background and 0
-    elsewhere. Raises InputError (one line, naming the file) for anything unreadable.
+    ``--motion-convention`` set). Cleaning rules: depth <= 0, +-Inf or >= FAR_DEPTH -> 0
+    (background); NaN depth -> 0 with a counted warning; normals non-finite -> 0 then
+    renormalised; NaN/Inf in radiance, albedo, emission, motion -> 0 with a counted
+    warning; negative radiance/albedo -> 0 with a counted warning; mesh id rounded to int32,
+    NaN -> -1, absent -> -1 on background and 0 elsewhere. The frame's luminance weights are
+    the file's (chromaticities; ``LuminanceWeights.for_filter``). The whole file is decoded
+    and kept in ``source`` (unchanged) for the writer; ``passthrough`` False keeps only what
+    a ``--colour-only`` output needs. Raises InputError (one line, naming the file) for
+    anything unreadable, for deep parts and for multi-view files.
     """
     path = Path(path)
     convention = motion_convention or mapping.motion_convention
     image = _open(path)
     try:
         info = _read_header(image, path)
-        resolved = resolve_layers(mapping, info.channels, str(path))
-        roles = resolved.roles_to_read()
-        names = [name for role in roles for name in (resolved[role] or ())]
+    except UnicodeError as exc:
+        raise InputError(f"header holds text that is not UTF-8 ({exc})", str(path)) from None
     finally:
         image.close()
-    planes = _read_channels(info, names)
+    refuse_multiview(info)
+    resolved = resolve_layers(mapping, info.channels, str(path))
+    roles = resolved.roles_to_read()
+    names = [name for role in roles for name in (resolved[role] or ())]
+    colour_channels = resolve_output_colour(mapping, info.channels)
+    planes = _read_channels(info, names, also_in_window=colour_channels or ())
 
+    # The output replaces the colour channels: the writer never needs their input values.
+    colour_is_read = set(colour_channels or ()) & set(names)
+    for name in (colour_channels or ()) if not colour_is_read else ():
+        planes.source.release(name)
+    # Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
+    # the source reference the copy instead of holding the same values twice.
     warnings: list[str] = []
     values: dict[str, np.ndarray] = {}
     for role in roles:
         channel_names = resolved[role]
         assert channel_names is not None
-        values[role] = planes.gather(channel_names)
+        data = values[role] = planes.gather(channel_names)
+        if role in (*_RADIANCE_ROLES, "albedo"):
+            changed = _scrub(role, data, path, warnings, clamp_negative=True)
+        elif role == "depth":
+            changed = _clean_depth(data[0], path, warnings)
+        elif role == "normal":
+            changed = _scrub("normal", data, path, warnings, clamp_negative=False)
+            changed += _renormalise(data)
+        elif role in ("motion", "alpha"):
+            changed = _scrub(role, data, path, warnings, clamp_negative=False)
+        else:  # id: read as is (the mesh id is derived from it below)
+            changed = 0
+        if not changed:
+            planes.share(channel_names, data)
+    # The output replaces the colour channels: the writer never needs their input values.
+    for name in colour_channels or ():
+        planes.source.release(name)
+    if not passthrough:
+        _keep_colour_part_only(planes.source, colour_channels, resolved)
     height, width = values["depth"].shape[1:]
-
-    for role in (*_RADIANCE_ROLES, "albedo"):
-        if role in values:
-            _scrub(role, values[role], path, warnings, clamp_negative=True)
-
     depth = values["depth"][0]
-    with np.errstate(invalid="ignore"):
-        depth[~(np.isfinite(depth) & (depth > 0) & (depth < FAR_DEPTH))] = 0.0
-
-    normal = values["normal"]
-    _scrub("normal", normal, path, warnings, clamp_negative=False)
-    length = np.sqrt(np.einsum("chw,chw->hw", normal, normal))
-    nonzero = length > 0
-    normal[:, nonzero] /= length[nonzero]
-
-    motion = values["motion"]
-    _scrub("motion", motion, path, warnings, clamp_negative=False)
-    motion = to_backward_pixels(motion, convention)
+    motion = to_backward_pixels(values["motion"], convention)
 
     if "id" in values:
         raw_id = values["id"][0]
@@ -539,42 +727,61 @@ def read_frame(
     else:
         mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
 
-    alpha = None
-    if "alpha" in values:
-        alpha = np.ascontiguousarray(values["alpha"][0])
-        _scrub("alpha", alpha, path, warnings, clamp_negative=False)
+    alpha = values["alpha"][0] if "alpha" in values else None
 
     geometry = dict(
         albedo=values["albedo"],
-        normal=normal,
+        normal=values["normal"],
         depth=np.ascontiguousarray(depth),
         motion=motion,
         mesh_id=mesh_id,
         emission=values.get("emission"),
+        # The filter's luminance is the file's own (its chromaticities), never negative.
+        luminance_weights=info.luminance_weights.for_filter(),
     )
     if resolved.split:
         frame = Frame.direct_indirect(values["direct"], values["indirect"], **geometry)
     else:
         frame = Frame.combined(values["color"], **geometry)
     frame.validate()
-    return ReadResult(frame=frame, alpha=alpha, info=info, resolved=resolved, warnings=warnings)
+    return ReadResult(
+        frame=frame,
+        alpha=alpha,
+        info=info,
+        resolved=resolved,
+        warnings=warnings,
+        source=planes.source,
+        colour_channels=colour_channels,
+        luminance_weights=info.luminance_weights,
+    )
 
 
-def read_rgb(path: str | os.PathLike[str]) -> tuple[np.ndarray, ExrInfo]:
-    """Plain ``R,G,B`` as a (3, H, W) float32 array (references, denoised outputs).
+def read_rgb(
+    path: str | os.PathLike[str], mapping: LayerMapping | None = None
+) -> tuple[np.ndarray, ExrInfo]:
+    """The colour layer as a (3, H, W) float32 array (references, denoised outputs).
 
+    The colour layer is found as `svgf denoise` writes it: through ``mapping``'s output
+    colour (e.g. ``ViewLayer.Combined.R/G/B`` with the cycles preset), else plain ``R,G,B``.
     NaN/Inf are left as they are: evaluation should see what the file holds.
     """
     path = Path(path)
     image = _open(path)
     try:
         info = _read_header(image, path)
-        missing = [c for c in ("R", "G", "B") if c not in info.channels]
-        if missing:
-            raise InputError(
-                f"missing channel(s) {', '.join(missing)}; file has: {', '.join(info.channels)}",
-                str(path),
-            )
+    except UnicodeError as exc:
+        raise InputError(f"header holds text that is not UTF-8 ({exc})", str(path)) from None
     finally:
         image.close()
-    return _read_channels(info, ("R", "G", "B")).gather(("R", "G", "B")), info
+    refuse_multiview(info)
+    names = resolve_output_colour(mapping or build_mapping(), info.channels)
+    if names is None and all(c in info.channels for c in "RGB"):
+        names = ("R", "G", "B")
+    if names is None:
+        raise InputError(
+            f"missing channel(s) for the colour layer (looked for "
+            f"{describe_output_colour(mapping or build_mapping())}); file has: "
+            f"{', '.join(info.channels)}",
+            str(path),
+        )
+    return _read_channels(info, names).gather(names), info

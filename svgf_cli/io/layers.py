@@ -88,7 +88,10 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "indirect": (_rgb("indirect"),),
         "emission": (_rgb("Emit"),),
         "albedo": (_rgb("Denoising Albedo"), _rgb("DiffCol")),
-        "normal": (_xyz("Denoising Normal"), _xyz("Normal")),
+        # Normal is world space, Denoising Normal camera space (verified on Blender 4.5
+        # renders): reprojection compares normals across frames, so camera-space normals
+        # would fail it wherever the camera rotates.
+        "normal": (_xyz("Normal"), _xyz("Denoising Normal")),
         "depth": (("Depth.Z",), ("Denoising Depth.Z",)),
         "motion": (("Vector.X", "Vector.Y"),),
         "id": (("IndexOB.X",), ("IndexOB.V",)),
@@ -124,9 +127,17 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
     },
 }
 
+# Where `svgf denoise` writes the denoised colour: the layer a compositing script reads as
+# the beauty. Cycles filters its noisy `Noisy Image` (when Cycles' own denoiser also ran,
+# `Combined` holds that denoised result) but the beauty a compositor reads is `Combined`;
+# the noisy layer is passed through unchanged. Other presets write over the colour role.
+OUTPUT_COLOUR: dict[str, Candidates] = {
+    "cycles": (_rgb("Combined"), _rgb("Noisy Image")),
+}
+
 # The motion convention each preset implies unless --motion-convention says otherwise.
 # Arnold and Karma write shutter-interval motion-blur vectors (towards the next frame);
-# this mapping is our best reading of their docs and marked [verify] in the README.
+# this mapping is our best reading of their docs, marked [verify] in docs/inputs.md.
 PRESET_MOTION_CONVENTION = {
     "svgf": "backward-pixels",
     "cycles": "cycles",
@@ -378,6 +389,8 @@ def resolve_layers(
 def to_backward_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
     """Convert a ``(2, H, W)`` motion field to the canonical backward, pixel, y-down form.
 
+    Already canonical float32 input is returned as is (not copied).
+
     * ``backward-pixels``: already canonical (previous position = current + v);
     * ``forward-pixels``: v points from the previous to the current position
       (previous = current - v), so backward = -v;
@@ -388,7 +401,7 @@ def to_backward_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
     if xy.ndim != 3 or xy.shape[0] != 2:
         raise ValueError(f"motion must be (2, H, W), got {xy.shape}")
     if convention == "backward-pixels":
-        return np.ascontiguousarray(xy, dtype=np.float32).copy()
+        return np.ascontiguousarray(xy, dtype=np.float32)
     if convention == "forward-pixels":
         return np.ascontiguousarray(-xy, dtype=np.float32)
     if convention == "cycles":
@@ -399,3 +412,30 @@ def to_backward_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
     raise ValueError(
         f"unknown motion convention {convention!r} (choose from {', '.join(MOTION_CONVENTIONS)})"
     )
+
+
+def _output_colour_candidates(mapping: LayerMapping) -> Candidates:
+    if "color" in mapping.overridden:
+        return mapping.candidates.get("color", ())
+    return OUTPUT_COLOUR.get(mapping.preset, mapping.candidates.get("color", ()))
+
+
+def describe_output_colour(mapping: LayerMapping) -> str:
+    """``A,B,C or D,E,F``: the channel names the denoised colour may be written under."""
+    return " or ".join(",".join(c) for c in _output_colour_candidates(mapping)) or "(none)"
+
+
+def resolve_output_colour(
+    mapping: LayerMapping, channel_names: Sequence[str]
+) -> tuple[str, str, str] | None:
+    """The input channels the denoised colour replaces (None: the file has no colour layer;
+    the writer then adds ``R,G,B``). Same name matching as `resolve_layers`."""
+    present = set(channel_names)
+    by_suffix = _suffix_index(channel_names)
+    for wanted in _output_colour_candidates(mapping):
+        if len(wanted) != 3:
+            continue
+        found, _ = _match_tuple(wanted, present, by_suffix)
+        if found is not None:
+            return (found[0], found[1], found[2])
+    return None

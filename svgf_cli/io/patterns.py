@@ -1,9 +1,13 @@
 """File-sequence patterns and frame specs, in the conventions render farms already use.
 
-Pattern tokens (only in the file name, never in the directory part):
+Frame sets and padding widths come from ``fileseq`` (the VFX standard); this module adds the
+pieces fileseq does not cover (see each one's comment).
 
-* ``####`` -- one padded digit per ``#`` (``####`` = 4 digits); a lone ``#`` means 4-padded,
-  as in fileseq, because that is what ``render.#.exr`` means in Nuke/fileseq pipelines;
+Pattern tokens (only in the file name, never in the directory part), padding style
+``fileseq.PAD_STYLE_HASH1`` (one digit per ``#``, as Nuke, Houdini and Deadline write it):
+
+* ``####`` -- one padded digit per ``#``; a *lone* ``#`` means 4 digits (fileseq's default
+  ``HASH4`` reading, what ``render.#.exr`` means in fileseq pipelines);
 * ``@``, ``@@@@`` -- one padded digit per ``@`` (``@`` = unpadded);
 * ``%04d`` / ``%d`` -- printf style;
 * ``$F4`` / ``$F`` -- Houdini style;
@@ -11,8 +15,14 @@ Pattern tokens (only in the file name, never in the directory part):
   the extension is the frame number and its width is the padding;
 * a plain file name with no digits is a single file, not a sequence.
 
-Frame specs (fileseq / Deadline syntax): ``1001-1100``, ``1,5,7-9``, ``1001-1100x2`` (also
-``1001-1100:2``, the OpenJD form), ``5``.
+Negative frames are written with their sign inside the padding (``####`` and -5 give
+``-005``), as fileseq and printf do.
+
+Frame specs (fileseq syntax, also Deadline's): ``1001-1100``, ``1,5,7-9``, ``1001-1100x2``
+(every 2nd), ``1001-1100y2`` (fileseq's inverse step: the frames ``x2`` leaves out),
+``-10--1`` (negative frames), ``5``. ``A-B:N`` is a step too, as in OpenJD range expressions
+(fileseq reads ``:`` as a staggered order of *all* frames, an order this tool cannot honour:
+frames are always filtered in timeline order).
 """
 
 from __future__ import annotations
@@ -23,61 +33,70 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from fileseq import PAD_STYLE_HASH1, PAD_STYLE_HASH4, FileSequence, FrameSet
+from fileseq.exceptions import FileSeqException, MaxSizeException
+
 from svgf_cli.errors import InputError, UsageError
 
-# One range item of a frame spec: "5", "1-10", "1-10x2", "1-10:2".
-_SPEC_ITEM = re.compile(r"^(\d+)(?:-(\d+)(?:[x:](\d+))?)?$")
+# More frames than any shot has (11.5 hours at 24 fps); a larger spec is a typo, and
+# expanding it would only exhaust memory.
+MAX_SPEC_FRAMES = 1_000_000
 
-# Explicit tokens, in the order they are tried. Each yields the padding width.
-_TOKEN = re.compile(r"(?P<hash>#+)|(?P<at>@+)|%(?P<printf>0?\d*)d|\$F(?P<houdini>\d*)")
-# The last run of digits in a name (the frame number of a concrete path).
-_LAST_DIGITS = re.compile(r"(\d+)(?!.*\d)")
+# Hand-kept: fileseq's grammar only finds a token right before the extension, so it cannot
+# locate the one in ``shot_####_v2.exr``; this finds it anywhere in the name.
+_TOKEN = re.compile(r"#+|@+|%0?\d*d|\$F\d*")
+# Hand-kept (fileseq needs a dot before the frame of a concrete path): the last digit group,
+# with a sign when it directly follows a dot (``shot.-005.exr``).
+_LAST_DIGITS = re.compile(r"((?<=\.)-)?\d+(?!.*\d)")
+_FRAME_DIGITS = re.compile(r"-?\d+")
+_SPEC_HELP = "expected N, A-B, A-BxSTEP, A-BySTEP or a comma list; negative frames allowed"
 
 
 def parse_frame_spec(spec: str) -> list[int]:
     """Frames named by a spec such as ``"1001-1100"``, ``"1,5,7-9"``, ``"1001-1100x2"``.
 
-    Returns the sorted unique frame numbers; raises ValueError with a message that quotes
-    the bad part of the spec.
+    Returns the sorted unique frame numbers; raises ValueError with a one-line message that
+    quotes the bad part of the spec.
     """
     text = spec.strip()
     if not text:
-        raise ValueError("empty frame spec (expected e.g. 1001-1100, 1,5,7-9 or 1001-1100x2)")
-    frames: set[int] = set()
-    for raw_item in text.split(","):
-        item = raw_item.strip().replace(" ", "")
-        match = _SPEC_ITEM.match(item)
-        if match is None:
-            raise ValueError(
-                f"bad frame spec item {raw_item.strip()!r} in {spec!r} "
-                "(expected N, A-B or A-BxSTEP with non-negative integers)"
-            )
-        start = int(match.group(1))
-        end = int(match.group(2)) if match.group(2) is not None else start
-        step = int(match.group(3)) if match.group(3) is not None else 1
-        if step < 1:
-            raise ValueError(f"frame spec item {item!r}: step must be at least 1")
-        if end < start:
-            raise ValueError(f"frame spec item {item!r}: range runs backwards ({start} > {end})")
-        frames.update(range(start, end + 1, step))
-    return sorted(frames)
+        raise ValueError(f"empty frame spec ({_SPEC_HELP})")
+    try:
+        frames = FrameSet(text.replace(":", "x"))
+    except MaxSizeException:
+        raise ValueError(
+            f"frame spec {spec!r} names more than {MAX_SPEC_FRAMES} frames"
+        ) from None
+    except FileSeqException:
+        raise ValueError(f"{_bad_item(spec)} ({_SPEC_HELP})") from None
+    if len(frames) > MAX_SPEC_FRAMES:
+        raise ValueError(
+            f"frame spec {spec!r} names {len(frames)} frames, more than {MAX_SPEC_FRAMES}"
+        )
+    if not frames:
+        raise ValueError(f"frame spec {spec!r} names no frames")
+    if frames.hasSubFrames():
+        raise ValueError(f"frame spec {spec!r}: sub-frames are not supported")
+    return sorted({int(frame) for frame in frames})
+
+
+def _bad_item(spec: str) -> str:
+    """``bad frame spec item '1-' in '1-,5'``: the first comma item fileseq refuses."""
+    for item in spec.split(","):
+        try:
+            FrameSet(item.strip().replace(":", "x"))
+        except FileSeqException:
+            return f"bad frame spec item {item.strip()!r} in {spec!r}"
+    return f"bad frame spec {spec!r}"
 
 
 def format_frame_spec(frames: Iterable[int]) -> str:
-    """The shortest-ish spec for ``frames``: consecutive runs as ``A-B``, others comma-joined.
+    """The compact spec for ``frames`` (``1001-1025``, ``1-9x2``, ``1,5,7-9``).
 
-    ``parse_frame_spec(format_frame_spec(f)) == sorted(set(f))`` for non-negative frames.
+    ``parse_frame_spec(format_frame_spec(f)) == sorted(set(f))``.
     """
     ordered = sorted(set(frames))
-    parts: list[str] = []
-    i = 0
-    while i < len(ordered):
-        j = i
-        while j + 1 < len(ordered) and ordered[j + 1] == ordered[j] + 1:
-            j += 1
-        parts.append(str(ordered[i]) if i == j else f"{ordered[i]}-{ordered[j]}")
-        i = j + 1
-    return ",".join(parts)
+    return FrameSet.framesToFrameRange(ordered, sort=False, compress=False)
 
 
 def _split_extension(name: str) -> tuple[str, str]:
@@ -113,23 +132,12 @@ class SequencePattern:
             raise UsageError("more than one frame token in the file name", text)
         if tokens:
             token = tokens[0]
-            if token.group("hash") is not None:
-                width = len(token.group("hash"))
-                padding = 4 if width == 1 else width
-            elif token.group("at") is not None:
-                padding = len(token.group("at"))
-            elif token.group("printf") is not None:
-                digits = token.group("printf").lstrip("0")
-                padding = int(digits) if digits else 1
-            else:
-                digits = token.group("houdini")
-                padding = int(digits) if digits else 1
             return cls(
                 text=text,
                 directory=directory,
                 prefix=name[: token.start()],
                 suffix=name[token.end() :],
-                padding=max(padding, 1),
+                padding=max(padding_width(token.group()), 1),
                 is_sequence=True,
             )
         stem, extension = _split_extension(name)
@@ -141,7 +149,7 @@ class SequencePattern:
             directory=directory,
             prefix=stem[: match.start()],
             suffix=stem[match.end() :] + extension,
-            padding=len(match.group(1)),
+            padding=len(match.group()),
             is_sequence=True,
         )
 
@@ -150,12 +158,11 @@ class SequencePattern:
         """The pattern in ``#`` form (``@`` when unpadded), for logs and plans."""
         if not self.is_sequence:
             return str(self.directory / self.prefix)
-        token = "@" if self.padding == 1 else "#" * self.padding
+        token = "@" if self.padding == 1 else hash_token(self.padding)
         return str(self.directory / f"{self.prefix}{token}{self.suffix}")
 
     def format_frame(self, frame: int) -> str:
-        if frame < 0:
-            raise ValueError(f"negative frame number {frame} is not supported")
+        """Zero-padded to the pattern's width, a sign counting as a digit (``-005``)."""
         return f"{frame:0{self.padding}d}"
 
     def path(self, frame: int) -> Path:
@@ -176,7 +183,7 @@ class SequencePattern:
         if not (name.startswith(self.prefix) and name.endswith(self.suffix)):
             return None
         digits = name[len(self.prefix) : len(name) - len(self.suffix)]
-        if not digits.isdigit() or not digits.isascii():
+        if not digits.isascii() or _FRAME_DIGITS.fullmatch(digits) is None:
             return None
         frame = int(digits)
         return frame if self.format_frame(frame) == digits else None
@@ -211,6 +218,17 @@ class SequencePattern:
             padding=self.padding,
             is_sequence=self.is_sequence,
         )
+
+
+def padding_width(token: str) -> int:
+    """Digits a token stands for: ``####`` 4, ``#`` 4, ``@@`` 2, ``%04d`` 4, ``$F`` 1."""
+    style = PAD_STYLE_HASH4 if token == "#" else PAD_STYLE_HASH1
+    return FileSequence.getPaddingNum(token, pad_style=style)
+
+
+def hash_token(width: int) -> str:
+    """``#`` characters for ``width`` digits in our padding style (``####`` for 4)."""
+    return FileSequence.getPaddingChars(width, pad_style=PAD_STYLE_HASH1)
 
 
 def has_frame_token(text: str) -> bool:
@@ -251,7 +269,7 @@ def expand_inputs(inputs: Sequence[str]) -> list[tuple[int, Path]]:
     numbers: list[int | None] = []
     for text in inputs:
         match = _LAST_DIGITS.search(_split_extension(Path(text).name)[0])
-        numbers.append(int(match.group(1)) if match else None)
+        numbers.append(int(match.group()) if match else None)
     if any(n is None for n in numbers):
         return [(i, Path(text)) for i, text in enumerate(inputs)]
     seen: dict[int, str] = {}

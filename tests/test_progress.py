@@ -6,7 +6,7 @@ import io
 import json
 import re
 
-from svgf_cli.farm.progress import Progress
+from svgf_cli.progress import Progress
 
 DEADLINE_STOCK = re.compile(r".*Progress: (\d+)%.*")
 
@@ -60,11 +60,16 @@ def test_quiet_suppresses_automatic_progress_but_not_warnings() -> None:
 
 
 def test_bar_rewrites_one_line() -> None:
-    out = io.StringIO()
-    progress = Progress("bar", total=2, out=out, err=io.StringIO())
-    progress.frame_done(1, 0.1)
+    out, err = io.StringIO(), io.StringIO()
+    progress = Progress("bar", total=2, out=out, err=err)
+    progress.warmup(1, 1, 1)
     progress.frame_done(2, 0.1)
+    progress.warning("a warning while the bar is drawn")
+    progress.frame_done(3, 0.1)
     progress.finish("Done")
     text = out.getvalue()
-    assert text.count("\r") == 2 and " 50%" in text and "100%" in text
-    assert text.endswith("\nDone\n")
+    bar, summary = text.rsplit("\n", 2)[:2]
+    assert "\n" not in bar and bar.count("\r") >= 2  # one line, rewritten in place
+    assert "100%" in bar and "2/2" in bar and "frame 3" in bar
+    assert summary == "Done" and text.endswith("\nDone\n")
+    assert err.getvalue() == "WARNING: a warning while the bar is drawn\n"

@@ -1,14 +1,19 @@
 """Progress and log output in the formats render-farm managers parse.
 
-* ``bar``: a single rewritten line on a terminal.
+Below both the runner and ``farm/``: `svgf denoise`, `svgf trace` and the Dask backend all
+report through ``Progress``.
+
+* ``bar``: a tqdm progress bar on a terminal (one rewritten line).
 * ``lines``: one flushed line per written frame, ``Progress: 37% (frame 1037, 37/100,
   0.4 s/frame)``, which Deadline's stock ``.*Progress: (\\d+)%.*`` handler understands;
   warm-up frames print ``Warmup: 3/16`` and do not count towards the percentage.
 * ``json``: one JSON object per line (``{"event": "frame_done", ...}``) for scripts.
 
-``auto`` picks ``bar`` when stdout is a terminal and ``lines`` otherwise. Start-up information
-goes to stdout, except in ``json`` mode where stdout carries only JSON and information goes to
-stderr. Warnings always go to stderr prefixed ``WARNING:``.
+The ``lines`` and ``json`` formats are written here by hand: their exact text is a contract
+with farm parsers, which no progress library keeps. ``auto`` picks ``bar`` when stdout is a
+terminal and ``lines`` otherwise. Start-up information goes to stdout, except in ``json``
+mode where stdout carries only JSON and information goes to stderr. Warnings always go to
+stderr prefixed ``WARNING:``.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import json
 import sys
 import time
 from collections import deque
-from typing import TextIO
+from typing import Any, TextIO
 
 PROGRESS_MODES = ("auto", "bar", "lines", "json")
 RATE_WINDOW = 10
@@ -59,28 +64,23 @@ class Progress:
         # s/frame over the most recent frames: the first ones pay for JIT compilation.
         self.recent: deque[float] = deque(maxlen=RATE_WINDOW)
         self.started = time.perf_counter()
-        self._bar_open = False
+        self._bar: Any = None  # tqdm bar, opened on the first frame in bar mode
 
     # -- plain messages ----------------------------------------------------------------
     def info(self, message: str) -> None:
         """A start-up / summary line (suppressed by -q)."""
         if self.quiet:
             return
-        self._end_bar()
-        stream = self.err if self.mode == "json" else self.out
-        print(message, file=stream, flush=True)
+        self._print(message, self.err if self.mode == "json" else self.out)
 
     def detail(self, message: str) -> None:
         """A -v line (timings, per-frame details); never on stdout in json mode."""
         if not self.verbose:
             return
-        self._end_bar()
-        stream = self.err if self.mode == "json" else self.out
-        print(message, file=stream, flush=True)
+        self._print(message, self.err if self.mode == "json" else self.out)
 
     def warning(self, message: str) -> None:
-        self._end_bar()
-        print(f"WARNING: {message}", file=self.err, flush=True)
+        self._print(f"WARNING: {message}", self.err)
 
     # -- progress -----------------------------------------------------------------------
     def warmup(self, frame: int, index: int, total: int) -> None:
@@ -90,7 +90,7 @@ class Progress:
         if self.mode == "json":
             self._json({"event": "warmup", "frame": frame, "index": index, "total": total})
         elif self.mode == "bar":
-            self._bar(f"Warmup: {index}/{total} (frame {frame})")
+            self._open_bar().set_description_str(f"Warmup: {index}/{total} (frame {frame})")
         else:
             print(f"Warmup: {index}/{total} (frame {frame})", file=self.out, flush=True)
 
@@ -116,13 +116,10 @@ class Progress:
                 }
             )
         elif self.mode == "bar":
-            width = 30
-            filled = int(width * self.done / total) if total else width
-            eta = mean * (total - self.done)
-            self._bar(
-                f"[{'#' * filled}{'-' * (width - filled)}] {percent:3d}% frame {frame} "
-                f"{self.done}/{total} {mean:.2f} s/frame ETA {eta:.0f} s"
-            )
+            bar = self._open_bar()
+            bar.set_description_str(f"frame {frame}", refresh=False)
+            bar.total = total
+            bar.update(self.done - bar.n)
         else:
             print(
                 f"Progress: {percent}% (frame {frame}, {self.done}/{total}, {mean:.2f} s/frame)",
@@ -143,13 +140,29 @@ class Progress:
     def _json(self, record: dict[str, object]) -> None:
         print(json.dumps(record), file=self.out, flush=True)
 
-    def _bar(self, text: str) -> None:
-        self.out.write("\r" + text + "\x1b[K")
-        self.out.flush()
-        self._bar_open = True
+    def _print(self, message: str, stream: TextIO) -> None:
+        """A whole line; while a bar is drawn, tqdm clears it, prints, and redraws it."""
+        if self._bar is not None:
+            self._bar.write(message, file=stream)
+            stream.flush()
+        else:
+            print(message, file=stream, flush=True)
+
+    def _open_bar(self) -> Any:
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=self.total,
+                unit="frame",
+                file=self.out,
+                dynamic_ncols=True,
+                leave=True,
+                smoothing=0.3,  # the first frames pay for JIT compilation
+            )
+        return self._bar
 
     def _end_bar(self) -> None:
-        if self._bar_open:
-            self.out.write("\n")
-            self.out.flush()
-            self._bar_open = False
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None

@@ -1,0 +1,518 @@
+"""Render the Blender Cycles fixtures under testdata/cycles (run by `make cycles-fixtures`).
+
+Runs in its own virtual environment with Blender as a Python module (`bpy` 4.5 LTS):
+
+    .venv-blender/bin/python testdata/cycles/render.py [--scene roll metal] [--what all]
+
+Both scenes are built in code from the factory-empty file (no .blend is stored), animated with
+keyframes (so Cycles can evaluate the neighbouring frames for the Vector pass), and rendered on
+the CPU with fixed seeds. For every frame it writes
+
+    <scene>/in.####.exr   1 spp, multilayer EXR, every pass a Blender user enables for denoising
+    <scene>/ref.####.exr  the same frame at --ref-spp samples, plain single-layer float R,G,B,A
+
+and once per scene <scene>/scene.json: the camera (world matrix, field of view) and the moving
+objects' and lights' state per frame, so tests can compute what a pixel should see.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import bpy
+
+HERE = Path(__file__).resolve().parent
+
+RESOLUTION = (128, 72)
+FRAMES = (1, 10)
+INPUT_SEED = 17  # Cycles seed of the 1 spp inputs (animated: hashed with the frame number)
+REF_SEED = 4711  # a different seed for the references, so no reference sample equals an input's
+REF_SPP = 1024
+
+# pass_index of each object: the IndexOB pass holds these values (0 = background / no object)
+PASS_INDEX = {
+    "roll": {"floor": 1, "ball": 2, "box": 3, "bust": 4, "panel": 5},
+    "metal": {"floor": 1, "mirror_ball": 2, "strip": 3, "cube": 4, "pillar": 5},
+}
+
+
+# --------------------------------------------------------------------------- building blocks
+
+
+def reset_scene() -> bpy.types.Scene:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene
+
+
+def principled(
+    name: str,
+    base: tuple[float, float, float] = (0.8, 0.8, 0.8),
+    roughness: float = 0.5,
+    metallic: float = 0.0,
+    checker: tuple[tuple[float, float, float], tuple[float, float, float], float] | None = None,
+    checker_coords: str = "UV",
+    emission: tuple[float, float, float] | None = None,
+    emission_strength: float = 0.0,
+) -> bpy.types.Material:
+    """A Principled BSDF material; optionally a procedural checker as base colour and emission."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (*base, 1.0)
+    bsdf.inputs["Roughness"].default_value = roughness
+    bsdf.inputs["Metallic"].default_value = metallic
+    if checker is not None:
+        colour_a, colour_b, scale = checker
+        coords = nodes.new("ShaderNodeTexCoord")
+        tex = nodes.new("ShaderNodeTexChecker")
+        tex.inputs["Color1"].default_value = (*colour_a, 1.0)
+        tex.inputs["Color2"].default_value = (*colour_b, 1.0)
+        tex.inputs["Scale"].default_value = scale
+        links.new(coords.outputs[checker_coords], tex.inputs["Vector"])
+        links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    if emission is not None:
+        bsdf.inputs["Emission Color"].default_value = (*emission, 1.0)
+        bsdf.inputs["Emission Strength"].default_value = emission_strength
+    return mat
+
+
+def attach(obj: bpy.types.Object, mat: bpy.types.Material, name: str, pass_index: int) -> None:
+    obj.name = name
+    obj.data.materials.append(mat)
+    obj.pass_index = pass_index
+
+
+def smooth(obj: bpy.types.Object) -> None:
+    for poly in obj.data.polygons:
+        poly.use_smooth = True
+
+
+def add_plane(size: float, location, rotation=(0.0, 0.0, 0.0)) -> bpy.types.Object:
+    bpy.ops.mesh.primitive_plane_add(size=size, location=location, rotation=rotation)
+    return bpy.context.active_object
+
+
+def add_sphere(radius: float, location) -> bpy.types.Object:
+    bpy.ops.mesh.primitive_uv_sphere_add(
+        radius=radius, location=location, segments=64, ring_count=32
+    )
+    obj = bpy.context.active_object
+    smooth(obj)
+    return obj
+
+
+def gradient_world(scene, horizon, zenith, strength: float) -> None:
+    """A world whose colour blends from `horizon` (and below) to `zenith` with view elevation."""
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    world.use_nodes = True
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    background = nodes["Background"]
+    background.inputs["Strength"].default_value = strength
+    coords = nodes.new("ShaderNodeTexCoord")
+    split = nodes.new("ShaderNodeSeparateXYZ")
+    ramp = nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].position = 0.0  # world "Generated" z = view direction z
+    ramp.color_ramp.elements[0].color = (*horizon, 1.0)
+    ramp.color_ramp.elements[1].position = 0.12
+    ramp.color_ramp.elements[1].color = (*zenith, 1.0)
+    links.new(coords.outputs["Generated"], split.inputs["Vector"])
+    links.new(split.outputs["Z"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], background.inputs["Color"])
+
+
+def add_camera(
+    scene, target_name: str, lens_mm: float
+) -> tuple[bpy.types.Object, bpy.types.Object]:
+    bpy.ops.object.empty_add(location=(0.0, 0.0, 0.0))
+    target = bpy.context.active_object
+    target.name = target_name
+    bpy.ops.object.camera_add()
+    camera = bpy.context.active_object
+    camera.name = "Camera"
+    camera.data.lens = lens_mm
+    camera.data.sensor_fit = "AUTO"
+    track = camera.constraints.new("TRACK_TO")
+    track.target = target
+    track.track_axis = "TRACK_NEGATIVE_Z"
+    track.up_axis = "UP_Y"
+    scene.camera = camera
+    return camera, target
+
+
+def key_location(obj, frame: int, location) -> None:
+    obj.location = location
+    obj.keyframe_insert("location", frame=frame)
+
+
+def hold_keys(data) -> None:
+    """Make every keyframe of `data` (an object or object data) a step: CONSTANT interpolation.
+
+    Keys are inserted with Blender's default (Bezier, auto-clamped handles); the preference for
+    new keys is not honoured by the Python module, so the curves are changed after insertion."""
+    for curve in data.animation_data.action.fcurves:
+        for key in curve.keyframe_points:
+            key.interpolation = "CONSTANT"
+
+
+# --------------------------------------------------------------------------- scenes
+
+
+def build_roll(scene) -> dict:
+    """Camera move; a textured ball rolling across a checker floor; glossy and diffuse objects."""
+    index = PASS_INDEX["roll"]
+    gradient_world(scene, horizon=(0.55, 0.5, 0.45), zenith=(0.15, 0.3, 0.75), strength=0.6)
+
+    floor = add_plane(30.0, (0.0, 0.0, 0.0))
+    attach(
+        floor,
+        principled("floor", roughness=0.9, checker=((0.75, 0.75, 0.72), (0.08, 0.1, 0.12), 24.0)),
+        "floor",
+        index["floor"],
+    )
+
+    radius = 0.55
+    ball = add_sphere(radius, (0.0, 0.0, radius))
+    attach(
+        ball,
+        principled(
+            "ball_rough_glossy",
+            roughness=0.3,
+            checker=((0.8, 0.15, 0.05), (0.9, 0.85, 0.7), 2.0),
+            checker_coords="Object",
+        ),
+        "ball",
+        index["ball"],
+    )
+
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(1.6, 1.4, 0.5), rotation=(0, 0, 0.5))
+    attach(
+        bpy.context.active_object,
+        principled("box_diffuse", base=(0.2, 0.45, 0.7), roughness=1.0),
+        "box",
+        index["box"],
+    )
+
+    bpy.ops.mesh.primitive_monkey_add(size=1.1, location=(-1.7, 1.5, 0.75), rotation=(0, 0, -0.4))
+    bust = bpy.context.active_object
+    bpy.ops.object.modifier_add(type="SUBSURF")
+    bust.modifiers[-1].levels = 1
+    bust.modifiers[-1].render_levels = 2
+    smooth(bust)
+    attach(
+        bust,
+        principled("bust_mid_glossy", base=(0.9, 0.6, 0.25), roughness=0.25, metallic=1.0),
+        "bust",
+        index["bust"],
+    )
+
+    panel = add_plane(1.4, (0.4, 3.2, 1.0), rotation=(math.radians(90), 0.0, 0.0))
+    panel.scale = (1.6, 0.6, 1.0)
+    attach(
+        panel,
+        principled(
+            "panel_emitter",
+            base=(0.0, 0.0, 0.0),
+            roughness=0.5,
+            emission=(1.0, 0.75, 0.45),
+            emission_strength=6.0,
+        ),
+        "panel",
+        index["panel"],
+    )
+
+    bpy.ops.object.light_add(type="AREA", location=(-2.0, -1.5, 4.5))
+    key_light = bpy.context.active_object
+    key_light.name = "key_light"
+    key_light.data.energy = 900.0
+    key_light.data.size = 2.0
+    key_light.rotation_euler = (math.radians(25), math.radians(-20), 0.0)
+
+    camera, target = add_camera(scene, "camera_target", lens_mm=35.0)
+
+    first, last = FRAMES
+    # Ball: at rest at `first`, rolls +x, at rest again at `last` (Bezier ease in/out, so its
+    # speed differs from frame to frame: the backward and forward motion vectors are not mirror
+    # images). Rolling without slipping: rotation about +y = distance / radius.
+    x0, x1 = -1.4, 1.3
+    for frame, x in ((first, x0), (last, x1)):
+        key_location(ball, frame, (x, 0.2, radius))
+        ball.rotation_euler = (0.0, (x - x0) / radius, 0.0)
+        ball.keyframe_insert("rotation_euler", frame=frame)
+    # Camera: a dolly to the right and down while its target drifts; keys outside the frame
+    # range, so it moves on every rendered frame, at changing speed.
+    key_location(camera, first - 6, (-3.6, -6.2, 2.9))
+    key_location(camera, last + 6, (2.2, -5.4, 2.2))
+    key_location(target, first - 6, (-0.6, 0.8, 0.9))
+    key_location(target, last + 6, (0.5, 0.9, 0.8))
+    return {"ball_radius": radius, "ball_x": [x0, x1]}
+
+
+def build_metal(scene) -> dict:
+    """A mirror-like metal ball reflecting a moving area light, a point light switching on."""
+    index = PASS_INDEX["metal"]
+    gradient_world(scene, horizon=(0.12, 0.12, 0.14), zenith=(0.05, 0.08, 0.2), strength=1.0)
+
+    floor = add_plane(30.0, (0.0, 0.0, 0.0))
+    attach(
+        floor,
+        principled(
+            "floor_glossy",
+            roughness=0.12,
+            checker=((0.7, 0.7, 0.7), (0.05, 0.05, 0.06), 24.0),
+        ),
+        "floor",
+        index["floor"],
+    )
+
+    radius = 0.8
+    mirror = add_sphere(radius, (0.0, 0.4, radius))
+    attach(
+        mirror,
+        principled("mirror_metal", base=(0.95, 0.93, 0.9), roughness=0.08, metallic=1.0),
+        "mirror_ball",
+        index["mirror_ball"],
+    )
+
+    strip = add_plane(1.0, (-1.6, 3.0, 1.4), rotation=(math.radians(90), 0.0, math.radians(20)))
+    strip.scale = (1.8, 0.25, 1.0)
+    attach(
+        strip,
+        principled(
+            "strip_emitter",
+            base=(0.0, 0.0, 0.0),
+            emission=(0.6, 0.8, 1.0),
+            emission_strength=8.0,
+        ),
+        "strip",
+        index["strip"],
+    )
+
+    bpy.ops.mesh.primitive_cube_add(size=0.7, location=(1.6, 0.9, 0.35), rotation=(0, 0, 0.7))
+    attach(
+        bpy.context.active_object,
+        principled("cube_diffuse", base=(0.75, 0.2, 0.15), roughness=1.0),
+        "cube",
+        index["cube"],
+    )
+
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.3, depth=1.6, location=(-1.5, 1.2, 0.8))
+    pillar = bpy.context.active_object
+    smooth(pillar)
+    attach(
+        pillar,
+        principled("pillar_rough_glossy", base=(0.3, 0.7, 0.35), roughness=0.35),
+        "pillar",
+        index["pillar"],
+    )
+
+    first, last = FRAMES
+    half = (first + last + 1) // 2  # first frame with the point light on
+
+    bpy.ops.object.light_add(type="AREA", location=(2.5, -1.0, 3.0))
+    area = bpy.context.active_object
+    area.name = "moving_area_light"
+    area.data.energy = 400.0
+    area.data.size = 0.8
+    area.data.color = (1.0, 0.9, 0.75)
+    track = area.constraints.new("TRACK_TO")
+    track.target = mirror
+    track.track_axis = "TRACK_NEGATIVE_Z"
+    track.up_axis = "UP_Y"
+    key_location(area, first - 3, (2.8, -1.6, 2.6))
+    key_location(area, (first + last) // 2, (0.6, -2.4, 3.4))
+    key_location(area, last + 3, (-2.4, -1.4, 2.8))
+
+    bpy.ops.object.light_add(type="POINT", location=(-0.9, -0.9, 2.2))
+    point = bpy.context.active_object
+    point.name = "switched_point_light"
+    point.data.shadow_soft_size = 0.1
+    point.data.color = (0.6, 0.75, 1.0)
+    point.data.energy = 0.0
+    point.data.keyframe_insert("energy", frame=first - 1)
+    point.data.energy = 400.0
+    point.data.keyframe_insert("energy", frame=half)
+    hold_keys(point.data)
+
+    camera, target = add_camera(scene, "camera_target", lens_mm=40.0)
+    target.location = (0.0, 0.6, 0.6)
+    key_location(camera, first - 6, (-1.2, -5.8, 2.3))
+    key_location(camera, last + 6, (0.9, -5.5, 2.0))
+    return {"mirror_ball_radius": radius, "point_light_on_from_frame": half}
+
+
+SCENES = {"roll": build_roll, "metal": build_metal}
+
+
+# --------------------------------------------------------------------------- render settings
+
+
+def common_settings(scene, resolution: tuple[int, int]) -> None:
+    render = scene.render
+    render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    render.resolution_x, render.resolution_y = resolution
+    render.resolution_percentage = 100
+    render.fps = 24
+    scene.frame_start, scene.frame_end = FRAMES
+    render.use_motion_blur = False  # the Vector pass is only written without motion blur
+    render.use_compositing = False
+    render.use_sequencer = False
+    render.threads_mode = "FIXED"
+    render.threads = 2
+    scene.cycles.use_denoising = False
+    scene.cycles.use_adaptive_sampling = False
+    scene.cycles.use_animated_seed = True
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    # Header metadata that changes from run to run (wall-clock date, render time, host).
+    render.use_stamp_date = False
+    render.use_stamp_render_time = False
+    render.use_stamp_memory = False
+    render.use_stamp_hostname = False
+
+
+def input_settings(scene, codec: str, depth: str) -> None:
+    scene.cycles.samples = 1
+    scene.cycles.seed = INPUT_SEED
+    layer = scene.view_layers[0]
+    for name in (
+        "combined", "z", "normal", "vector", "object_index", "emit", "environment",
+        "diffuse_direct", "diffuse_indirect", "diffuse_color",
+        "glossy_direct", "glossy_indirect", "glossy_color",
+        "transmission_direct", "transmission_indirect", "transmission_color",
+    ):  # fmt: skip
+        setattr(layer, f"use_pass_{name}", True)
+    layer.cycles.denoising_store_passes = True  # Denoising Albedo / Normal / Depth
+    image = scene.render.image_settings
+    image.file_format = "OPEN_EXR_MULTILAYER"
+    image.color_depth = depth
+    image.exr_codec = codec
+
+
+def reference_settings(scene, spp: int) -> None:
+    scene.cycles.samples = spp
+    scene.cycles.seed = REF_SEED
+    layer = scene.view_layers[0]
+    for prop in dir(layer):
+        if prop.startswith("use_pass_") and prop != "use_pass_combined":
+            setattr(layer, prop, False)
+    layer.cycles.denoising_store_passes = False
+    image = scene.render.image_settings
+    image.file_format = "OPEN_EXR"
+    image.color_mode = "RGBA"
+    image.color_depth = "32"
+    image.exr_codec = "ZIP"
+
+
+def frame_record(scene, moving: list[str]) -> dict:
+    camera = scene.camera
+    record = {
+        "camera_matrix_world": [list(row) for row in camera.matrix_world],
+        "camera_angle_x": camera.data.angle_x,
+        "objects": {
+            name: {
+                "location": list(bpy.data.objects[name].matrix_world.translation),
+                "rotation_euler": list(bpy.data.objects[name].matrix_world.to_euler()),
+            }
+            for name in moving
+        },
+        "lights": {
+            light.name: {
+                "energy": light.data.energy,
+                "location": list(light.matrix_world.translation),
+            }
+            for light in scene.objects
+            if light.type == "LIGHT"
+        },
+    }
+    return record
+
+
+def render_frame(scene, path: Path) -> float:
+    scene.render.filepath = str(path)
+    start = time.process_time()
+    wall = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    wall = time.perf_counter() - wall
+    cpu = time.process_time() - start
+    print(f"  {path.name}: {wall:.1f} s wall, {cpu:.1f} s cpu", flush=True)
+    return wall
+
+
+def run(args) -> None:
+    for name in args.scene:
+        out = args.out / name
+        out.mkdir(parents=True, exist_ok=True)
+        scene = reset_scene()
+        extra = SCENES[name](scene)
+        common_settings(scene, tuple(args.resolution))
+        frames = range(args.frames[0], args.frames[1] + 1)
+        moving = {"roll": ["ball", "Camera", "camera_target"],
+                  "metal": ["Camera", "moving_area_light"]}[name]  # fmt: skip
+        info = {
+            "scene": name,
+            "blender": bpy.app.version_string,
+            "resolution": list(args.resolution),
+            "frames": [FRAMES[0], FRAMES[1]],
+            "input_seed": INPUT_SEED,
+            "reference_seed": REF_SEED,
+            "reference_spp": args.ref_spp,
+            "pass_index": PASS_INDEX[name],
+            **extra,
+            "per_frame": {},
+        }
+        for frame in range(FRAMES[0], FRAMES[1] + 1):
+            scene.frame_set(frame)
+            info["per_frame"][str(frame)] = frame_record(scene, moving)
+        if args.what in ("scene", "inputs", "all"):
+            (out / "scene.json").write_text(json.dumps(info, indent=1) + "\n")
+        if args.what in ("inputs", "all"):
+            input_settings(scene, args.codec, args.depth)
+            for frame in frames:
+                scene.frame_set(frame)
+                render_frame(scene, out / f"{args.prefix}in.{frame:04d}.exr")
+        if args.what in ("refs", "all"):
+            reference_settings(scene, args.ref_spp)
+            for frame in frames:
+                scene.frame_set(frame)
+                render_frame(scene, out / f"{args.prefix}ref.{frame:04d}.exr")
+        if args.what == "preview":
+            scene.cycles.samples = args.ref_spp
+            scene.render.image_settings.file_format = "PNG"
+            for frame in frames:
+                scene.frame_set(frame)
+                render_frame(scene, out / f"preview.{frame:04d}.png")
+
+
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", nargs="+", choices=sorted(SCENES), default=["roll", "metal"])
+    parser.add_argument(
+        "--what", choices=["all", "inputs", "refs", "scene", "preview"], default="all"
+    )
+    parser.add_argument(
+        "--frames", type=int, nargs=2, default=list(FRAMES), metavar=("FIRST", "LAST")
+    )
+    parser.add_argument("--ref-spp", type=int, default=REF_SPP)
+    parser.add_argument(
+        "--resolution", type=int, nargs=2, default=list(RESOLUTION), metavar=("W", "H")
+    )
+    parser.add_argument("--codec", default="ZIP", help="EXR codec of the inputs (lossless only)")
+    parser.add_argument("--depth", default="16", choices=["16", "32"], help="inputs' half/float")
+    parser.add_argument("--out", type=Path, default=HERE)
+    parser.add_argument("--prefix", default="", help="file name prefix (for experiments)")
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    run(args)
+    print(f"done in {time.perf_counter() - start:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,416 @@
+"""Plant known bugs one at a time in a copy of the tree and check that the tests catch them.
+
+Each mutant is a text patch (the old text must occur exactly once) plus the tests that
+must fail because of it. The tree (tracked and untracked-not-ignored files, with their
+modification times, and the numba kernel caches, so only the patched file's kernels are
+recompiled) is copied once into a temporary folder; every mutant is applied there, its
+tests are run with that copy first on ``sys.path``, and the file is restored. A baseline
+run of the same tests on the unpatched copy must pass first, or "caught" means nothing.
+
+    .venv/bin/python tests/mutants/plant.py                 # every mutant, its own tests
+    .venv/bin/python tests/mutants/plant.py --list
+    .venv/bin/python tests/mutants/plant.py --only taa-motion-sign --only bessel
+    .venv/bin/python tests/mutants/plant.py --owner filters
+    .venv/bin/python tests/mutants/plant.py --full          # the whole suite per mutant (slow)
+    .venv/bin/python tests/mutants/plant.py --owner filters --tests tests/test_reference_denoiser.py
+
+Prints a Markdown table and exits 1 when a mutant survived. Not collected by pytest (the
+file name does not start with ``test_``). The list comes from issue 15's audit; add a
+mutant whenever a test is written to catch a specific bug.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@dataclass(frozen=True)
+class Mutant:
+    name: str
+    owner: str  # whose tests must catch it: filters, io, farm
+    bug: str
+    path: str
+    edits: tuple[tuple[str, str], ...]
+    tests: tuple[str, ...]
+
+
+FILTER_TESTS = (
+    "tests/test_reference_stages.py",
+    "tests/test_reference_denoiser.py",
+    "tests/test_filters_stages.py",
+    "tests/test_filters_denoiser.py",
+    "tests/test_filters_atrous.py",
+    "tests/test_filters_signals.py",
+    "tests/test_filters_values.py",
+    "tests/test_filters_scale.py",
+)
+IO_TESTS = (
+    "tests/test_io_presets.py",
+    "tests/test_io_layers.py",
+    "tests/test_io_exr.py",
+    "tests/test_cli_ground_truth.py",
+)
+WRITE_TESTS = (
+    "tests/test_io_exr.py",
+    "tests/test_cli_denoise.py",
+    "tests/test_farm_resume.py",
+    "tests/test_farm_runner.py",
+)
+
+MUTANTS: tuple[Mutant, ...] = (
+    # --- survived the audit (issue 15), must be caught now
+    Mutant(
+        "moments-ramp", "filters", "1/h ramp dropped for the moments only",
+        "svgf_cli/filters/reproject.py",
+        (("blend_moments[x] = max(moments_alpha, inv_h) if reused else _ONE",
+          "blend_moments[x] = moments_alpha if reused else _ONE"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "no-3x3-fallback", "filters", "3x3 reprojection fallback removed",
+        "svgf_cli/filters/reproject.py",
+        (("                if count == 0:\n                    continue\n",
+          "                if True:\n                    continue\n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "no-boost", "filters", "4/h short-history variance boost removed",
+        "svgf_cli/filters/variance.py",
+        (("    boost_short_history(out_variance, history_length, threshold)\n",
+          "    pass  # boost removed\n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "bessel", "filters", "Bessel (reliability-weights) correction removed",
+        "svgf_cli/filters/variance.py",
+        (("            if shrink < _ONE:\n                population /= _ONE - shrink",
+          "            if False:\n                population /= _ONE - shrink"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "atrous-linear-steps", "filters", "a-trous steps 1,2,3,4,5 instead of 2^i",
+        "svgf_cli/filters/denoiser.py",
+        (("                    1 << iteration, p.sigma_depth, p.sigma_normal, propagate,",
+          "                    iteration + 1, p.sigma_depth, p.sigma_normal, propagate,"),),
+        FILTER_TESTS + ("tests/test_evaluate_regression.py",),
+    ),
+    Mutant(
+        "taa-motion-sign", "filters", "TAA motion sign flipped",
+        "svgf_cli/filters/taa.py",
+        (("px = F32(x) + motion[0, y, x]\n            py = F32(y) + motion[1, y, x]",
+          "px = F32(x) - motion[0, y, x]\n            py = F32(y) - motion[1, y, x]"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "arnold-backward", "io", "Arnold preset treated as backward motion",
+        "svgf_cli/io/layers.py",
+        (('    "arnold": "forward-pixels",', '    "arnold": "backward-pixels",'),),
+        IO_TESTS,
+    ),
+    # --- caught by the audit, must stay caught
+    Mutant(
+        "reproject-motion-sign", "filters", "motion sign flipped in reprojection",
+        "svgf_cli/filters/reproject.py",
+        (("px = F32(x) + motion[0, uy, ux]\n            py = F32(y) + motion[1, uy, ux]",
+          "px = F32(x) - motion[0, uy, ux]\n            py = F32(y) - motion[1, uy, ux]"),),
+        FILTER_TESTS + ("tests/test_cli_ground_truth.py",),
+    ),
+    Mutant(
+        "cycles-y", "io", "Cycles Y not flipped",
+        "svgf_cli/io/layers.py",
+        (("        np.negative(xy[1], out=out[1])", "        out[1] = xy[1]"),),
+        IO_TESTS,
+    ),
+    Mutant(
+        "no-ramp", "filters", "1/h ramp dropped (colour and moments)",
+        "svgf_cli/filters/reproject.py",
+        (("blend[x] = max(alpha, inv_h) if reused else _ONE",
+          "blend[x] = alpha if reused else _ONE"),
+         ("blend_moments[x] = max(moments_alpha, inv_h) if reused else _ONE",
+          "blend_moments[x] = moments_alpha if reused else _ONE")),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "variance-w", "filters", "w instead of w^2 in variance propagation",
+        "svgf_cli/filters/atrous.py",
+        (("fma(w0 * w0, variance[0, uq, qx], acc[4])", "fma(w0, variance[0, uq, qx], acc[4])"),
+         ("fma(w1 * w1, variance[second, uq, qx], acc[9])",
+          "fma(w1, variance[second, uq, qx], acc[9])")),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "no-depth-test", "filters", "reprojection depth test removed",
+        "svgf_cli/filters/reproject.py",
+        (("    if abs(z_prev - z) > max_depth_diff:\n        return False\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "id-truncated", "io", "mesh id truncated instead of rounded",
+        "svgf_cli/io/exr.py",
+        (("rounded = np.rint(raw_id[finite].astype(np.float64))",
+          "rounded = np.trunc(raw_id[finite].astype(np.float64))"),),
+        IO_TESTS,
+    ),
+    Mutant(
+        "skip-existing-no-replay", "farm", "--skip-existing (and chunks) not replaying history",
+        "svgf_cli/farm/job.py",
+        (("frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]",
+          "frames = [(f, p) for f, p in usable if f in write]"),),
+        ("tests/test_farm_resume.py", "tests/test_farm_chunks.py"),
+    ),
+    # --- the generalised filter (signals branch): N signals, modes, values, colour space
+    Mutant(
+        "reproject-mode-blind", "filters", "mode test removed from reprojection",
+        "svgf_cli/filters/reproject.py",
+        (("relevant = np.uint16(1 << s) | NO_HISTORY", "relevant = NO_HISTORY"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "history-length-of-signal-0", "filters",
+        "per-signal history length replaced by signal 0's",
+        "svgf_cli/filters/denoiser.py",
+        (("            self._before_accumulation(TemporalState(",
+          "            history_length[1:] = history_length[0]\n"
+          "            self._before_accumulation(TemporalState("),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "rec709-weights", "filters", "luminance weights ignored (Rec.709 constants used)",
+        "svgf_cli/filters/denoiser.py",
+        (("weights = float32_weights(frame.luminance_weights)",
+          "weights = float32_weights((0.2126, 0.7152, 0.0722))"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "no-history-guard", "filters", "history guard removed",
+        "svgf_cli/filters/denoiser.py",
+        (('        counts["history_resets"] += values.reset_nonfinite_history(\n'
+          '            history["history_illumination"], history["history_moments"],\n'
+          '            history["history_length"], history["history_mode"],\n'
+          '        )\n',
+          '        counts["history_resets"] += 0\n'),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "variance-mode-blind", "filters", "mode test removed from the spatial variance",
+        "svgf_cli/filters/variance.py",
+        (("w = w if (mode_p[i] ^ mode_q[i]) & bit == 0 else _ZERO", "w = w"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "atrous-mode-blind", "filters", "a-trous ignores the mode (guide sign)",
+        "svgf_cli/filters/atrous.py",
+        (("    w0 = w0 if (guide0 < _ZERO) == (lum0 < _ZERO) else _ZERO\n"
+          "    w1 = w1 if (guide1 < _ZERO) == (lum1 < _ZERO) else _ZERO\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "implausible-demodulated", "filters", "colours above 1.05 demodulated",
+        "svgf_cli/filters/modulate.py",
+        (("if not (brightest >= black and brightest <= max_reflectance):",
+          "if not brightest >= black:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "absolute-albedo-floor", "filters", "demodulation floor not relative to max(a)",
+        "svgf_cli/filters/modulate.py",
+        (("floor = max(black, relative_floor * brightest)", "floor = black"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "extreme-radiance-kept", "filters", "radiance beyond 1e15 kept (only NaN/Inf cleaned)",
+        "svgf_cli/filters/modulate.py",
+        (("return v if is_usable(v) else _ZERO", "return _ZERO if is_nonfinite(v) else v"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "emission-per-signal", "filters", "emission added once per signal",
+        "svgf_cli/filters/denoiser.py",
+        (("add_emission = has_emission and index == 0", "add_emission = has_emission"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "absolute-deviation-floor", "filters", "a-trous deviation floor absolute (1e-5)",
+        "svgf_cli/filters/atrous.py",
+        (("floor = RELATIVE_DEVIATION_FLOOR * lum", "floor = RELATIVE_DEVIATION_FLOOR"),),
+        FILTER_TESTS,
+    ),
+    # --- write safety: the io engineer's tests (issue 15 item 3); listed to run after merge
+    Mutant(
+        "temp-copied", "io", "output temp file copied instead of renamed",
+        "svgf_cli/io/exr.py",
+        (("        os.replace(tmp, path)\n",
+          "        __import__('shutil').copyfile(tmp, path)\n        tmp.unlink()\n"),),
+        WRITE_TESTS,
+    ),
+    Mutant(
+        "temp-not-hidden", "io", "temp name not hidden",
+        "svgf_cli/io/exr.py",
+        (('return path.with_name(f".{path.name}.{os.getpid()}.tmp.exr")',
+          'return path.with_name(f"{path.name}.{os.getpid()}.tmp.exr")'),),
+        WRITE_TESTS,
+    ),
+    Mutant(
+        "history-no-temp", "io", "history .npz written without a temp file",
+        "svgf_cli/runner.py",
+        (('    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")\n',
+          "    tmp = path\n"),),
+        WRITE_TESTS,
+    ),
+    Mutant(
+        "alpha-always-1", "io", "output alpha always 1 (input A dropped)",
+        "svgf_cli/runner.py",
+        (('"A": alpha if alpha is not None else np.ones((height, width), np.float32),',
+          '"A": np.ones((height, width), np.float32),'),),
+        WRITE_TESTS,
+    ),
+)
+
+
+def _tree_files() -> list[str]:
+    listed = subprocess.run(
+        ["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT, check=True,
+        capture_output=True,
+    ).stdout.decode().split("\0")
+    caches = [str(p.relative_to(ROOT)) for p in ROOT.glob("svgf_*/**/__pycache__/*.nb[ic]")]
+    return [name for name in listed if name and (ROOT / name).is_file()] + caches
+
+
+def copy_tree(destination: Path) -> None:
+    """The tree with modification times kept, so numba's caches stay valid."""
+    for name in _tree_files():
+        target = destination / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / name, target)
+
+
+def _environment(copy: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(copy), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    return env
+
+
+def check_import_location(copy: Path) -> None:
+    located = subprocess.run(
+        [sys.executable, "-c", "import svgf_cli; print(svgf_cli.__file__)"], cwd=copy,
+        env=_environment(copy), check=True, capture_output=True, text=True,
+    ).stdout.strip()
+    if not Path(located).resolve().is_relative_to(copy.resolve()):
+        raise SystemExit(f"svgf_cli imports from {located}, not from the copy {copy}")
+
+
+def run_tests(copy: Path, tests: tuple[str, ...], full: bool) -> tuple[int, str, float]:
+    """pytest in the copy: (exit code, first failing test or last line, seconds)."""
+    args = [sys.executable, "-m", "pytest", "-x", "-rfE", "-p", "no:cacheprovider"]
+    if not full:
+        args += list(tests)
+    start = time.perf_counter()
+    done = subprocess.run(args, cwd=copy, env=_environment(copy), capture_output=True,
+                          text=True)
+    seconds = time.perf_counter() - start
+    lines = done.stdout.splitlines()
+    failed = [line for line in lines if line.startswith(("FAILED", "ERROR"))]
+    summary = failed[0] if failed else (lines[-1] if lines else done.stderr.strip()[-200:])
+    return done.returncode, summary, seconds
+
+
+def _patch(file: Path, mutant: Mutant) -> str:
+    original = file.read_text()
+    text = original
+    for old, new in mutant.edits:
+        count = text.count(old)
+        if count != 1:
+            raise SystemExit(f"{mutant.name}: expected the text once in {mutant.path}, "
+                             f"found it {count} times (the code moved: update the mutant)")
+        text = text.replace(old, new)
+    file.write_text(text)
+    return original
+
+
+def plant(copy: Path, mutant: Mutant, full: bool) -> tuple[int, str, float]:
+    file = copy / mutant.path
+    stat = file.stat()
+    cache = file.parent / "__pycache__"
+    saved_cache = copy / ".plant-cache-backup"
+    if cache.exists():
+        shutil.copytree(cache, saved_cache, copy_function=shutil.copy2)
+    original = _patch(file, mutant)
+    try:
+        return run_tests(copy, mutant.tests, full)
+    finally:
+        file.write_text(original)
+        os.utime(file, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+        if saved_cache.exists():
+            shutil.rmtree(cache, ignore_errors=True)
+            shutil.move(saved_cache, cache)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--list", action="store_true", help="list the mutants and exit")
+    parser.add_argument("--only", action="append", default=[], help="run this mutant")
+    parser.add_argument("--owner", action="append", default=[],
+                        help="run the mutants of this owner (filters, io, farm)")
+    parser.add_argument("--full", action="store_true", help="run the whole suite per mutant")
+    parser.add_argument("--tests", action="append", default=[],
+                        help="run these test files instead of each mutant's own")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the baseline run")
+    parser.add_argument("--keep", action="store_true", help="keep the copy of the tree")
+    args = parser.parse_args(argv)
+    chosen = [m for m in MUTANTS if (not args.only or m.name in args.only)
+              and (not args.owner or m.owner in args.owner)]
+    if args.tests:
+        chosen = [dataclasses.replace(m, tests=tuple(args.tests)) for m in chosen]
+    unknown = set(args.only) - {m.name for m in MUTANTS}
+    if unknown:
+        parser.error(f"unknown mutant(s): {', '.join(sorted(unknown))}")
+    if args.list:
+        for m in chosen:
+            print(f"{m.name:24} {m.owner:8} {m.bug}  [{m.path}]")
+        return 0
+    copy = Path(tempfile.mkdtemp(prefix="svgf-mutants-"))
+    try:
+        print(f"copying the tree to {copy}", file=sys.stderr)
+        copy_tree(copy)
+        check_import_location(copy)
+        if not args.no_baseline:
+            tests = tuple(dict.fromkeys(t for m in chosen for t in m.tests))
+            code, summary, seconds = run_tests(copy, tests, args.full)
+            print(f"baseline: exit {code} in {seconds:.0f} s: {summary}", file=sys.stderr)
+            if code != 0:
+                print("the unpatched tree fails these tests: fix that first", file=sys.stderr)
+                return 2
+        rows, survived = [], []
+        for mutant in chosen:
+            code, summary, seconds = plant(copy, mutant, args.full)
+            verdict = "caught" if code != 0 else "SURVIVED"
+            if code == 0:
+                survived.append(mutant.name)
+            print(f"{mutant.name}: {verdict} ({seconds:.0f} s) {summary}", file=sys.stderr)
+            rows.append(f"| {mutant.bug} | `{mutant.name}` | {mutant.owner} | {verdict} | "
+                        f"{summary.replace('|', '/')[:110]} |")
+        print("| planted bug | name | owner | result | first failure |")
+        print("|---|---|---|---|---|")
+        print("\n".join(rows))
+        return 1 if survived else 0
+    finally:
+        if args.keep:
+            print(f"kept {copy}", file=sys.stderr)
+        else:
+            shutil.rmtree(copy, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,956 @@
+"""A float64 reference of the SVGF ``Denoiser``, written from the documented equations.
+
+This is test support, not production code: plain numpy/Python in float64, loops over pixels
+(or over taps, vectorised over pixels) in the most obvious order, no scratch sharing, no
+fast exp/log, no bit masks, no row balancing. It is written from the paper (Schied et al.
+2017), ``docs/algorithm.md``, ``docs/robustness.md`` and the kernels' docstrings, never by
+transcribing a kernel, so a kernel that departs from its documentation disagrees with it.
+
+Structure (one function per stage, so each can be compared with its kernel alone, and a
+small :class:`ReferenceDenoiser` that owns float64 history, so the whole can be compared
+frame by frame):
+
+======================  =======================================================  ===========
+stage                   function(s)                                              kernel(s)
+======================  =======================================================  ===========
+values                  :func:`apply_value_policy` (:func:`clean_value`,         values,
+                        :func:`clean_albedo`, :func:`clean_depth`,               modulate
+                        :func:`clean_normal`, :func:`clean_motion`)
+0 geometry              :func:`unit_normals`, :func:`depth_gradients`,           gradients
+                        :func:`normal_gradient`, :func:`geometry`
+1 demodulation          :func:`effective_albedo` (the mode rule),                modulate
+                        :func:`demodulate`
++ firefly clamp         :func:`firefly_clamp`                                    clamp
+2 reprojection          :func:`tap_consistent`, :func:`reproject` (per signal,   reproject
+                        mode-matched taps)
++ anti-lag hook         :meth:`ReferenceDenoiser.before_accumulation`            denoiser
++ history clamp         :func:`history_clamp`                                    clamp
+2 accumulation          :func:`accumulate` (paper eq. 6, 1/h ramp per signal)    reproject
+3 variance              :func:`temporal_variance`, :func:`spatial_variance`,     variance
+                        :func:`boost_short_history`, :func:`estimate_variance`
+4 a-trous               :func:`luminance_stop_guides`, :func:`atrous_iteration`  atrous
+                        (paper eqs. 1-5), :func:`atrous_steps` (2^i)
+history guard           :func:`reset_nonfinite_history`                          values
+5 remodulation          :func:`remodulate`, :func:`radiance_with_background`,    modulate
+                        emission added once
++ TAA                   :func:`taa_resolve`                                      taa
+======================  =======================================================  ===========
+
+Shapes follow ``svgf_cli.frame``: colour-like planes ``(3, H, W)``, several signals
+``(S, 3, H, W)``, moments ``(S, 2, H, W)``, variance and history length ``(S, H, W)``, modes
+``(S, H, W)`` booleans (True: the signal is filtered as radiance at that pixel), scalar
+planes ``(H, W)``; depth ``<= 0`` is background; motion is backward, in pixels (the surface
+seen at pixel ``(x, y)`` was at ``(x + motion.x, y + motion.y)`` in the previous frame, in
+pixel-index space). Every function accepts float32 or float64 arrays and returns float64.
+
+Extending it (anti-lag, lobe signals, ...): add a stage function with its equation in the
+docstring, a stage test against its kernel in ``tests/test_reference_stages.py``, and call
+it from :meth:`ReferenceDenoiser.process` in pipeline order. Nothing here is shared between
+stages except the :class:`Geometry` of the frame, so a new stage can be slotted in without
+touching the others.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.frame import Frame
+
+F64 = np.float64
+REC709 = (0.2126, 0.7152, 0.0722)  # Rec.709 luminance weights, the default colour space
+B3 = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0  # the B3-spline a-trous kernel h
+G3 = np.array([0.25, 0.5, 0.25])  # 1-D factor of the 3x3 Gaussian that prefilters variance
+DEPTH_EPSILON = 1e-3  # w_z's depth-relative epsilon: 1e-3 z(p) (docs/algorithm.md, edges.py)
+RELATIVE_DEVIATION_FLOOR = 1e-5  # w_l's deviation is at least 1e-5 l(p) ...
+MIN_SCALE = 1e-20  # ... and its scale at least 1e-20 (black pixels)
+SPATIAL_TINY = 1e-30  # added to the spatial variance's luminance scale (0/0 on black)
+NORMAL_SLACK = 0.01  # reprojection normal test: tolerance * (fwidth_n + 0.01)
+MIN_BILINEAR_WEIGHT = 0.01  # passing bilinear weights summing below this are rejected
+WHOLE_SNAP = 1e-3  # a resampled history length this close to a whole count is that count
+VALUE_LIMIT = 1e15  # inputs beyond it are blow-ups; demodulated values are clamped to it
+MAX_REFLECTANCE = 1.05  # a demodulation colour brighter than this is not a reflectance
+RELATIVE_ALBEDO_FLOOR = 0.02  # per-channel floor relative to the brightest channel
+NO_HISTORY_MOTION = 1e15  # what non-finite motion becomes: a position far outside the image
+
+
+def luminance(rgb: np.ndarray, weights: Sequence[float] = REC709) -> np.ndarray:
+    """``w_r r + w_g g + w_b b`` over the colour axis (the axis of length 3 just before
+    H, W), with the frame's luminance weights."""
+    return np.moveaxis(np.asarray(rgb, dtype=F64), -3, -1) @ np.asarray(weights, dtype=F64)
+
+
+# --------------------------------------------------------------------------- values
+def usable(values: np.ndarray) -> np.ndarray:
+    """Finite and ``|v| <= VALUE_LIMIT`` (NaN compares false)."""
+    with np.errstate(invalid="ignore"):
+        return np.abs(np.asarray(values, dtype=F64)) <= VALUE_LIMIT
+
+
+def clean_value(values: np.ndarray) -> np.ndarray:
+    """Radiance and emission: non-finite values and values beyond +-1e15 become 0."""
+    v = np.asarray(values, dtype=F64)
+    return np.where(usable(v), v, 0.0)
+
+
+def clean_albedo(albedo: np.ndarray) -> np.ndarray:
+    """Demodulation colours: non-finite channels become 0 (large finite ones are kept; the
+    mode rule then filters such a pixel as radiance)."""
+    a = np.asarray(albedo, dtype=F64)
+    return np.where(np.isfinite(a), a, 0.0)
+
+
+def clean_depth(depth: np.ndarray) -> np.ndarray:
+    """Non-finite depth and depth beyond +-1e15 become background (0)."""
+    z = np.asarray(depth, dtype=F64)
+    return np.where(usable(z), z, 0.0)
+
+
+def clean_normal(normal: np.ndarray) -> np.ndarray:
+    """A normal with a non-finite component or one beyond +-1e15 becomes the zero normal."""
+    n = np.asarray(normal, dtype=F64)
+    return np.where(np.all(usable(n), axis=0)[None], n, 0.0)
+
+
+def clean_motion(motion: np.ndarray) -> np.ndarray:
+    """Motion with a non-finite component becomes ``(1e15, 1e15)``: no history (large
+    finite motion is kept: it only means no history too)."""
+    m = np.asarray(motion, dtype=F64)
+    return np.where(np.all(np.isfinite(m), axis=0)[None], m, NO_HISTORY_MOTION)
+
+
+def count_bad(values: np.ndarray) -> tuple[int, int]:
+    """(non-finite values, finite values beyond +-1e15)."""
+    v = np.asarray(values, dtype=F64)
+    nonfinite = ~np.isfinite(v)
+    with np.errstate(invalid="ignore"):
+        extreme = np.isfinite(v) & (np.abs(v) > VALUE_LIMIT)
+    return int(nonfinite.sum()), int(extreme.sum())
+
+
+@dataclass
+class CleanFrame:
+    """A frame after the value policy, in float64: what every later stage reads.
+
+    ``radiance`` and ``albedo`` are ``(S, 3, H, W)``: each signal's radiance (emission
+    excluded) and demodulation colour; ``counts`` are the policy's counts with the keys of
+    ``DenoisedFrame.counts`` (``frame.COUNT_KEYS``)."""
+
+    names: list[str]
+    radiance: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray | None
+    depth: np.ndarray
+    normal: np.ndarray
+    motion: np.ndarray
+    mesh_id: np.ndarray
+    weights: tuple[float, float, float]
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+def _count(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
+    counts[kind] = counts.get(kind, 0) + value
+    if value:
+        counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
+
+
+def apply_value_policy(frame: Frame) -> CleanFrame:
+    """``docs/robustness.md`` "Inside the filter": replace and count what would overflow.
+
+    Radiance and emission beyond +-1e15 or non-finite -> 0; non-finite albedo -> 0; bad
+    depth -> background; a normal with a bad component -> the zero normal; non-finite motion
+    -> no history. Counted per plane as non-finite or extreme (beyond the limit; not for
+    albedo, where a large value is only implausible, nor motion, where it is harmless).
+    """
+    counts: dict[str, int] = {"nonfinite": 0, "extreme": 0, "history_resets": 0}
+    for name, plane, extreme_counts in (("depth", frame.depth, True),
+                                        ("normal", frame.normal, True),
+                                        ("motion", frame.motion, False)):
+        nonfinite, extreme = count_bad(plane)
+        _count(counts, "nonfinite", name, nonfinite)
+        _count(counts, "extreme", name, extreme if extreme_counts else 0)
+    for signal in frame.signals:
+        nonfinite, extreme = count_bad(signal.radiance)
+        _count(counts, "nonfinite", f"radiance.{signal.name}", nonfinite)
+        _count(counts, "extreme", f"radiance.{signal.name}", extreme)
+        _count(counts, "nonfinite", f"albedo.{signal.name}", count_bad(signal.albedo)[0])
+    emission = None
+    if frame.emission is not None:
+        nonfinite, extreme = count_bad(frame.emission)
+        _count(counts, "nonfinite", "emission", nonfinite)
+        _count(counts, "extreme", "emission", extreme)
+        emission = clean_value(frame.emission)
+    weights = tuple(float(w) for w in frame.luminance_weights)
+    return CleanFrame(
+        names=[s.name for s in frame.signals],
+        radiance=np.stack([clean_value(s.radiance) for s in frame.signals]),
+        albedo=np.stack([clean_albedo(s.albedo) for s in frame.signals]),
+        emission=emission, depth=clean_depth(frame.depth), normal=clean_normal(frame.normal),
+        motion=clean_motion(frame.motion), mesh_id=np.asarray(frame.mesh_id),
+        weights=(weights[0], weights[1], weights[2]), counts=counts,
+    )
+
+
+# --------------------------------------------------------------------------- 0 geometry
+def unit_normals(normal: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Unit normals; background (depth <= 0) and degenerate normals (|n|^2 <= 1e-12) are 0.
+
+    A zero normal makes ``max(0, n.n')`` vanish, so no spatial weight flows to or from it.
+    """
+    n = np.asarray(normal, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    length_sq = np.sum(n * n, axis=0)
+    keep = (z > 0.0) & (length_sq > 1e-12)
+    out = np.zeros_like(n)
+    out[:, keep] = n[:, keep] / np.sqrt(length_sq[keep])
+    return out
+
+
+def _one_sided(left_ok: bool, right_ok: bool, left: Any, right: Any,
+               size: Callable[[Any], float], zero: Any) -> Any:
+    """The usable one-sided difference of smaller ``size``; the left/up one on a tie."""
+    if left_ok and right_ok:
+        return left if size(left) <= size(right) else right
+    if left_ok:
+        return left
+    if right_ok:
+        return right
+    return zero
+
+
+def depth_gradients(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Signed per-axis depth derivatives ``ddx``, ``ddy`` and the reprojection slope
+    ``max(|ddx|, |ddy|)``.
+
+    Per axis: the smaller (in magnitude) of the two one-sided differences, using only sides
+    whose neighbour is inside the image and not background, so a silhouette does not
+    inflate the slope of the surface it bounds. Background and pixels without a usable side
+    get 0.
+    """
+    z = np.asarray(depth, dtype=F64)
+    height, width = z.shape
+    ddx = np.zeros_like(z)
+    ddy = np.zeros_like(z)
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0.0:
+                continue
+            left_ok = x > 0 and z[y, x - 1] > 0.0
+            right_ok = x < width - 1 and z[y, x + 1] > 0.0
+            up_ok = y > 0 and z[y - 1, x] > 0.0
+            down_ok = y < height - 1 and z[y + 1, x] > 0.0
+            ddx[y, x] = _one_sided(
+                left_ok, right_ok,
+                z[y, x] - z[y, x - 1] if left_ok else 0.0,
+                z[y, x + 1] - z[y, x] if right_ok else 0.0, abs, 0.0,
+            )
+            ddy[y, x] = _one_sided(
+                up_ok, down_ok,
+                z[y, x] - z[y - 1, x] if up_ok else 0.0,
+                z[y + 1, x] - z[y, x] if down_ok else 0.0, abs, 0.0,
+            )
+    return ddx, ddy, np.maximum(np.abs(ddx), np.abs(ddy))
+
+
+def normal_gradient(unit_normal: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """``length(fwidth(n))`` with ``fwidth = |ddx n| + |ddy n|`` per component.
+
+    The per-axis difference vectors follow the same one-sided rule as the depth (the one
+    with the smaller length; the left/up one on a tie). Background gets 0.
+    """
+    n = np.asarray(unit_normal, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    height, width = z.shape
+    out = np.zeros_like(z)
+    zero = np.zeros(3)
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0.0:
+                continue
+            left_ok = x > 0 and z[y, x - 1] > 0.0
+            right_ok = x < width - 1 and z[y, x + 1] > 0.0
+            up_ok = y > 0 and z[y - 1, x] > 0.0
+            down_ok = y < height - 1 and z[y + 1, x] > 0.0
+            along_x = _one_sided(
+                left_ok, right_ok,
+                n[:, y, x] - n[:, y, x - 1] if left_ok else zero,
+                n[:, y, x + 1] - n[:, y, x] if right_ok else zero,
+                lambda v: float(v @ v), zero,
+            )
+            along_y = _one_sided(
+                up_ok, down_ok,
+                n[:, y, x] - n[:, y - 1, x] if up_ok else zero,
+                n[:, y + 1, x] - n[:, y, x] if down_ok else zero,
+                lambda v: float(v @ v), zero,
+            )
+            out[y, x] = float(np.linalg.norm(np.abs(along_x) + np.abs(along_y)))
+    return out
+
+
+@dataclass
+class Geometry:
+    """Everything the stages need from one frame's G-buffer, in float64."""
+
+    depth: np.ndarray
+    unit_normal: np.ndarray
+    ddx: np.ndarray
+    ddy: np.ndarray
+    depth_slope: np.ndarray
+    normal_width: np.ndarray
+
+    @property
+    def surface(self) -> np.ndarray:
+        return self.depth > 0.0
+
+
+def geometry(depth: np.ndarray, normal: np.ndarray) -> Geometry:
+    """Stage 0 as a whole (on the cleaned depth and normals)."""
+    z = np.asarray(depth, dtype=F64)
+    unit = unit_normals(normal, z)
+    ddx, ddy, slope = depth_gradients(z)
+    return Geometry(z, unit, ddx, ddy, slope, normal_gradient(unit, z))
+
+
+# --------------------------------------------------------------------------- 1 demodulation
+def effective_albedo(albedo: np.ndarray, black: float,
+                     max_reflectance: float = MAX_REFLECTANCE,
+                     relative_floor: float = RELATIVE_ALBEDO_FLOOR
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The mode rule and the divisor ``a'`` of one (cleaned) demodulation colour.
+
+    Returns ``(radiance_mode, a')``. A pixel is demodulated where the brightest channel
+    ``max(a)`` lies in ``[black, max_reflectance]`` (a plausible reflectance), with the
+    per-channel floor ``a'_c = max(a_c, black, relative_floor * max(a))``; elsewhere (black,
+    or brighter than a reflectance) it is filtered as radiance: ``a' = 1``.
+    """
+    a = clean_albedo(albedo)
+    brightest = a.max(axis=-3, keepdims=True)
+    demodulated = (brightest >= black) & (brightest <= max_reflectance)
+    floor = np.maximum(black, relative_floor * brightest)
+    divisor = np.where(demodulated, np.maximum(a, floor), 1.0)
+    return ~demodulated[..., 0, :, :], divisor
+
+
+def demodulate(radiance: np.ndarray, albedo: np.ndarray,
+               black: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """``illumination = clean(radiance) / a'`` clamped to +-1e15 (paper section 4; the value
+    policy). Returns ``(illumination, radiance_mode, clamped values)``."""
+    radiance_mode, divisor = effective_albedo(albedo, black)
+    illumination = clean_value(radiance) / divisor
+    clamped = int(np.sum(np.abs(illumination) > VALUE_LIMIT))
+    return np.clip(illumination, -VALUE_LIMIT, VALUE_LIMIT), radiance_mode, clamped
+
+
+def remodulate(illumination: np.ndarray, albedo: np.ndarray, black: float) -> np.ndarray:
+    """Inverse of :func:`demodulate`: ``a' * illumination`` (the same ``a'``)."""
+    return effective_albedo(albedo, black)[1] * np.asarray(illumination, dtype=F64)
+
+
+def radiance_with_background(radiance: np.ndarray, original: np.ndarray,
+                             depth: np.ndarray) -> np.ndarray:
+    """Background pixels are not filtered: their (cleaned) input radiance goes to the
+    output."""
+    out = np.array(radiance, dtype=F64)
+    background = np.asarray(depth) <= 0.0
+    out[:, background] = clean_value(original)[:, background]
+    return out
+
+
+# --------------------------------------------------------------------------- clamps
+def _neighbours(y: int, x: int, height: int, width: int,
+                include_centre: bool) -> Iterator[tuple[int, int]]:
+    for yy in range(y - 1, y + 2):
+        for xx in range(x - 1, x + 2):
+            if not (0 <= yy < height and 0 <= xx < width):
+                continue
+            if (yy, xx) == (y, x) and not include_centre:
+                continue
+            yield yy, xx
+
+
+def firefly_clamp(illumination: np.ndarray, depth: np.ndarray, k: float,
+                  weights: Sequence[float] = REC709) -> np.ndarray:
+    """Clamp each surface pixel's luminance to ``mean + k sigma`` (population sigma) of its
+    in-image surface neighbours, the centre left out; the rgb is scaled (hue kept).
+
+    A limit below 0 counts as 0; a pixel without such neighbours is left alone.
+    """
+    c = np.asarray(illumination, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    out = c.copy()
+    lum = luminance(c, weights)
+    num_signals, _, height, width = c.shape
+    for s in range(num_signals):
+        for y in range(height):
+            for x in range(width):
+                if z[y, x] <= 0.0:
+                    continue
+                values = [lum[s, yy, xx] for yy, xx in _neighbours(y, x, height, width, False)
+                          if z[yy, xx] > 0.0]
+                if not values:
+                    continue
+                limit = max(float(np.mean(values) + k * np.std(values)), 0.0)
+                if lum[s, y, x] > limit:
+                    out[s, :, y, x] *= limit / lum[s, y, x]
+    return out
+
+
+def history_clamp(history: np.ndarray, history_length: np.ndarray, current: np.ndarray,
+                  depth: np.ndarray, k: float) -> np.ndarray:
+    """Clamp each history channel to the current 3x3 (in-image surface pixels, centre
+    included) ``mean +- k sigma``; a signal's pixels without history (its ``h <= 0``) and
+    background are left alone."""
+    hist = np.array(history, dtype=F64)
+    cur = np.asarray(current, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    h = np.asarray(history_length, dtype=F64)
+    num_signals, _, height, width = hist.shape
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0.0:
+                continue
+            window = [(yy, xx) for yy, xx in _neighbours(y, x, height, width, True)
+                      if z[yy, xx] > 0.0]
+            for s in range(num_signals):
+                if h[s, y, x] <= 0.0:
+                    continue
+                for c in range(3):
+                    values = np.array([cur[s, c, yy, xx] for yy, xx in window])
+                    mean, sigma = values.mean(), values.std()
+                    hist[s, c, y, x] = min(max(hist[s, c, y, x], mean - k * sigma),
+                                           mean + k * sigma)
+    return hist
+
+
+# --------------------------------------------------------------------------- 2 reprojection
+@dataclass
+class History:
+    """One frame's persistent state, as the next frame reads it."""
+
+    illumination: np.ndarray  # (S, 3, H, W) colour history (the feedback iteration's output)
+    moments: np.ndarray  # (S, 2, H, W) integrated luminance moments (l, l^2)
+    history_length: np.ndarray  # (S, H, W)
+    radiance_mode: np.ndarray  # (S, H, W) the mode each signal's history was filtered in
+    has_history: np.ndarray  # (H, W) False where the history guard reset the pixel
+    depth: np.ndarray
+    unit_normal: np.ndarray
+    mesh_id: np.ndarray
+
+
+def tap_consistent(tx: int, ty: int, z: float, n: np.ndarray, mesh: int,
+                   depth_slope: float, normal_width: float, prev: History,
+                   depth_tolerance: float, depth_slack: float, normal_tolerance: float) -> bool:
+    """The paper's consistency tests for one previous-frame pixel ``(tx, ty)``.
+
+    Inside the image; not background; the same mesh id; depth
+    ``|z_prev - z| <= depth_tolerance * (slope + depth_slack * z)``; normal
+    ``||n - n_prev|| <= normal_tolerance * (fwidth_n + 0.01)``.
+    """
+    height, width = prev.depth.shape
+    if not (0 <= tx < width and 0 <= ty < height):
+        return False
+    z_prev = prev.depth[ty, tx]
+    if z_prev <= 0.0:
+        return False
+    if int(prev.mesh_id[ty, tx]) != int(mesh):
+        return False
+    if abs(z_prev - z) > depth_tolerance * (depth_slope + depth_slack * z):
+        return False
+    distance = float(np.linalg.norm(n - prev.unit_normal[:, ty, tx]))
+    return distance <= normal_tolerance * (normal_width + NORMAL_SLACK)
+
+
+@dataclass
+class Reprojected:
+    """Last frame's history resampled at this frame's pixels, per signal; a signal's
+    ``history_length`` 0 means rejected (disocclusion, or no tap of its current mode).
+    ``path`` (S, H, W) says which branch each signal took at each pixel: 0 rejected,
+    1 bilinear, 2 the 3x3 fallback (for tests that must exercise every branch)."""
+
+    illumination: np.ndarray
+    moments: np.ndarray
+    history_length: np.ndarray
+    path: np.ndarray
+
+
+REJECTED, BILINEAR, FALLBACK = 0, 1, 2
+
+
+def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray,
+              radiance_mode: np.ndarray, prev: History, depth_tolerance: float,
+              depth_slack: float, normal_tolerance: float) -> Reprojected:
+    """Resample ``prev`` at the backprojected positions, per signal (paper 4.1).
+
+    Per surface pixel: ``P = (x + motion.x, y + motion.y)``. A previous pixel is a usable
+    tap for signal ``s`` when it passes :func:`tap_consistent`, was not reset by the history
+    guard, and its history of ``s`` was filtered in the mode ``s`` has at the pixel now
+    (radiance and illumination history never mix). The bilinear weights of the usable 2x2
+    taps are renormalised to sum to 1, unless their sum is below 0.01, which rejects them.
+    Then: the plain average of the usable taps in the 3x3 around the rounded position
+    ``floor(P + 0.5)``; with none, a disocclusion of that signal. Colour, moments and
+    history length are resampled with the same weights; a history length within 1e-3 of a
+    whole number of frames is that number. Non-finite motion is a disocclusion.
+    """
+    z = geom.depth
+    height, width = z.shape
+    num_signals = prev.illumination.shape[0]
+    mv = np.asarray(motion, dtype=F64)
+    mode_now = np.asarray(radiance_mode, dtype=bool)
+    illumination = np.zeros((num_signals, 3, height, width))
+    moments = np.zeros((num_signals, 2, height, width))
+    history_length = np.zeros((num_signals, height, width))
+    path = np.full((num_signals, height, width), REJECTED, dtype=np.int8)
+    for y in range(height):
+        for x in range(width):
+            px, py = x + mv[0, y, x], y + mv[1, y, x]
+            if z[y, x] <= 0.0 or not (math.isfinite(px) and math.isfinite(py)):
+                continue
+
+            def consistent(tx: int, ty: int, x: int = x, y: int = y) -> bool:
+                return tap_consistent(
+                    tx, ty, z[y, x], geom.unit_normal[:, y, x], mesh_id[y, x],
+                    geom.depth_slope[y, x], geom.normal_width[y, x], prev, depth_tolerance,
+                    depth_slack, normal_tolerance,
+                )
+
+            x0, y0 = math.floor(px), math.floor(py)
+            fx, fy = px - x0, py - y0
+            taps = [(x0, y0, (1 - fx) * (1 - fy)), (x0 + 1, y0, fx * (1 - fy)),
+                    (x0, y0 + 1, (1 - fx) * fy), (x0 + 1, y0 + 1, fx * fy)]
+            cx, cy = math.floor(px + 0.5), math.floor(py + 0.5)
+            box = [(tx, ty) for ty in range(cy - 1, cy + 2) for tx in range(cx - 1, cx + 2)]
+            for s in range(num_signals):
+
+                def usable_tap(tx: int, ty: int, s: int = s, x: int = x, y: int = y) -> bool:
+                    return (consistent(tx, ty) and bool(prev.has_history[ty, tx])
+                            and bool(prev.radiance_mode[s, ty, tx]) == bool(mode_now[s, y, x]))
+
+                passing = [(tx, ty, w) for tx, ty, w in taps if usable_tap(tx, ty)]
+                total = sum(w for _, _, w in passing)
+                if total >= MIN_BILINEAR_WEIGHT:
+                    chosen = [(tx, ty, w / total) for tx, ty, w in passing]
+                    path[s, y, x] = BILINEAR
+                else:
+                    found = [(tx, ty) for tx, ty in box if usable_tap(tx, ty)]
+                    if not found:
+                        continue
+                    chosen = [(tx, ty, 1.0 / len(found)) for tx, ty in found]
+                    path[s, y, x] = FALLBACK
+                for tx, ty, w in chosen:
+                    illumination[s, :, y, x] += w * prev.illumination[s, :, ty, tx]
+                    moments[s, :, y, x] += w * prev.moments[s, :, ty, tx]
+                    history_length[s, y, x] += w * prev.history_length[s, ty, tx]
+    whole = np.floor(history_length + 0.5)
+    history_length = np.where(np.abs(history_length - whole) < WHOLE_SNAP, whole,
+                              history_length)
+    return Reprojected(illumination, moments, history_length, path)
+
+
+# --------------------------------------------------------------------------- 2 accumulation
+def accumulate(illumination: np.ndarray, reprojected_illumination: np.ndarray,
+               reprojected_moments: np.ndarray, reprojected_length: np.ndarray,
+               depth: np.ndarray, alpha: float, moments_alpha: float, history_cap: float,
+               weights: Sequence[float] = REC709
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Paper eq. 6 with the 1/h ramp, each signal with its own history length: returns
+    (illumination, moments, history length).
+
+    Where signal ``s``'s history was reused (surface, resampled ``h_prev[s] > 0``):
+    ``h = min(cap, h_prev + 1)``, ``c = lerp(c_hist, c, max(alpha, 1/h))`` and the moments
+    ``(l, l^2)`` (luminance with the frame's weights) likewise with
+    ``max(moments_alpha, 1/h)``. Elsewhere the current values (``h = 1``; background 0).
+    """
+    c = np.asarray(illumination, dtype=F64)
+    c_hist = np.asarray(reprojected_illumination, dtype=F64)
+    m_hist = np.asarray(reprojected_moments, dtype=F64)
+    h_prev = np.asarray(reprojected_length, dtype=F64)
+    surface = (np.asarray(depth) > 0.0)[None]
+    reused = surface & (h_prev > 0.0)
+    h = np.where(reused, np.minimum(history_cap, h_prev + 1.0), 1.0)
+    a = np.where(reused, np.maximum(alpha, 1.0 / h), 1.0)[:, None]
+    a_m = np.where(reused, np.maximum(moments_alpha, 1.0 / h), 1.0)[:, None]
+    lum = luminance(c, weights)
+    current_moments = np.stack([lum, lum * lum], axis=1)
+    blend = reused[:, None]
+    out_c = np.where(blend, (1.0 - a) * c_hist + a * c, c)
+    out_m = np.where(blend, (1.0 - a_m) * m_hist + a_m * current_moments, current_moments)
+    return out_c, out_m, np.where(surface, h, 0.0)
+
+
+# --------------------------------------------------------------------------- 3 variance
+def temporal_variance(moments: np.ndarray) -> np.ndarray:
+    """``Var = max(0, m2 - m1^2)`` from the integrated moments."""
+    m = np.asarray(moments, dtype=F64)
+    return np.maximum(m[:, 1] - m[:, 0] ** 2, 0.0)
+
+
+def depth_exponent(z_p: float, z_q: float, ddx_p: float, ddy_p: float, ox: float, oy: float,
+                   sigma_depth: float) -> float:
+    """Paper eq. 3's exponent with the projected gradient and a depth-relative epsilon:
+    ``|z(p) - z(q)| / (sigma_z |grad z(p) . (q - p)| + 1e-3 z(p))``."""
+    return abs(z_p - z_q) / (sigma_depth * abs(ddx_p * ox + ddy_p * oy) + DEPTH_EPSILON * z_p)
+
+
+def normal_weight(n_p: np.ndarray, n_q: np.ndarray, sigma_normal: float) -> float:
+    """Paper eq. 4: ``max(0, n(p).n(q)) ** sigma_n``."""
+    return max(0.0, float(n_p @ n_q)) ** sigma_normal
+
+
+def spatial_variance(illumination: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
+                     radiance_mode: np.ndarray, geom: Geometry, history_threshold: float,
+                     radius: int, sigma_depth: float, sigma_luminance: float,
+                     sigma_normal: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unboosted edge-aware spatial variance where a signal's ``0 < h < threshold`` (4.2).
+
+    Returns (variance, colour, mask), each per signal. Over the in-image ``(2r+1)^2`` box
+    around ``p``: ``w = w_n exp(-depth exponent - |m1(p) - m1(q)| / (sigma (|m1(p)| +
+    |m1(q)|) / 2 + 1e-30))`` (a luminance stop relative to the pair's mean luminance; the
+    centre has weight 1), and ``w = 0`` where ``q``'s mode for the signal differs from
+    ``p``'s; weighted means of ``m1``, ``m2`` and the colour; the population variance
+    ``max(0, E_w[m2] - E_w[m1]^2)`` is divided by ``1 - sum(w^2) / (h (sum w)^2)``, the
+    reliability-weights (Bessel) correction for a weighted sample of h-frame averages (a
+    lone sample, where that factor is 0, has no spread and stays 0). Pixels outside the mask
+    keep the temporal variance and their own colour. ``h >= 1`` wherever the mask is set
+    (the accumulation guarantees it).
+    """
+    c = np.asarray(illumination, dtype=F64)
+    m = np.asarray(moments, dtype=F64)
+    h = np.asarray(history_length, dtype=F64)
+    mode = np.asarray(radiance_mode, dtype=bool)
+    z, n = geom.depth, geom.unit_normal
+    num_signals, _, height, width = c.shape
+    variance = temporal_variance(m)
+    colour = c.copy()
+    mask = (h > 0.0) & (h < history_threshold)
+    for s, y, x in zip(*np.nonzero(mask), strict=True):
+        # The in-image window around p, as (taps,) arrays of q's coordinates.
+        qy, qx = np.mgrid[max(0, y - radius):min(height, y + radius + 1),
+                          max(0, x - radius):min(width, x + radius + 1)]
+        qy, qx = qy.ravel(), qx.ravel()
+        centre = (qy == y) & (qx == x)
+        w_n = np.maximum(n[:, y, x] @ n[:, qy, qx], 0.0) ** sigma_normal
+        depth_term = np.abs(z[y, x] - z[qy, qx]) / (
+            sigma_depth * np.abs(geom.ddx[y, x] * (qx - x) + geom.ddy[y, x] * (qy - y))
+            + DEPTH_EPSILON * z[y, x]
+        )
+        m1_p, m1_q, m2_q = m[s, 0, y, x], m[s, 0, qy, qx], m[s, 1, qy, qx]
+        scale = sigma_luminance * (abs(m1_p) + np.abs(m1_q)) / 2.0 + SPATIAL_TINY
+        luminance_term = np.abs(m1_p - m1_q) / scale
+        w = np.where(centre, 1.0, w_n * np.exp(-(depth_term + luminance_term)))
+        w = np.where(mode[s, qy, qx] == mode[s, y, x], w, 0.0)
+        total = w.sum()
+        mean1, mean2 = (w @ m1_q) / total, (w @ m2_q) / total
+        population = max(mean2 - mean1 * mean1, 0.0)
+        shrink = (w @ w) / total**2 / h[s, y, x]
+        if shrink < 1.0:
+            population /= 1.0 - shrink
+        variance[s, y, x] = population
+        colour[s, :, y, x] = c[s][:, qy, qx] @ w / total
+    return variance, colour, mask
+
+
+def boost_short_history(variance: np.ndarray, history_length: np.ndarray,
+                        history_threshold: float) -> np.ndarray:
+    """``Var *= threshold / h`` where ``0 < h < threshold`` (Falcor's 4/h), per signal."""
+    h = np.asarray(history_length, dtype=F64)
+    short = (h > 0.0) & (h < history_threshold)
+    boost = np.where(short, history_threshold / np.where(short, h, 1.0), 1.0)
+    return np.asarray(variance, dtype=F64) * boost
+
+
+def estimate_variance(illumination: np.ndarray, moments: np.ndarray,
+                      history_length: np.ndarray, radiance_mode: np.ndarray, geom: Geometry,
+                      params: SVGFParams) -> tuple[np.ndarray, np.ndarray]:
+    """Paper 4.2 as a whole: (variance, colour). The temporal variance, replaced where a
+    signal's history is short by the spatial estimate times ``threshold / h``; the colour is
+    the input, or with ``spatial_variance_blur_color`` the spatially filtered colour on
+    those pixels. A threshold <= 1 never selects the spatial estimate."""
+    threshold = float(params.variance_history_threshold)
+    if threshold <= 1.0:
+        return temporal_variance(moments), np.array(illumination, dtype=F64)
+    variance, colour, _ = spatial_variance(
+        illumination, moments, history_length, radiance_mode, geom, threshold,
+        params.spatial_variance_radius, params.sigma_depth,
+        params.spatial_variance_sigma_luminance, params.sigma_normal,
+    )
+    variance = boost_short_history(variance, history_length, threshold)
+    if not params.spatial_variance_blur_color:
+        colour = np.array(illumination, dtype=F64)
+    return variance, colour
+
+
+# --------------------------------------------------------------------------- 4 a-trous
+def atrous_steps(iterations: int) -> list[int]:
+    """The a-trous step schedule: iteration i filters at step 2^i (1, 2, 4, 8, 16, ...)."""
+    return [2**i for i in range(iterations)]
+
+
+def luminance_stop_guides(illumination: np.ndarray, variance: np.ndarray,
+                          depth: np.ndarray, sigma_luminance: float,
+                          weights: Sequence[float] = REC709) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel and signal: ``l(p) = max(0, luminance)`` (the frame's weights) and
+    ``1 / max(sigma_l sqrt(g3x3(Var(p)) + (1e-5 l(p))^2), 1e-20)``.
+
+    ``g3x3`` is the 3x3 Gaussian (1/4 centre, 1/8 edge, 1/16 corner) renormalised over the
+    in-image surface pixels; a pixel with none of those keeps its own variance. The floor on
+    the deviation is relative to ``l``, so scaling the input scales the output.
+    """
+    c = np.asarray(illumination, dtype=F64)
+    v = np.asarray(variance, dtype=F64)
+    surface = np.asarray(depth) > 0.0
+    height, width = surface.shape
+    total = np.zeros_like(v)
+    weight = np.zeros((height, width))
+    for oy in (-1, 0, 1):
+        for ox in (-1, 0, 1):
+            # q = p + (ox, oy) where that is inside the image and a surface pixel
+            target = (slice(max(0, -oy), height - max(0, oy)),
+                      slice(max(0, -ox), width - max(0, ox)))
+            source = (slice(max(0, oy), height + min(0, oy)),
+                      slice(max(0, ox), width + min(0, ox)))
+            g = G3[ox + 1] * G3[oy + 1] * surface[source]
+            weight[target] += g
+            total[(slice(None), *target)] += g * v[(slice(None), *source)]
+    filtered = np.where(weight > 0.0, total / np.where(weight > 0.0, weight, 1.0), v)
+    lum = np.maximum(luminance(c, weights), 0.0)
+    deviation = np.sqrt(np.maximum(filtered, 0.0) + (RELATIVE_DEVIATION_FLOOR * lum) ** 2)
+    return lum, 1.0 / np.maximum(sigma_luminance * deviation, MIN_SCALE)
+
+
+def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
+                     guide_luminance: np.ndarray, radiance_mode: np.ndarray,
+                     guide_inverse_scale: np.ndarray, depth: np.ndarray, ddx: np.ndarray,
+                     ddy: np.ndarray, normal: np.ndarray, step: int, sigma_depth: float,
+                     sigma_normal: float) -> tuple[np.ndarray, np.ndarray]:
+    """Paper eqs. 1-5 for every pixel and signal, one tap offset at a time.
+
+    Over the in-image taps ``q = p + step (i - 2, j - 2)`` of the 5x5 B3 kernel:
+    ``w = h(q) w_z w_n w_l`` with ``w_z = exp(-depth exponent)`` (eq. 3, see
+    :func:`depth_exponent`), ``w_n`` (eq. 4) and
+    ``w_l = exp(-|l(p) - l(q)| * guide_inverse_scale(p))`` (eq. 5), and ``w = 0`` where the
+    signal's mode at ``q`` differs from ``p``'s; the centre has weight ``h``.
+    ``c' = sum(w c) / sum(w)`` (eq. 1), ``Var' = sum(w^2 Var) / (sum w)^2`` (eq. 2).
+    Background centres (zero normal) receive weight only from themselves.
+    (Vectorised over pixels, taps in an outer loop: the per-pixel form of the same sums
+    took seconds per frame.)
+    """
+    c_in = np.asarray(illumination, dtype=F64)
+    v_in = np.asarray(variance, dtype=F64)
+    lum = np.asarray(guide_luminance, dtype=F64)
+    mode = np.asarray(radiance_mode, dtype=bool)
+    inv = np.asarray(guide_inverse_scale, dtype=F64)
+    z, gx, gy = (np.asarray(a, dtype=F64) for a in (depth, ddx, ddy))
+    n = np.asarray(normal, dtype=F64)
+    height, width = z.shape
+    py, px = np.mgrid[0:height, 0:width]
+    sum_w = np.zeros_like(v_in)
+    sum_c = np.zeros_like(c_in)
+    sum_w2v = np.zeros_like(v_in)
+    for j in range(5):
+        for i in range(5):
+            oy, ox = (j - 2) * step, (i - 2) * step
+            qy, qx = py + oy, px + ox
+            inside = (qy >= 0) & (qy < height) & (qx >= 0) & (qx < width)
+            qy, qx = np.clip(qy, 0, height - 1), np.clip(qx, 0, width - 1)
+            h = B3[i] * B3[j]
+            if (oy, ox) == (0, 0):
+                w = np.full_like(v_in, h)
+            else:
+                cosine = np.sum(n * n[:, qy, qx], axis=0)
+                w_n = np.maximum(cosine, 0.0) ** sigma_normal
+                facing = inside & (w_n > 0.0)  # also keeps 0/0 away on background centres
+                z_p = np.where(facing, z, 1.0)
+                w_z = np.abs(z_p - z[qy, qx]) / (
+                    sigma_depth * np.abs(gx * ox + gy * oy) + DEPTH_EPSILON * z_p
+                )
+                w_l = np.abs(lum - lum[:, qy, qx]) * inv
+                same_mode = mode == mode[:, qy, qx]
+                w = np.where(facing & same_mode, h * w_n * np.exp(-(w_z + w_l)), 0.0)
+            sum_w += w
+            sum_c += w[:, None] * c_in[:, :, qy, qx]
+            sum_w2v += w * w * v_in[:, qy, qx]
+    return sum_c / sum_w[:, None], sum_w2v / sum_w**2
+
+
+# --------------------------------------------------------------------------- TAA
+def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
+                alpha: float) -> np.ndarray:
+    """Temporal anti-aliasing of the output: ``lerp(clamp(prev(P)), current, alpha)``.
+
+    ``P = (x + motion.x, y + motion.y)`` (the same backward motion as the reprojection); the
+    previous output is sampled bilinearly there (indices clamped to the image) and clamped
+    per channel to the min/max of the current 3x3 neighbourhood (in-image pixels). A
+    position outside ``[-0.5, size - 0.5]`` takes the current value.
+    """
+    cur = np.asarray(current, dtype=F64)
+    prev = np.asarray(previous, dtype=F64)
+    mv = np.asarray(motion, dtype=F64)
+    _, height, width = cur.shape
+    out = cur.copy()
+    for y in range(height):
+        for x in range(width):
+            px, py = x + mv[0, y, x], y + mv[1, y, x]
+            if not (-0.5 <= px <= width - 0.5 and -0.5 <= py <= height - 0.5):
+                continue
+            x0, y0 = math.floor(px), math.floor(py)
+            fx, fy = px - x0, py - y0
+            xa, xb = min(max(x0, 0), width - 1), min(max(x0 + 1, 0), width - 1)
+            ya, yb = min(max(y0, 0), height - 1), min(max(y0 + 1, 0), height - 1)
+            sampled = ((1 - fy) * ((1 - fx) * prev[:, ya, xa] + fx * prev[:, ya, xb])
+                       + fy * ((1 - fx) * prev[:, yb, xa] + fx * prev[:, yb, xb]))
+            window = cur[:, max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].reshape(3, -1)
+            sampled = np.clip(sampled, window.min(axis=1), window.max(axis=1))
+            out[:, y, x] = sampled + alpha * (cur[:, y, x] - sampled)
+    return out
+
+
+# --------------------------------------------------------------------------- history guard
+def reset_nonfinite_history(history: History) -> int:
+    """In place: where any signal's history (colour, moments, history length) holds a
+    non-finite value, reset the pixel for every signal (zeros, history length 0, no
+    history for the next frame to resample). Returns how many pixels were reset."""
+    bad = ~(np.all(np.isfinite(history.illumination), axis=(0, 1))
+            & np.all(np.isfinite(history.moments), axis=(0, 1))
+            & np.all(np.isfinite(history.history_length), axis=0))
+    history.illumination[:, :, bad] = 0.0
+    history.moments[:, :, bad] = 0.0
+    history.history_length[:, bad] = 0.0
+    history.has_history[bad] = False
+    return int(bad.sum())
+
+
+# --------------------------------------------------------------------------- the whole
+@dataclass
+class ReferenceOutput:
+    """One frame's result, with the same names as ``DenoisedFrame`` and its debug layers:
+    ``color``; ``variance`` (S, H, W) before the a-trous; ``history_length`` (S, H, W);
+    ``radiance`` per signal name (remodulated, background restored, no emission);
+    ``radiance_mode`` (S, H, W); ``counts`` as ``DenoisedFrame.counts``."""
+
+    color: np.ndarray
+    variance: np.ndarray
+    history_length: np.ndarray
+    radiance_mode: np.ndarray
+    radiance: dict[str, np.ndarray] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class TemporalState:
+    """What :meth:`ReferenceDenoiser.before_accumulation` sees (the Denoiser's anti-lag
+    hook): this frame's demodulated ``current`` illumination and its ``radiance_mode``, and
+    the reprojected ``history`` (per signal; history length 0 = none), which it may change."""
+
+    current: np.ndarray
+    radiance_mode: np.ndarray
+    history: Reprojected
+    depth: np.ndarray
+    weights: tuple[float, float, float]
+
+
+class ReferenceDenoiser:
+    """The ``Denoiser`` pipeline in float64, stage by stage; owns the history.
+
+    Per frame: value policy -> geometry -> demodulate each signal by its own colour, with
+    its mode (+ firefly clamp) -> reproject each signal (mode-matched taps) ->
+    :meth:`before_accumulation` (the history clamp; anti-lag) -> accumulate each signal with
+    its own history length -> variance (+ colour blur) -> a-trous at steps 2^i, the output
+    of ``feedback_iteration`` (clamped to the last iteration; -1 or no iterations: the colour
+    entering the a-trous) becoming the colour history -> history guard -> remodulate,
+    restore background, sum the signals, add the emission once -> TAA.
+    """
+
+    def __init__(self, params: SVGFParams) -> None:
+        self.params = params
+        self.history: History | None = None
+        self.taa_previous: np.ndarray | None = None
+        self.last_reprojected: Reprojected | None = None  # for tests and diagnosis
+
+    def before_accumulation(self, temporal: TemporalState) -> None:
+        """Adjust the reprojected history before it is blended (today: the optional
+        history clamp). Lowering ``temporal.history.history_length[s]`` raises signal
+        ``s``'s blend factor there."""
+        p = self.params
+        if p.history_clamp > 0.0:
+            reprojected = temporal.history
+            reprojected.illumination = history_clamp(
+                reprojected.illumination, reprojected.history_length, temporal.current,
+                temporal.depth, p.history_clamp)
+
+    def process(self, frame: Frame) -> ReferenceOutput:
+        p = self.params
+        eps = p.albedo_epsilon
+        clean = apply_value_policy(frame)
+        counts = clean.counts
+        geom = geometry(clean.depth, clean.normal)
+        surface = geom.surface
+        planes = []
+        for index, name in enumerate(clean.names):
+            illumination, mode, clamped = demodulate(clean.radiance[index],
+                                                     clean.albedo[index], eps)
+            brightest = clean.albedo[index].max(axis=0)
+            counts[f"clamped.{name}"] = clamped
+            counts[f"radiance_mode.{name}"] = int(np.sum(mode & surface))
+            counts[f"implausible_albedo.{name}"] = int(
+                np.sum((brightest > MAX_REFLECTANCE) & surface))
+            planes.append((illumination, mode))
+        illumination = np.stack([c for c, _ in planes])
+        radiance_mode = np.stack([m for _, m in planes])
+        if p.firefly_clamp > 0.0:
+            illumination = firefly_clamp(illumination, geom.depth, p.firefly_clamp,
+                                         clean.weights)
+
+        shape = illumination.shape
+        if p.temporal and self.history is not None:
+            reprojected = reproject(clean.motion, geom, clean.mesh_id, radiance_mode,
+                                    self.history, p.depth_tolerance, p.depth_slack,
+                                    p.normal_tolerance)
+            self.before_accumulation(TemporalState(illumination, radiance_mode, reprojected,
+                                                   geom.depth, clean.weights))
+            self.last_reprojected = reprojected
+        else:
+            reprojected = Reprojected(np.zeros(shape), np.zeros((shape[0], 2, *shape[2:])),
+                                      np.zeros((shape[0], *shape[2:])),
+                                      np.zeros((shape[0], *shape[2:]), np.int8))
+        colour, moments, length = accumulate(
+            illumination, reprojected.illumination, reprojected.moments,
+            reprojected.history_length, geom.depth, p.alpha, p.moments_alpha, p.history_cap,
+            clean.weights)
+
+        variance, colour = estimate_variance(colour, moments, length, radiance_mode, geom, p)
+        variance_before_atrous = variance
+        feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
+        colour_history = colour
+        for iteration, step in enumerate(atrous_steps(p.atrous_iterations)):
+            guides = luminance_stop_guides(colour, variance, geom.depth, p.sigma_luminance,
+                                           clean.weights)
+            colour, variance = atrous_iteration(colour, variance, guides[0], radiance_mode,
+                                                guides[1], geom.depth, geom.ddx, geom.ddy,
+                                                geom.unit_normal, step, p.sigma_depth,
+                                                p.sigma_normal)
+            if iteration == feedback:
+                colour_history = colour
+        self.history = History(np.array(colour_history), np.array(moments), np.array(length),
+                               radiance_mode, np.ones(geom.depth.shape, bool), geom.depth,
+                               geom.unit_normal, np.array(clean.mesh_id))
+        counts["history_resets"] = reset_nonfinite_history(self.history)
+
+        per_signal = {}
+        for index, name in enumerate(clean.names):
+            radiance = remodulate(colour[index], clean.albedo[index], eps)
+            per_signal[name] = radiance_with_background(radiance, clean.radiance[index],
+                                                        geom.depth)
+        output = sum(per_signal.values())
+        if clean.emission is not None:
+            output = output + clean.emission
+        if p.taa:
+            if self.taa_previous is not None:
+                output = taa_resolve(output, self.taa_previous, clean.motion, p.taa_alpha)
+            self.taa_previous = output
+        return ReferenceOutput(output, variance_before_atrous, length, radiance_mode,
+                               per_signal, counts)

@@ -1,0 +1,67 @@
+"""Luminance weights from the EXR chromaticities attribute (Y row of RGB -> XYZ)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from svgf_cli.io.colour import REC709_CHROMATICITIES, luminance_weights, rgb_to_xyz_matrix
+
+ACESCG = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+REC2020 = (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290)
+AP0 = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
+
+
+@pytest.mark.parametrize(
+    ("chromaticities", "expected"),
+    [
+        (REC709_CHROMATICITIES, (0.2126, 0.7152, 0.0722)),  # ITU-R BT.709 / sRGB
+        (ACESCG, (0.2722, 0.6741, 0.0537)),  # ACES TB-2014-004 (AP1)
+        (REC2020, (0.2627, 0.6780, 0.0593)),  # ITU-R BT.2020
+        (AP0, (0.3440, 0.7282, -0.0721)),  # ACES2065-1: a negative blue weight, kept
+    ],
+)
+def test_published_luminance_rows(chromaticities, expected) -> None:
+    weights = luminance_weights(chromaticities)
+    assert np.allclose(weights.weights, expected, atol=1e-4)
+    assert abs(sum(weights.weights) - 1.0) < 1e-9
+    assert "from chromaticities" in weights.source
+
+
+def test_matrix_maps_white_to_y_one_and_primaries_to_their_chromaticity() -> None:
+    matrix = rgb_to_xyz_matrix(ACESCG)
+    white = matrix @ np.ones(3)
+    assert np.isclose(white[1], 1.0)
+    assert np.allclose(white[:2] / white.sum(), ACESCG[6:])
+    for column, (x, y) in zip(matrix.T, np.reshape(ACESCG[:6], (3, 2)), strict=True):
+        assert np.allclose(column[:2] / column.sum(), (x, y))
+
+
+def test_absent_and_broken_attributes_fall_back_to_rec709() -> None:
+    rec709 = (0.2126, 0.7152, 0.0722)
+    absent = luminance_weights(None)
+    assert np.allclose(absent.weights, rec709, atol=1e-4) and "no chromaticities" in absent.source
+    for broken in ((0, 0, 0, 0, 0, 0, 0.3, 0.3), (0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3, 0.0),
+                   (np.nan,) * 8, (0.1, 0.2)):
+        fallback = luminance_weights(broken)
+        assert np.allclose(fallback.weights, rec709, atol=1e-4)
+        assert "unusable" in fallback.source
+
+
+def test_xyz_encoded_file_weights_green_only() -> None:
+    xyz = luminance_weights((1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1 / 3, 1 / 3))
+    assert np.allclose(xyz.weights, (0.0, 1.0, 0.0), atol=1e-9)
+
+
+def test_non_negative_variant_for_kernels_that_need_it() -> None:
+    r, g, b = luminance_weights(AP0).non_negative()
+    assert b == 0.0 and np.isclose(r + g, 1.0) and r > 0 and g > 0
+
+
+def test_filter_weights_are_the_file_weights_unless_one_is_negative() -> None:
+    acescg = luminance_weights(ACESCG)
+    assert acescg.for_filter() == acescg.weights
+    assert "the filter uses" not in acescg.describe()
+    ap0 = luminance_weights(AP0)
+    assert ap0.for_filter() == ap0.non_negative()
+    assert "the filter uses R 0.3208, G 0.6792, B 0.0000" in ap0.describe()

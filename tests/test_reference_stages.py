@@ -1,0 +1,685 @@
+"""Each kernel of the temporal half alone against the float64 reference (``reference_svgf``).
+
+Inputs are built to take every branch: background, image borders, black, one-channel-black
+and brighter-than-a-reflectance demodulation colours, several signals with colours of their
+own, emission, non-finite and beyond-limit values, depth edges inside one mesh, mesh-id
+changes at equal depth, normal creases and grazing normals, disocclusions, taps outside the
+image, the bilinear path, the 3x3 fallback (also the one reached because the passing
+bilinear weight is below 0.01), taps of another demodulation mode and reset (no-history)
+taps, non-finite motion. Each test asserts that its inputs really reach those branches.
+
+Tolerances: the kernels run in float32 (relative rounding 6e-8 per operation, a few dozen
+operations per output) and the spatial-variance weights use ``fast_exp`` (relative error
+< 4e-6). Pure arithmetic stages are held to 1e-6 relative, the weighted ones to 2e-5,
+which is 10 to 100 times tighter than any of the planted bugs the suite must catch
+(``tests/mutants/plant.py``), whose effects are percent-level or more. Modes, masks, counts
+and the value policy's replacements are compared exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import reference_svgf as ref
+from moving_scene import ACESCG_LUMINANCE, plant_extremes, scene_frame
+
+from svgf_cli.filters import values
+from svgf_cli.filters.clamp import firefly_clamp, history_clamp
+from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
+from svgf_cli.filters.edges import normal_squarings
+from svgf_cli.filters.fastmath import REC709, float32_weights
+from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
+from svgf_cli.filters.modulate import (
+    DEMODULATE_COUNTERS,
+    NO_HISTORY,
+    demodulate,
+    remodulate,
+    remodulate_add,
+)
+from svgf_cli.filters.reproject import accumulate, reproject
+from svgf_cli.filters.taa import taa_resolve
+from svgf_cli.filters.variance import (
+    boost_short_history,
+    estimate_variance,
+    spatial_variance,
+    temporal_variance,
+)
+from svgf_cli.frame import Frame
+
+F32 = np.float32
+EPS = 1e-3  # albedo floor (the default)
+RULE = (F32(EPS), F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
+ACESCG = float32_weights(ACESCG_LUMINANCE)
+
+
+def _close(got: np.ndarray, want: np.ndarray, rtol: float, what: str = "",
+           scale: float | None = None) -> None:
+    """``|got - want| <= rtol * (|want| + scale)``: relative, with an absolute floor at the
+    quantity's scale (default ``max|want|``: values that cancel to near 0 are held to the
+    same absolute precision as the largest ones). A variance ``m2 - m1^2`` is a difference
+    of moments: its scale is the moments' (float32 rounds ``m2``, not the difference)."""
+    want = np.asarray(want, dtype=np.float64)
+    if scale is None:
+        scale = float(np.max(np.abs(want))) if want.size else 0.0
+    np.testing.assert_allclose(got, want, rtol=rtol, atol=rtol * scale, err_msg=what)
+
+
+def mode_mask(radiance_mode: np.ndarray) -> np.ndarray:
+    """The (S, H, W) booleans as the kernels' (H, W) uint16 mode mask."""
+    return np.asarray(sum(radiance_mode[s].astype(np.uint16) << s
+                          for s in range(len(radiance_mode))), dtype=np.uint16)
+
+
+def mode_bits(mask: np.ndarray, num_signals: int) -> np.ndarray:
+    """The kernels' uint16 mode mask as (S, H, W) booleans."""
+    return np.stack([(mask >> s) & 1 == 1 for s in range(num_signals)])
+
+
+# --------------------------------------------------------------------------- kernels
+# Thin adapters: the only place that knows the kernels' calling conventions.
+def kernel_geometry(frame: Frame) -> dict[str, np.ndarray]:
+    height, width = frame.depth.shape
+    planes = {name: np.zeros((height, width), F32)
+              for name in ("ddx", "ddy", "depth_slope", "normal_width")}
+    unit = np.zeros((3, height, width), F32)
+    unit_normals(frame.normal, frame.depth, unit)
+    depth_gradients(frame.depth, planes["ddx"], planes["ddy"], planes["depth_slope"])
+    normal_gradient(unit, frame.depth, planes["normal_width"])
+    return {**planes, "unit_normal": unit, "depth": frame.depth}
+
+
+def as_reference(g: dict[str, np.ndarray]) -> ref.Geometry:
+    """The kernels' float32 geometry as the reference's, so a stage is compared alone."""
+    return ref.Geometry(*(g[k].astype(np.float64) for k in (
+        "depth", "unit_normal", "ddx", "ddy", "depth_slope", "normal_width")))
+
+
+def kernel_demodulated(frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(illumination (S, 3, H, W), uint16 mode mask, per-signal counter totals); the depth
+    (which only decides what counts as a surface) cleaned first, as the Denoiser does."""
+    depth = values.cleaned_depth(frame.depth)
+    out = np.zeros((len(frame.signals), *frame.albedo.shape), F32)
+    mode = np.full(frame.depth.shape, 0xFFFF, np.uint16)  # signal 0 overwrites it
+    totals = []
+    for index, signal in enumerate(frame.signals):
+        rows = np.zeros((frame.height, DEMODULATE_COUNTERS), np.int64)
+        demodulate(signal.radiance, signal.albedo, depth, *RULE, index, out[index], mode, rows)
+        totals.append(rows.sum(axis=0))
+    return out, mode, np.array(totals)
+# --------------------------------------------------------------------------- 0 geometry
+def _rough_geometry() -> tuple[np.ndarray, np.ndarray]:
+    """Integer depths (ties between one-sided differences, ridges with opposite-sign sides),
+    background holes and edges, random and degenerate normals."""
+    rng = np.random.default_rng(4)
+    height, width = 9, 11
+    depth = rng.integers(1, 6, (height, width)).astype(F32)
+    depth[0, :3] = 0.0
+    depth[4, 5] = 0.0  # isolated hole: neighbours lose one side on each axis
+    depth[:, -1] = 0.0
+    depth[6, 2] = 0.0
+    depth[7, 2] = 0.0
+    normal = rng.normal(size=(3, height, width)).astype(F32)
+    # Degenerate normals on surface pixels, next to the background column so that their
+    # one-sided normal differences (unit length on both sides) are not a tie.
+    normal[:, 2, -2] = 0.0
+    normal[:, 3, -2] = 1e-7
+    return depth, normal
+
+
+@pytest.mark.parametrize("source", ["rough", "scene"])
+def test_geometry_matches_reference(source: str) -> None:
+    if source == "rough":
+        depth, normal = _rough_geometry()
+        albedo = np.full((3, *depth.shape), 0.5, F32)
+    else:
+        frame = scene_frame(3)
+        depth, normal, albedo = frame.depth, frame.normal, frame.albedo
+    frame = Frame.combined(albedo, albedo=albedo, normal=normal, depth=depth,
+                           motion=np.zeros((2, *depth.shape), F32),
+                           mesh_id=np.ones(depth.shape, np.int32))
+    got = kernel_geometry(frame)
+    unit = ref.unit_normals(normal, depth)
+    _close(got["unit_normal"], unit, 1e-6, "unit normals")
+    ddx, ddy, slope = ref.depth_gradients(depth)
+    _close(got["ddx"], ddx, 1e-6, "ddx")
+    _close(got["ddy"], ddy, 1e-6, "ddy")
+    _close(got["depth_slope"], slope, 1e-6, "slope")
+    # The normal gradient is compared on the kernel's own unit normals (stage alone).
+    _close(got["normal_width"], ref.normal_gradient(got["unit_normal"], depth), 1e-6, "fwidth")
+    if source == "rough":
+        # The branches: ties between equal-magnitude sides with opposite signs, pixels with
+        # one usable side, pixels with none (zero derivative), degenerate normals.
+        left = np.abs(depth[1:-1, 1:-2] - depth[1:-1, :-3])
+        right = np.abs(depth[1:-1, 2:-1] - depth[1:-1, 1:-2])
+        assert np.any((left == right) & (left > 0))
+        assert np.any((got["ddx"] == 0) & (depth > 0) & (np.roll(depth, 1, 1) == 0))
+        assert np.all(got["unit_normal"][:, 2:4, -2] == 0) and np.all(depth[2:4, -2] > 0)
+
+
+# --------------------------------------------------------------------------- values
+def test_value_policy_of_the_geometry_matches_reference() -> None:
+    """Depth, normal and motion of a frame with every kind of bad value: the Denoiser's
+    cleaners and counters against the reference's policy, exactly."""
+    frame = scene_frame(2, layout="three")
+    plant_extremes(frame)
+    frame.depth[1, 1] = -1e20  # beyond the limit but background anyway: still counted
+    frame.motion[0, 3, 3] = 1e30  # finite: kept (it only means no history)
+    clean = ref.apply_value_policy(frame)
+    # Exactly (the reference's 1e15 rounds to the kernels' float32 VALUE_LIMIT).
+    np.testing.assert_array_equal(values.cleaned_depth(frame.depth), clean.depth.astype(F32))
+    np.testing.assert_array_equal(values.cleaned_normal(frame.normal), clean.normal.astype(F32))
+    np.testing.assert_array_equal(values.cleaned_motion(frame.motion), clean.motion.astype(F32))
+    counted = values.count_geometry(frame.depth, frame.normal, frame.motion)
+    for plane in ("depth", "normal", "motion"):
+        nonfinite, extreme = counted[plane]
+        assert clean.counts.get(f"nonfinite.{plane}", 0) == nonfinite, plane
+        if plane != "motion":  # far-away motion is not a problem: never counted as one
+            assert clean.counts.get(f"extreme.{plane}", 0) == extreme, plane
+    assert counted["depth"] == (2, 2) and counted["motion"] == (2, 1)
+    assert clean.motion[0, 3, 3] == F32(1e30) and np.all(clean.motion[:, 13, 10:12] == 1e15)
+    assert np.all(clean.normal[:, 12, 8:10] == 0.0)
+    assert clean.depth[13, 5] == clean.depth[14, 6] == clean.depth[15, 7] == 0.0
+
+
+def test_history_guard_matches_reference() -> None:
+    rng = np.random.default_rng(21)
+    shape = (3, 7, 9)
+    illumination = rng.gamma(2.0, 0.5, (3, 3, 7, 9)).astype(F32)
+    moments = rng.gamma(2.0, 0.5, (3, 2, 7, 9)).astype(F32)
+    length = rng.choice([0.0, 1.0, 4.0], size=shape).astype(F32)
+    illumination[2, 1, 0, 0] = np.nan
+    moments[0, 1, 3, 4] = -np.inf
+    length[1, 6, 8] = np.inf
+    moments[1, 0, 2, 2] = 3e38  # finite: not the guard's business
+    mode = rng.integers(0, 8, (7, 9)).astype(np.uint16)
+    history = ref.History(illumination.astype(np.float64), moments.astype(np.float64),
+                          length.astype(np.float64), mode_bits(mode, 3),
+                          np.ones((7, 9), bool), np.ones((7, 9)), np.zeros((3, 7, 9)),
+                          np.ones((7, 9), np.int32))
+    want = ref.reset_nonfinite_history(history)
+    got = values.reset_nonfinite_history(illumination, moments, length, mode)
+    assert got == want == 3
+    np.testing.assert_array_equal(illumination, history.illumination)
+    np.testing.assert_array_equal(moments, history.moments)
+    np.testing.assert_array_equal(length, history.history_length)
+    np.testing.assert_array_equal(mode == NO_HISTORY, ~history.has_history)
+
+
+# --------------------------------------------------------------------------- 1 demodulation
+@pytest.mark.parametrize("layout", ["split", "combined", "three"])
+def test_demodulation_round_trip_matches_reference(layout: str) -> None:
+    """Each signal by its own colour: the mode rule (black, brighter than a reflectance,
+    one black channel floored), the value policy (bad radiance and albedo, a demodulated
+    value beyond the limit clamped) and the counts, then the remodulation and the one-pass
+    sum with background and emission."""
+    frame = scene_frame(2, layout=layout)
+    plant_extremes(frame)
+    first = frame.signals[0]
+    first.radiance[:, 10, 20] = 5e13  # over the 1e-3 floor: 5e16, clamped to 1e15
+    first.albedo[:, 10, 20] = 1e-3
+    depth = values.cleaned_depth(frame.depth)
+    got, mode, totals = kernel_demodulated(frame)
+    surface = depth > 0
+    clean = ref.apply_value_policy(frame)
+    for index, signal in enumerate(frame.signals):
+        want, radiance_mode, clamped = ref.demodulate(signal.radiance, signal.albedo, EPS)
+        np.testing.assert_array_equal(mode_bits(mode, len(frame.signals))[index], radiance_mode)
+        _close(got[index], want, 1e-6, f"demodulate {signal.name}")
+        name = signal.name
+        assert totals[index].tolist() == [
+            clean.counts.get(f"nonfinite.radiance.{name}", 0),
+            clean.counts.get(f"extreme.radiance.{name}", 0),
+            clean.counts.get(f"nonfinite.albedo.{name}", 0),
+            int(np.sum(radiance_mode & surface)),
+            int(np.sum((ref.clean_albedo(signal.albedo).max(axis=0) > MAX_REFLECTANCE)
+                       & surface)),
+            clamped,
+        ], name
+        back = np.empty_like(signal.radiance)
+        remodulate(got[index], signal.albedo, *RULE, back)
+        _close(back, ref.remodulate(got[index], signal.albedo, EPS), 1e-6)
+        inverse = ref.usable(signal.radiance) & (np.abs(want) < 1e15)
+        np.testing.assert_allclose(back[inverse], signal.radiance[inverse], rtol=1e-5,
+                                   atol=1e-6)  # exact inverse
+    # The branches: black, implausible (in the three layout the glossy copper) and
+    # one-channel-black colours; the clamp.
+    assert totals[:, 3].sum() > 10 and totals[:, 4].sum() >= 1 and totals[0, 5] == 3
+    # Remodulation, background restore, the sum of the signals and the emission in one pass.
+    total = np.zeros_like(frame.albedo)
+    rows = np.zeros((frame.height, 2), np.int64)
+    for index, signal in enumerate(frame.signals):
+        remodulate_add(got[index], signal.radiance, signal.albedo, depth, frame.emission,
+                       index == 0, *RULE, total, rows)
+        if index == 0:
+            assert rows.sum(axis=0).tolist() == [clean.counts["nonfinite.emission"],
+                                                 clean.counts["extreme.emission"]]
+    want = sum(ref.radiance_with_background(ref.remodulate(got[i], s.albedo, EPS), s.radiance,
+                                            depth) for i, s in enumerate(frame.signals))
+    _close(total, want + ref.clean_value(frame.emission), 1e-6, "remodulate_add")
+
+
+def test_mode_rule_thresholds() -> None:
+    """The rule's edges: brightest channel at 1.05 (in) and above (out), at the black
+    floor (in) and below (out); the per-channel floor relative to the brightest channel."""
+    albedo = np.ascontiguousarray(np.array(
+        [[1.05, 0.5, 0.0], [1.06, 0.5, 0.0], [1e-3, 0.0, 0.0], [9e-4, 9e-4, 9e-4],
+         [0.8, 1e-4, 0.01]], F32).T[:, None, :])
+    radiance_mode, divisor = ref.effective_albedo(albedo, EPS)
+    assert radiance_mode[0].tolist() == [False, True, False, True, False]
+    np.testing.assert_allclose(divisor[:, 0, 4], [0.8, 0.016, 0.016])
+    np.testing.assert_allclose(divisor[:, 0, 2], [1e-3, 1e-3, 1e-3])
+    out = np.empty((3, 1, 5), F32)
+    mode = np.zeros((1, 5), np.uint16)
+    demodulate(np.ones((3, 1, 5), F32), albedo, np.ones((1, 5), F32), *RULE, 0, out, mode,
+               np.zeros((1, DEMODULATE_COUNTERS), np.int64))
+    np.testing.assert_array_equal(mode[0] == 1, radiance_mode[0])
+    _close(out, 1.0 / divisor, 1e-6)
+
+
+# --------------------------------------------------------------------------- clamps
+def _spiky_illumination(seed: int, height: int = 9, width: int = 10) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(seed)
+    illumination = rng.gamma(2.0, 0.5, (2, 3, height, width)).astype(F32)
+    illumination[0, :, 4, 4] *= 40.0  # fireflies, one at the border
+    illumination[1, :, 0, 7] *= 25.0
+    depth = np.full((height, width), 5.0, F32)
+    depth[2, :4] = 0.0  # background: skipped and left out of the neighbour statistics
+    depth[7, 0] = 0.0
+    depth[8, 1] = 0.0
+    return illumination, depth
+
+
+@pytest.mark.parametrize("weights", [REC709, ACESCG], ids=["rec709", "acescg"])
+def test_firefly_clamp_matches_reference(weights: tuple) -> None:
+    illumination, depth = _spiky_illumination(1)
+    out = np.empty_like(illumination)
+    firefly_clamp(illumination, depth, F32(1.5), weights, out)
+    want = ref.firefly_clamp(illumination, depth, 1.5, weights)
+    _close(out, want, 2e-5, "firefly clamp")
+    changed = np.any(want != illumination, axis=1)
+    assert changed[0, 4, 4] and changed[1, 0, 7] and changed.sum() > 10
+    assert np.all(want[:, :, depth <= 0] == illumination[:, :, depth <= 0])
+
+
+def test_history_clamp_matches_reference() -> None:
+    current, depth = _spiky_illumination(2)
+    rng = np.random.default_rng(3)
+    history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
+    # Per signal: a signal's pixels without history are left alone, the other's clamped.
+    length = rng.choice([0.0, 1.0, 2.5, 8.0], size=(2, *depth.shape)).astype(F32)
+    got = history.copy()
+    history_clamp(got, length, current, depth, F32(1.0))
+    want = ref.history_clamp(history, length, current, depth, 1.0)
+    _close(got, want, 2e-5, "history clamp")
+    assert np.sum(want != history) > 50  # it clamps, ...
+    for s in range(2):
+        untouched = (length[s] <= 0) | (depth <= 0)
+        assert untouched.any() and np.all(want[s][:, untouched] == history[s][:, untouched])
+    assert np.any((length[0] <= 0) & (length[1] > 0) & np.any(want[1] != history[1], axis=0))
+
+
+# --------------------------------------------------------------------------- 2 reprojection
+def _history_for(prev: Frame, seed: int) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    shape = prev.depth.shape
+    return {
+        "illumination": rng.gamma(2.0, 0.5, (2, 3, *shape)).astype(F32),
+        "moments": rng.gamma(2.0, 0.5, (2, 2, *shape)).astype(F32),
+        "length": rng.choice([1.0, 2.0, 3.5, 6.0, 32.0], size=(2, *shape)).astype(F32),
+    }
+
+
+def _run_reproject(prev: Frame, cur: Frame, history: dict[str, np.ndarray],
+                   tolerances: tuple[float, float, float] = (10.0, 0.002, 16.0),
+                   mode: np.ndarray | None = None, prev_mode: np.ndarray | None = None):
+    """The kernel and the reference on the same float32 geometry; returns both.
+
+    ``mode`` and ``prev_mode`` are the kernels' uint16 masks (default: every signal
+    demodulated everywhere); ``prev_mode`` may carry ``NO_HISTORY``."""
+    g_prev, g_cur = kernel_geometry(prev), kernel_geometry(cur)
+    num_signals = history["illumination"].shape[0]
+    height, width = cur.depth.shape
+    mode = np.zeros((height, width), np.uint16) if mode is None else mode
+    prev_mode = np.zeros((height, width), np.uint16) if prev_mode is None else prev_mode
+    out = (np.full((num_signals, 3, height, width), np.nan, F32),
+           np.full((num_signals, 2, height, width), np.nan, F32),
+           np.full((num_signals, height, width), np.nan, F32))
+    reproject(cur.motion, cur.depth, g_cur["unit_normal"], cur.mesh_id, mode,
+              g_cur["depth_slope"], g_cur["normal_width"], prev.depth, g_prev["unit_normal"],
+              prev.mesh_id, prev_mode, history["illumination"], history["moments"],
+              history["length"], *(F32(t) for t in tolerances), *out)
+    previous = ref.History(history["illumination"].astype(np.float64),
+                           history["moments"].astype(np.float64),
+                           history["length"].astype(np.float64),
+                           mode_bits(prev_mode, num_signals), prev_mode & NO_HISTORY == 0,
+                           prev.depth.astype(np.float64),
+                           g_prev["unit_normal"].astype(np.float64), prev.mesh_id)
+    want = ref.reproject(cur.motion, as_reference(g_cur), cur.mesh_id,
+                         mode_bits(mode, num_signals), previous, *tolerances)
+    return out, want
+
+
+def _assert_reprojection_matches(out, want: ref.Reprojected) -> None:
+    illumination, moments, length = out
+    _close(length, want.history_length, 1e-6, "history length")
+    _close(illumination, want.illumination, 1e-6, "illumination")
+    _close(moments, want.moments, 1e-6, "moments")
+
+
+def test_reprojection_of_the_moving_scene_matches_reference() -> None:
+    """Disocclusions behind the object, the mesh-id-only edge of the sticker, the depth step
+    and the normal crease inside the object, the left column's taps outside the image."""
+    for t in (1, 2, 4):
+        prev, cur = scene_frame(t - 1), scene_frame(t)
+        out, want = _run_reproject(prev, cur, _history_for(prev, seed=t))
+        _assert_reprojection_matches(out, want)
+        surface = cur.depth > 0
+        assert np.sum(want.path[0] == ref.BILINEAR) > 250
+        assert np.sum(want.path[0] == ref.FALLBACK) >= 5
+        if t % 2 == 0:
+            assert np.sum((want.path[0] == ref.REJECTED) & surface) >= 2
+
+
+def test_reprojection_with_perturbed_history_takes_every_test() -> None:
+    """The scene with its previous frame perturbed (ids, depths, normals, background pixels)
+    and sub-pixel motion jitter: every test rejects somewhere, on its own."""
+    rng = np.random.default_rng(8)
+    prev, cur = scene_frame(2), scene_frame(3)
+    shape = prev.depth.shape
+    surface = prev.depth > 0
+    changed_id = rng.random(shape) < 0.08
+    prev.mesh_id[changed_id & surface] += 5
+    nearer = rng.random(shape) < 0.08
+    prev.depth[nearer & surface] *= F32(0.9)
+    tilted = rng.random(shape) < 0.08
+    prev.normal[:, tilted & surface] = np.array([0.0, 0.7, 0.7], F32)[:, None]
+    holes = rng.random(shape) < 0.04
+    prev.depth[holes] = 0.0
+    cur.motion += rng.uniform(-0.45, 0.45, cur.motion.shape).astype(F32)
+    cur.motion[:, 5, 0] = np.nan
+    cur.motion[0, 6, 1] = np.inf
+    cur.motion[1, 7, 1] = -1e30
+    out, want = _run_reproject(prev, cur, _history_for(prev, seed=9))
+    _assert_reprojection_matches(out, want)
+    # Each test alone must reject some tap: loosen one tolerance at a time.
+    for tolerances in ((1e9, 1e9, 16.0), (10.0, 0.002, 1e9)):
+        loose_out, loose_want = _run_reproject(prev, cur, _history_for(prev, seed=9), tolerances)
+        _assert_reprojection_matches(loose_out, loose_want)
+        assert np.sum(loose_want.history_length != want.history_length) > 5
+    assert np.sum(want.path[0] == ref.FALLBACK) > 10
+    assert np.all(want.history_length[:, 5:8, :2][:, np.isnan(cur.motion[0, 5:8, :2])] == 0)
+
+
+def _flat(width: int, height: int, **planes: np.ndarray) -> Frame:
+    depth = np.full((height, width), 5.0, F32)
+    normal = np.zeros((3, height, width), F32)
+    normal[2] = 1.0
+    frame = Frame.combined(np.ones((3, height, width), F32),
+                           albedo=np.full((3, height, width), 0.5, F32), normal=normal,
+                           depth=depth, motion=np.zeros((2, height, width), F32),
+                           mesh_id=np.ones((height, width), np.int32))
+    for name, plane in planes.items():
+        setattr(frame, name, plane)
+    return frame
+
+
+def test_reprojection_fallback_and_rejection_cases() -> None:
+    """Hand-placed cases on a flat plane, each with its expected branch."""
+    height, width = 10, 12
+    prev = _flat(width, height)
+    # Case A lands at (1.995, 1.995): three of its 2x2 taps, (2, 1), (1, 2) and (2, 2), carry
+    # another id.
+    prev.mesh_id[1, 2] = 7
+    prev.mesh_id[2, 1] = 7
+    prev.mesh_id[2, 2] = 7
+    prev.depth[6:10, 8:12] = 0.0  # a background corner: case C finds nothing at all
+    motion = np.zeros((2, height, width), F32)
+    motion[:, 1, 1] = 0.995  # A: only tap (1, 1) passes, weight 2.5e-5 < 0.01 -> 3x3 fallback
+    motion[:, 4, 4] = 0.25  # B: all four taps pass -> bilinear
+    motion[:, 8, 9] = 0.5  # C: every tap in the background -> rejected
+    motion[0, 5, 0] = -0.5  # D: the left taps are outside the image -> bilinear on two
+    cur = _flat(width, height, motion=motion)
+    history = _history_for(prev, seed=1)
+    out, want = _run_reproject(prev, cur, history)
+    _assert_reprojection_matches(out, want)
+    assert np.all(want.path[:, 1, 1] == ref.FALLBACK)
+    box = [(ty, tx) for ty in range(1, 4) for tx in range(1, 4) if prev.mesh_id[ty, tx] == 1]
+    for s in range(2):
+        np.testing.assert_allclose(out[2][s, 1, 1],
+                                   np.mean([history["length"][s][q] for q in box]), rtol=1e-6)
+    assert np.all(want.path[:, 4, 4] == ref.BILINEAR)
+    assert np.all(want.path[:, 8, 9] == ref.REJECTED) and np.all(out[2][:, 8, 9] == 0.0)
+    assert np.all(want.path[:, 5, 0] == ref.BILINEAR)
+    np.testing.assert_allclose(out[2][:, 5, 0], history["length"][:, 5, 0], rtol=1e-6)
+
+
+def test_resampled_history_length_keeps_whole_counts() -> None:
+    """A footprint of equal history lengths resamples to exactly that length at any
+    sub-pixel position. (Float32 renormalised weights used to give 2.9999998 for 3 at about
+    9 % of positions, so a pixel with four frames of history fell below the variance
+    threshold of 4 and got the spatial estimate.) Mixed lengths stay fractional."""
+    height, width = 24, 32
+    rng = np.random.default_rng(12)
+    prev = _flat(width, height)
+    motion = rng.uniform(-0.99, 0.99, (2, height, width)).astype(F32)
+    cur = _flat(width, height, motion=motion)
+    history = _history_for(prev, seed=2)
+    history["length"][:] = 3.0
+    history["length"][:, :, width // 2:] = 2.0
+    out, want = _run_reproject(prev, cur, history)
+    _assert_reprojection_matches(out, want)
+    length = out[2][1]
+    inside = (slice(2, -2), slice(2, width // 2 - 2))
+    assert np.all(length[inside] == 3.0)
+    assert np.all(length[inside] + 1.0 >= 4.0)  # the next frame's h reaches the threshold
+    mixed = length[2:-2, width // 2 - 1:width // 2 + 1]
+    assert np.any((mixed > 2.0) & (mixed < 3.0))
+
+
+
+def _scene_modes(frame: Frame) -> np.ndarray:
+    """The uint16 mode mask of a frame's signals by the reference's rule."""
+    return mode_mask(np.stack([ref.effective_albedo(signal.albedo, EPS)[0]
+                               for signal in frame.signals]))
+
+
+def test_reprojection_matches_taps_by_mode_per_signal() -> None:
+    """Three signals with modes of their own (the moving black stripe changes the diffuse
+    signal's mode under the history of some pixels, the glossy and transmission colours
+    change mode at the object's edges) and reset (no-history) previous pixels: each signal
+    uses only the taps of its own current mode, so the signals take different branches at
+    the same pixel; reset taps serve no signal."""
+    rng = np.random.default_rng(31)
+    for t in (2, 3):
+        prev, cur = scene_frame(t - 1, layout="three"), scene_frame(t, layout="three")
+        shape = prev.depth.shape
+        history = _history_for(prev, seed=t)
+        history = {k: np.concatenate([v, v[:1]]) for k, v in history.items()}  # 3 signals
+        prev_mode = _scene_modes(prev)
+        reset = (rng.random(shape) < 0.06) & (prev.depth > 0)
+        prev_mode[reset] = NO_HISTORY
+        mode = _scene_modes(cur)
+        out, want = _run_reproject(prev, cur, history, mode=mode, prev_mode=prev_mode)
+        _assert_reprojection_matches(out, want)
+        # Without the modes (and the resets) the same pixels would reproject differently.
+        blind, blind_want = _run_reproject(prev, cur, history)
+        _assert_reprojection_matches(blind, blind_want)
+        surface = cur.depth > 0
+        differ = (want.path != blind_want.path) & surface
+        assert differ[0].sum() >= 4 and differ[2].sum() >= 2
+        # The signals part: at some pixels one signal is rejected or falls back while
+        # another resamples bilinearly.
+        parted = np.any(want.path != want.path[:1], axis=0) & surface
+        assert parted.sum() >= 4
+
+
+def test_shared_weights_give_the_per_signal_bits() -> None:
+    """Where every usable tap has the pixel's modes the kernel uses one set of weights for
+    all signals; forcing the per-signal path (a third signal whose mode changed everywhere)
+    must give signals 0 and 1 the same bits, and the third no history at all."""
+    prev, cur = scene_frame(1), scene_frame(2)
+    cur.motion += np.random.default_rng(5).uniform(-0.4, 0.4, cur.motion.shape).astype(F32)
+    history = _history_for(prev, seed=4)
+    shared, _ = _run_reproject(prev, cur, history)
+    third = {k: np.concatenate([v, v[:1]]) for k, v in history.items()}
+    shape = prev.depth.shape
+    forced, want = _run_reproject(prev, cur, third, mode=np.zeros(shape, np.uint16),
+                                  prev_mode=np.full(shape, 4, np.uint16))
+    _assert_reprojection_matches(forced, want)
+    for a, b in zip(shared, forced, strict=True):
+        assert a.tobytes() == b[:2].tobytes()
+    assert np.all(forced[2][2] == 0.0) and np.all(want.path[2] == ref.REJECTED)
+    assert np.sum(want.path[0] == ref.FALLBACK) >= 5 and np.sum(want.path[0] == ref.BILINEAR)
+
+
+# --------------------------------------------------------------------------- 2 accumulation
+@pytest.mark.parametrize(("alpha", "moments_alpha", "cap", "weights"),
+                         [(0.2, 0.2, 32.0, REC709), (0.05, 0.2, 8.0, ACESCG)])
+def test_accumulation_matches_reference(alpha: float, moments_alpha: float, cap: float,
+                                        weights: tuple) -> None:
+    rng = np.random.default_rng(5)
+    height, width = 6, 8
+    current = rng.gamma(2.0, 0.5, (2, 3, height, width)).astype(F32)
+    history = rng.gamma(2.0, 0.5, (2, 3, height, width)).astype(F32)
+    moments = rng.gamma(2.0, 0.5, (2, 2, height, width)).astype(F32)
+    lengths = [0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 7.5, 19.0, 31.0, 31.5, 40.0]
+    # Each signal its own history length: signal 1's are signal 0's reversed.
+    previous = rng.choice(lengths, size=(2, height, width)).astype(F32)
+    previous[0, 0, :len(lengths)] = lengths[:width]
+    previous[0, 1, :len(lengths) - width] = lengths[width:]
+    previous[1] = previous[0, ::-1, ::-1]
+    depth = np.full((height, width), 3.0, F32)
+    depth[5, 2:5] = 0.0  # background: h = 0, current values
+    out = (np.empty_like(current), np.empty_like(moments), np.empty_like(previous))
+    accumulate(current, history, moments, previous, depth, F32(alpha), F32(moments_alpha),
+               F32(cap), weights, *out)
+    want = ref.accumulate(current, history, moments, previous, depth, alpha, moments_alpha, cap,
+                          weights)
+    _close(out[0], want[0], 1e-6, "illumination")
+    _close(out[1], want[1], 1e-6, "moments")
+    _close(out[2], want[2], 0.0, "history length")
+    # The 1/h ramp, colour and moments alike: h_prev = 1 gives h = 2 and a blend of 1/2.
+    lum = float(np.asarray(weights, np.float64) @ current[0, :, 0, 2])
+    assert previous[0, 0, 2] == 1.0 and previous[1, 0, 2] != 1.0
+    np.testing.assert_allclose(out[1][0, 0, 0, 2], 0.5 * moments[0, 0, 0, 2] + 0.5 * lum,
+                               rtol=1e-6)
+    np.testing.assert_allclose(out[0][0, :, 0, 2], 0.5 * (history + current)[0, :, 0, 2],
+                               rtol=1e-6)
+    assert not np.allclose(out[0][1, :, 0, 2], 0.5 * (history + current)[1, :, 0, 2])
+
+
+# --------------------------------------------------------------------------- 3 variance
+def _variance_inputs(seed: int) -> tuple[np.ndarray, ...]:
+    """Accumulated-looking inputs of the three-signal scene (its modes) with mixed history
+    lengths, different per signal: (illumination, moments, length, mode mask, frame)."""
+    rng = np.random.default_rng(seed)
+    frame = scene_frame(3, layout="three", luminance_weights=ACESCG_LUMINANCE)
+    planes = [ref.demodulate(s.radiance, s.albedo, EPS) for s in frame.signals]
+    illumination = np.stack([c for c, _, _ in planes]).astype(F32)
+    mode = mode_mask(np.stack([m for _, m, _ in planes]))
+    lum = ref.luminance(illumination, ACESCG_LUMINANCE)
+    spread = rng.uniform(0.0, 0.5, lum.shape)
+    moments = np.stack([lum, lum * lum + spread], axis=1).astype(F32)
+    length = rng.choice([1.0, 2.0, 3.0, 3.5, 4.0, 6.0], size=(3, *frame.depth.shape))
+    length[:, :, :6] = 1.0  # a cold band over the black patch and the left border
+    length[1, :, 18:] = 6.0  # one signal long-history where the others are not
+    length[:, frame.depth <= 0] = 0.0
+    return illumination, moments, length.astype(F32), mode, frame
+
+
+@pytest.mark.parametrize(("radius", "sigma_normal"), [(3, 128.0), (1, 128.0), (2, 64.0),
+                                                      (3, 100.0)])
+def test_spatial_variance_matches_reference(radius: int, sigma_normal: float) -> None:
+    illumination, moments, length, mode, frame = _variance_inputs(seed=radius)
+    g = kernel_geometry(frame)
+    variance = np.full((3, *frame.depth.shape), -1.0, F32)
+    blurred = np.full_like(illumination, -1.0)
+    spatial_variance(illumination, moments, length, mode, frame.depth, g["ddx"], g["ddy"],
+                     g["unit_normal"], F32(4.0), radius, F32(1.0), F32(10.0),
+                     normal_squarings(sigma_normal), F32(sigma_normal), True, variance, blurred)
+    radiance_mode = mode_bits(mode, 3)
+    want_variance, want_colour, short = ref.spatial_variance(
+        illumination, moments, length, radiance_mode, as_reference(g), 4.0, radius, 1.0, 10.0,
+        sigma_normal)
+    assert short.sum() > 300 and (~short & (frame.depth > 0)).sum() > 150
+    _close(variance[short], want_variance[short], 2e-5, "spatial variance",
+           float(moments[:, 1].max()))
+    _close(np.moveaxis(blurred, 1, -1)[short], np.moveaxis(want_colour, 1, -1)[short], 2e-5,
+           "blurred colour")
+    assert np.all(variance[~short] == -1.0)  # other pixels untouched
+    # The estimate is not trivially the temporal one, radiance-mode pixels are in it, and
+    # the mode test matters: without it the estimate moves by far more than the tolerance.
+    assert np.mean(np.abs(want_variance - ref.temporal_variance(moments))[short]) > 0.05
+    assert np.any(short & radiance_mode)
+    blind, _, _ = ref.spatial_variance(illumination, moments, length, np.zeros_like(short),
+                                       as_reference(g), 4.0, radius, 1.0, 10.0, sigma_normal)
+    assert np.sum(np.abs(blind - want_variance)[short] > 1e-3 * want_variance[short]) > 20
+
+
+@pytest.mark.parametrize("blur", [False, True])
+def test_variance_estimate_with_boost_matches_reference(blur: bool) -> None:
+    from svgf_cli.filters.params import resolve_params
+
+    illumination, moments, length, mode, frame = _variance_inputs(seed=11)
+    g = kernel_geometry(frame)
+    params = resolve_params("paper", spatial_variance_blur_color=blur)
+    variance = np.empty((3, *frame.depth.shape), F32)
+    colour = np.empty_like(illumination) if blur else None
+    estimate_variance(illumination, moments, length, mode, frame.depth, g["ddx"], g["ddy"],
+                      g["unit_normal"], history_threshold=4.0, radius=3, sigma_depth=1.0,
+                      sigma_luminance=10.0, squarings=7, sigma_normal=128.0,
+                      out_variance=variance, out_illumination=colour)
+    want_variance, want_colour = ref.estimate_variance(illumination, moments, length,
+                                                       mode_bits(mode, 3), as_reference(g),
+                                                       params)
+    m2_scale = float(moments[:, 1].max())
+    _close(variance, want_variance, 2e-5, "variance", m2_scale)
+    if blur:
+        _close(colour, want_colour, 2e-5, "colour")
+    temporal = np.empty_like(variance)
+    temporal_variance(moments, temporal)
+    _close(temporal, ref.temporal_variance(moments), 1e-6, "temporal variance", m2_scale)
+    long_history = length >= 4.0
+    np.testing.assert_array_equal(variance[long_history], temporal[long_history])
+    boosted = variance.copy()
+    boost_short_history(boosted, length, F32(4.0))
+    _close(boosted, ref.boost_short_history(variance, length, 4.0), 1e-6, "boost")
+    # The boost is 4 / h: h = 1, 2, 3, 3.5 pixels all present; signals decide on their own.
+    assert {1.0, 2.0, 3.0, 3.5} <= set(np.unique(length[(length > 0) & (length < 4)]).tolist())
+    assert np.any(long_history[1] & (length[0] < 4.0) & (length[0] > 0))
+
+
+# --------------------------------------------------------------------------- TAA
+def test_taa_matches_reference() -> None:
+    rng = np.random.default_rng(6)
+    height, width = 9, 12
+    current = rng.gamma(2.0, 0.5, (3, height, width)).astype(F32)
+    previous = rng.gamma(2.0, 0.5, (3, height, width)).astype(F32)
+    motion = rng.uniform(-2.5, 2.5, (2, height, width)).astype(F32)
+    motion[0, :, 0] = -0.75  # outside on the left (x - 0.75 < -0.5): current value
+    motion[0, :, 1] = -1.25  # just inside the image: clamped taps
+    motion[1, 0, :] = -0.25
+    out = np.empty_like(current)
+    taa_resolve(current, previous, motion, F32(0.1), out)
+    want = ref.taa_resolve(current, previous, motion, 0.1)
+    _close(out, want, 1e-6, "taa")
+    np.testing.assert_array_equal(out[:, :, 0], current[:, :, 0])
+
+
+def test_taa_follows_the_motion_of_a_translating_image() -> None:
+    """An image that moved by exactly (+2, +1) px: with its history reprojected through the
+    backward motion, a slow blend (alpha 0.1) returns the current image unchanged."""
+    y, x = np.mgrid[0:12, 0:14].astype(np.float64)
+
+    def image(shift_x: float, shift_y: float) -> np.ndarray:
+        u, v = x - shift_x, y - shift_y
+        return np.stack([1 + np.sin(0.9 * u), 1 + np.cos(0.7 * v), 1 + np.sin(0.5 * (u + v))]
+                        ).astype(F32)
+
+    previous, current = image(0, 0), image(2, 1)
+    motion = np.stack([np.full(x.shape, -2.0), np.full(x.shape, -1.0)]).astype(F32)
+    out = np.empty_like(current)
+    taa_resolve(current, previous, motion, F32(0.1), out)
+    inside = (slice(None), slice(1, None), slice(2, None))
+    np.testing.assert_allclose(out[inside], current[inside], rtol=1e-6, atol=1e-6)
+    _close(out, ref.taa_resolve(current, previous, motion, 0.1), 1e-6)
