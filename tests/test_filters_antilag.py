@@ -1,10 +1,12 @@
-"""The anti-lag stage against a float64 transcription of its equations, and its behaviour
-on noise alone (no false alarms), on a lighting step and on a moving edge."""
+"""The anti-lag stage against the float64 reference (``reference_svgf.antilag``), and its
+behaviour on noise alone (no false alarms), on a lighting step, on a moving edge, with
+temporal gradient samples, and through the Denoiser."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from reference_svgf import antilag as reference_antilag
 
 from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape, scratch_shape
 
@@ -12,79 +14,13 @@ F32 = np.float32
 REC709 = np.array([0.2126, 0.7152, 0.0722], dtype=F32)
 
 
-def _reference_gradient_change(mask, previous, current, radius, sigma):
-    """Relative change of the gradient samples per cell window (float64), 0 where the mean
-    delta is not significant."""
-    height, width = mask.shape
-    cells_y, cells_x = (height + 1) // 2, (width + 1) // 2
-    out = np.zeros((cells_y, cells_x))
-    has = mask > 0
-    delta = current.astype(np.float64) - previous.astype(np.float64)
-    level = np.maximum(current, previous).astype(np.float64)
-    for cy in range(cells_y):
-        for cx in range(cells_x):
-            window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
-                      slice(2 * max(cx - radius, 0), 2 * (cx + radius + 1)))
-            v = has[window]
-            n = v.sum()
-            if n < 2:
-                continue
-            d = delta[window][v]
-            if d.mean() ** 2 > sigma**2 * d.var(ddof=1) / n and level[window][v].sum() > 0:
-                out[cy, cx] = min(abs(d.sum()) / level[window][v].sum(), 1.0)
-    return out
-
-
 def _reference(current, moments, history_length, depth, weights, radius, sigma,
                spatial_samples, tolerance, moments_alpha=0.2, gradients=None):
-    """Cell sums, window statistics, blend weight, 3x3 cell dilation and the shortened
-    history length, in float64, one cell and one window at a time."""
-    w = weights.astype(np.float64)
-    num_signals, _, height, width = current.shape
-    cells_y, cells_x = (height + 1) // 2, (width + 1) // 2
-    lam = np.zeros((num_signals, cells_y, cells_x))
-    new_length = history_length.astype(np.float64).copy()
-    stationary = moments_alpha / (2.0 - moments_alpha)
-    for s in range(num_signals):
-        lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
-        m1 = moments[s, 0].astype(np.float64)
-        temporal = np.maximum(moments[s, 1].astype(np.float64) - m1 * m1, 0.0)
-        valid = (history_length[s] > 0) & (depth > 0)
-        length = history_length[s].astype(np.float64)
-        raw = np.zeros((cells_y, cells_x))
-        change = None
-        if gradients is not None and gradients[s] is not None:
-            change = _reference_gradient_change(*gradients[s], radius, sigma)
-        for cy in range(cells_y):
-            for cx in range(cells_x):
-                window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
-                          slice(2 * max(cx - radius, 0), 2 * (cx + radius + 1)))
-                v = valid[window]
-                n = v.sum()
-                if n < MIN_SAMPLES:
-                    continue
-                c = lum[window][v]
-                mean_c = c.mean()
-                mean_h = m1[window][v].mean()
-                var = max(c.var(ddof=1), temporal[window][v].mean())
-                share = max(1.0 / max(length[window][v].mean(), 1.0), stationary)
-                diff2 = (mean_h - mean_c) ** 2
-                level = max(mean_c, mean_h)
-                if diff2 > sigma**2 * var / n * (1 + share) + (tolerance * level) ** 2:
-                    bias2 = diff2 - var / n
-                    raw[cy, cx] = bias2 / (bias2 + var / spatial_samples)
-                if change is not None:
-                    bias2 = (change[cy, cx] * mean_h) ** 2
-                    raw[cy, cx] = max(raw[cy, cx], bias2 / (bias2 + var / spatial_samples))
-        for cy in range(cells_y):
-            for cx in range(cells_x):
-                lam[s, cy, cx] = raw[max(cy - 1, 0):cy + 2, max(cx - 1, 0):cx + 2].max()
-        for y in range(height):
-            for x in range(width):
-                best = lam[s, y // 2, x // 2]
-                if valid[y, x] and best > 0:
-                    new_length[s, y, x] = min(new_length[s, y, x], max(1.0 / best - 1.0, 0.0))
-    return lam, new_length
+    """The float64 reference stage (lambda per cell, new history length)."""
+    lam, length, _ = reference_antilag(current, moments, history_length, depth, weights,
+                                       radius, sigma, spatial_samples, tolerance,
+                                       moments_alpha, gradients, MIN_SAMPLES)
+    return lam, length
 
 
 def _case(seed: int, height: int = 20, width: int = 28, num_signals: int = 2,

@@ -264,10 +264,12 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
-            counts["antilag"] = self._before_accumulation(TemporalState(
+            shortened = self._before_accumulation(TemporalState(
                 names, illumination, mode, accumulated, moments, history_length, depth, weights,
                 _gradient_samples(frame) if p.antilag_gradients else None,
             ))
+            if p.antilag:
+                counts["antilag"] = shortened
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
             history_length.fill(0.0)

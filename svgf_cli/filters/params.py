@@ -138,7 +138,11 @@ PRESETS: dict[str, SVGFParams] = {
 }
 
 
-def resolve_params(preset: str = "default", **overrides: Any) -> SVGFParams:
+# The preset used when none is named (CLI, evaluation baselines, farm templates).
+DEFAULT_PRESET = "default"
+
+
+def resolve_params(preset: str = DEFAULT_PRESET, **overrides: Any) -> SVGFParams:
     """Start from a preset and apply the overrides that are not None."""
     if preset not in PRESETS:
         raise ValueError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
