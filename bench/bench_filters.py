@@ -80,7 +80,9 @@ class SceneCanvas:
         self.rng = rng
 
     def frame(self, index: int) -> Frame:
-        x0 = self.pan - (index % (self.pan + 1))  # camera pans right: content moves left
+        # The crop slides left over the canvas, so the content moves one pixel right per frame:
+        # what pixel x shows was at x - 1 in the previous frame (backward motion -1).
+        x0 = self.pan - (index % (self.pan + 1))
         sl = np.s_[..., x0:x0 + self.width]
         h, w = self.height, self.width
 
@@ -93,7 +95,7 @@ class SceneCanvas:
         direct = albedo * crop(self.direct) * spp[0]
         indirect = albedo * crop(self.indirect) * spp[1]
         motion = np.zeros((2, h, w), dtype=F32)
-        motion[0] = 1.0 if index % (self.pan + 1) else 0.0
+        motion[0] = -1.0 if index % (self.pan + 1) else 0.0
         if self.signals == 2:
             signals = [Signal("direct", np.ascontiguousarray(direct, dtype=F32), albedo),
                        Signal("indirect", np.ascontiguousarray(indirect, dtype=F32), albedo)]

@@ -50,17 +50,31 @@ def _check_plane(name: str, plane: np.ndarray, shape: tuple[int, ...], dtype: ty
 
 
 @dataclass
+class TemporalGradient:
+    """A-SVGF temporal gradient samples of one signal (``svgf trace --gradient-samples``):
+    at pixels where ``mask`` is 1, the luminance of last frame's sample there (``previous``)
+    and of the same surface sample re-shaded in this frame with last frame's random numbers
+    (``current``); each (H, W) float32."""
+
+    mask: np.ndarray
+    previous: np.ndarray
+    current: np.ndarray
+
+
+@dataclass
 class Signal:
     """One noisy radiance signal and the colour it is demodulated by.
 
     ``radiance`` excludes emission. ``albedo`` is the demodulation colour: the signal is
     filtered as ``radiance / albedo`` where that is a plausible reflectance (every channel
     at most ~1, not black) and as plain radiance elsewhere (see ``filters.modulate``).
+    ``gradient`` optionally holds its temporal gradient samples (used by anti-lag).
     """
 
     name: str
     radiance: np.ndarray
     albedo: np.ndarray
+    gradient: TemporalGradient | None = None
 
 
 @dataclass(kw_only=True)
@@ -183,6 +197,10 @@ class Frame:
             seen.add(s.name)
             _check_plane(f"{s.name} radiance", s.radiance, (3, h, w), f32)
             _check_plane(f"{s.name} albedo", s.albedo, (3, h, w), f32)
+            if s.gradient is not None:
+                for part in ("mask", "previous", "current"):
+                    _check_plane(f"{s.name} gradient {part}", getattr(s.gradient, part),
+                                 (h, w), f32)
         weights = tuple(self.luminance_weights)
         if len(weights) != 3 or not all(
             isinstance(v, (int, float, np.floating)) and math.isfinite(v) and v >= 0.0
@@ -241,6 +259,8 @@ COUNT_KEYS = {
     "implausible_albedo.<signal>": "of those, pixels whose demodulation colour exceeds a"
     " reflectance (a channel above 1 + tolerance)",
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
+    "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
+    " matched them (information, not a problem)",
 }
 
 

@@ -28,7 +28,7 @@ from svgf_cli.evaluate.metrics import METRICS
 from svgf_cli.evaluate.plot import write_plot
 from svgf_cli.evaluate.report import EvaluationReport
 from svgf_cli.evaluate.synthetic import write_synthetic_sequence
-from svgf_cli.filters.params import resolve_params
+from svgf_cli.filters.params import DEFAULT_PRESET, resolve_params
 from svgf_cli.io.patterns import SequencePattern
 
 REPO = Path(__file__).resolve().parent.parent
@@ -201,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="*", type=Path, help="sequence folders")
     parser.add_argument("--docs", type=Path, default=REPO / "docs")
-    parser.add_argument("--preset", default="paper")
+    parser.add_argument("--preset", default=DEFAULT_PRESET)
     args = parser.parse_args(argv)
 
     sections = []

@@ -79,8 +79,12 @@ def _wall_albedo(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = True,
                 width: int = WIDTH, height: int = HEIGHT, wall_speed: float = 0.5,
                 object_velocity: tuple[float, float] = (2.5, 1.0), moving_edge: bool = False,
-                luminance_weights: tuple[float, float, float] = REC709_LUMINANCE) -> Frame:
+                luminance_weights: tuple[float, float, float] = REC709_LUMINANCE,
+                light_step: tuple[int, float] | None = None) -> Frame:
     """Frame ``t`` (0, 1, ...) of the scene. ``noise=False`` gives the noise-free frame.
+
+    ``light_step`` ``(frame, factor)``: from that frame on every light (not the emitters
+    or the sky) is scaled by ``factor``, a lighting change no geometric test sees.
 
     ``layout`` is ``"split"``, ``"combined"`` or ``"three"`` (see the module docstring).
     ``wall_speed`` (px per frame, rightwards) and ``object_velocity`` change the motion;
@@ -171,6 +175,9 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
     lamp = body & (a >= 3.0) & (a < 5.0) & (b >= 4.0) & (b < 6.0)
     emission[:, lamp] = EMISSION[:, None]
 
+    if light_step is not None and t >= light_step[0]:
+        for light in (direct, indirect, glossy_light, transmission_light):
+            light *= light_step[1]
     rng = np.random.default_rng(1000 * seed + t)
     draws = rng.exponential(1.0, (2, height, width)) if noise else np.ones((2, height, width))
     # Black-albedo pixels carry radiance of their own (a dark metal reflecting something).

@@ -25,6 +25,7 @@ values                  :func:`apply_value_policy` (:func:`clean_value`,        
                         mode-matched taps)
 + anti-lag hook         :meth:`ReferenceDenoiser.before_accumulation`            denoiser
 + history clamp         :func:`history_clamp`                                    clamp
++ anti-lag              :func:`antilag` (:func:`antilag_gradient_change`)         antilag
 2 accumulation          :func:`accumulate` (paper eq. 6, 1/h ramp per signal)    reproject
 3 variance              :func:`temporal_variance`, :func:`spatial_variance`,     variance
                         :func:`boost_short_history`, :func:`estimate_variance`
@@ -853,6 +854,90 @@ class TemporalState:
     weights: tuple[float, float, float]
 
 
+def antilag_gradient_change(mask, previous, current, radius, sigma):
+    """A-SVGF gradient samples: per 2x2 cell, over the window of (2r+1)^2 cells, the relative
+    change ``|sum delta| / sum max(curr, prev)`` where the mean delta exceeds ``sigma``
+    standard errors of the samples (Bessel-corrected), else 0."""
+    height, width = mask.shape
+    cells_y, cells_x = (height + 1) // 2, (width + 1) // 2
+    out = np.zeros((cells_y, cells_x))
+    has = mask > 0
+    delta = current.astype(np.float64) - previous.astype(np.float64)
+    level = np.maximum(current, previous).astype(np.float64)
+    for cy in range(cells_y):
+        for cx in range(cells_x):
+            window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
+                      slice(2 * max(cx - radius, 0), 2 * (cx + radius + 1)))
+            v = has[window]
+            n = v.sum()
+            if n < 2:
+                continue
+            d = delta[window][v]
+            if d.mean() ** 2 > sigma**2 * d.var(ddof=1) / n and level[window][v].sum() > 0:
+                out[cy, cx] = min(abs(d.sum()) / level[window][v].sum(), 1.0)
+    return out
+
+
+def antilag(current, moments, history_length, depth, weights, radius, sigma, spatial_samples,
+            tolerance, moments_alpha, gradients=None, min_samples=4):
+    """Anti-lag (``filters.antilag``), every cell window the obvious way: per signal, over
+    the pixels with history in the (2r+1)^2 cells of 2x2 pixels around a cell, the current
+    luminance's mean and Bessel-corrected variance, the reprojected first moment's mean, the
+    mean temporal variance and history length; stale where the squared difference exceeds
+    sigma^2 var/n (1 + max(1/h, a/(2-a))) + (tolerance level)^2; weight b^2 / (b^2 +
+    var / N) with b^2 = diff^2 - var/n (and the gradient samples' bias when given); 3x3
+    cell maximum; ``h = min(h, 1/lambda - 1)``. Returns (lambda per cell (S, Hc, Wc), new
+    history length (S, H, W), how many histories were shortened)."""
+    w = np.asarray(weights, dtype=np.float64)
+    num_signals, _, height, width = current.shape
+    cells_y, cells_x = (height + 1) // 2, (width + 1) // 2
+    lam = np.zeros((num_signals, cells_y, cells_x))
+    new_length = np.asarray(history_length, dtype=np.float64).copy()
+    stationary = moments_alpha / (2.0 - moments_alpha)
+    for s in range(num_signals):
+        lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
+        m1 = moments[s, 0].astype(np.float64)
+        temporal = np.maximum(moments[s, 1].astype(np.float64) - m1 * m1, 0.0)
+        valid = (history_length[s] > 0) & (depth > 0)
+        length = np.asarray(history_length[s], dtype=np.float64)
+        change = None
+        if gradients is not None and gradients[s] is not None:
+            change = antilag_gradient_change(*gradients[s], radius, sigma)
+        raw = np.zeros((cells_y, cells_x))
+        for cy in range(cells_y):
+            for cx in range(cells_x):
+                window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
+                          slice(2 * max(cx - radius, 0), 2 * (cx + radius + 1)))
+                v = valid[window]
+                n = v.sum()
+                if n < min_samples:
+                    continue
+                c = lum[window][v]
+                mean_c = c.mean()
+                mean_h = m1[window][v].mean()
+                var = max(c.var(ddof=1), temporal[window][v].mean())
+                share = max(1.0 / max(length[window][v].mean(), 1.0), stationary)
+                diff2 = (mean_h - mean_c) ** 2
+                level = max(mean_c, mean_h)
+                if diff2 > sigma**2 * var / n * (1 + share) + (tolerance * level) ** 2:
+                    bias2 = diff2 - var / n
+                    raw[cy, cx] = bias2 / (bias2 + var / spatial_samples)
+                if change is not None:
+                    bias2 = (change[cy, cx] * mean_h) ** 2
+                    if bias2 > 0:
+                        raw[cy, cx] = max(raw[cy, cx], bias2 / (bias2 + var / spatial_samples))
+        for cy in range(cells_y):
+            for cx in range(cells_x):
+                lam[s, cy, cx] = raw[max(cy - 1, 0):cy + 2, max(cx - 1, 0):cx + 2].max()
+        for y in range(height):
+            for x in range(width):
+                best = lam[s, y // 2, x // 2]
+                if valid[y, x] and best > 0:
+                    new_length[s, y, x] = min(new_length[s, y, x], max(1.0 / best - 1.0, 0.0))
+    shortened = int(np.count_nonzero(new_length < np.asarray(history_length) - 1e-6))
+    return lam, new_length, shortened
+
+
 class ReferenceDenoiser:
     """The ``Denoiser`` pipeline in float64, stage by stage; owns the history.
 
@@ -871,16 +956,24 @@ class ReferenceDenoiser:
         self.taa_previous: np.ndarray | None = None
         self.last_reprojected: Reprojected | None = None  # for tests and diagnosis
 
-    def before_accumulation(self, temporal: TemporalState) -> None:
-        """Adjust the reprojected history before it is blended (today: the optional
-        history clamp). Lowering ``temporal.history.history_length[s]`` raises signal
-        ``s``'s blend factor there."""
+    def before_accumulation(self, temporal: TemporalState) -> int | None:
+        """Adjust the reprojected history before it is blended: the optional history clamp,
+        then anti-lag. Lowering ``temporal.history.history_length[s]`` raises signal ``s``'s
+        blend factor there. Returns anti-lag's count (None when it is off)."""
         p = self.params
+        reprojected = temporal.history
         if p.history_clamp > 0.0:
-            reprojected = temporal.history
             reprojected.illumination = history_clamp(
                 reprojected.illumination, reprojected.history_length, temporal.current,
                 temporal.depth, p.history_clamp)
+        if not p.antilag:
+            return None
+        _, length, shortened = antilag(
+            temporal.current, reprojected.moments, reprojected.history_length, temporal.depth,
+            temporal.weights, p.antilag_radius, p.antilag_sigma, p.antilag_spatial_samples,
+            p.antilag_tolerance, p.moments_alpha)
+        reprojected.history_length = length
+        return shortened
 
     def process(self, frame: Frame) -> ReferenceOutput:
         p = self.params
@@ -910,8 +1003,10 @@ class ReferenceDenoiser:
             reprojected = reproject(clean.motion, geom, clean.mesh_id, radiance_mode,
                                     self.history, p.depth_tolerance, p.depth_slack,
                                     p.normal_tolerance)
-            self.before_accumulation(TemporalState(illumination, radiance_mode, reprojected,
-                                                   geom.depth, clean.weights))
+            shortened = self.before_accumulation(TemporalState(
+                illumination, radiance_mode, reprojected, geom.depth, clean.weights))
+            if shortened is not None:
+                counts["antilag"] = shortened
             self.last_reprojected = reprojected
         else:
             reprojected = Reprojected(np.zeros(shape), np.zeros((shape[0], 2, *shape[2:])),

@@ -20,7 +20,7 @@ from test_cli_support import (
     write_sequence,
 )
 
-from svgf_cli.filters.params import PRESETS
+from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS
 from svgf_cli.io.exr import write_exr
 
 FRAMES = range(1, 9)
@@ -71,15 +71,15 @@ def test_end_to_end_outputs_and_metadata(
     assert np.isfinite(rgb).all() and rgb.mean() > 0
     header = image.header
     params = json.loads(header["svgf/params"])
-    assert params == json.loads(PRESETS["paper"].to_json())
-    assert header["svgf/preset"] == "paper"
+    assert params == json.loads(PRESETS[DEFAULT_PRESET].to_json())
+    assert header["svgf/preset"] == DEFAULT_PRESET == "default"
     assert header["svgf/frame"] == 4
     assert header["svgf/input"].endswith("in.0004.exr")
     assert header["svgf/warmup"] == "all"
     for key, value in INPUT_ATTRIBUTES.items():
         assert header[key] == value
     # Start-up log: version, threads, preset + params, resolved layers; then one line a frame.
-    assert "svgf 0.1.0" in stdout and "Threads:" in stdout and "Preset: paper" in stdout
+    assert "svgf 0.1.0" in stdout and "Threads:" in stdout and "Preset: default" in stdout
     assert "direct: direct.R, direct.G, direct.B" in stdout
     assert stdout.count("Progress: ") == len(FRAMES)
     assert "Progress: 50% (frame 4, 4/8," in stdout

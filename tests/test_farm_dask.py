@@ -9,7 +9,7 @@ from test_cli_support import outputs, run_cli, write_sequence
 
 from svgf_cli.farm.dask_backend import run_chunk_task
 from svgf_cli.farm.job import build_job
-from svgf_cli.filters.params import PRESETS
+from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.runner import FrameTask, RunConfig
 
@@ -56,7 +56,8 @@ def test_two_workers_equal_local_chunked_run(
         for t in original.chunk_tasks[1]
     ]
     config = RunConfig(
-        params=PRESETS["paper"], preset="paper", mapping=build_mapping(), warmup_label="2"
+        params=PRESETS[DEFAULT_PRESET], preset=DEFAULT_PRESET, mapping=build_mapping(),
+        warmup_label="2",
     )
     summary = run_chunk_task(retry, config, overwrite=False)
     assert summary["written"] == [5]

@@ -57,6 +57,12 @@ CASES: dict[str, tuple[SVGFParams, dict[str, Any], int | None]] = {
     "paper, moving edge": (resolve_params("paper"), {"moving_edge": True}, None),
     "three signals, extreme frame": (resolve_params("paper"), THREE, 2),
     "paper, extreme frame": (resolve_params("paper", **EXTRAS), {}, 3),
+    # anti-lag (the default preset) where the light drops at frame 3, and with every extra
+    "default, light step": (resolve_params("default"), {"light_step": (3, 0.3)}, None),
+    "three signals, default, light step": (resolve_params("default"),
+                                           {**THREE, "light_step": (4, 0.4)}, None),
+    "default+extras, moving edge": (resolve_params("default", **EXTRAS),
+                                    {"moving_edge": True}, None),
 }
 WORST: dict[str, float] = {}
 
@@ -149,7 +155,13 @@ def test_denoiser_matches_the_float64_reference(case: str) -> None:
     # history elsewhere, and every frame has both short- and long-history variance.
     lengths = np.stack([out.history_length for out in outputs[1:]])
     assert np.sum(lengths == 1.0) >= 10 and lengths.max() == 6.0
-    _, scene, extreme_frame = CASES[case]
+    params, scene, extreme_frame = CASES[case]
+    if params.antilag and "light_step" in scene:
+        # The light change is seen: anti-lag shortens many histories at that frame, while
+        # before it (no change but the moving object) it stays nearly silent.
+        step = scene["light_step"][0]
+        assert outputs[step].counts["antilag"] > 100
+        assert outputs[step - 1].counts["antilag"] < outputs[step].counts["antilag"] // 4
     if extreme_frame is not None:
         counts = outputs[extreme_frame].counts
         assert counts["nonfinite"] >= 12 and counts["extreme"] == 5

@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 import click
 
 from svgf_cli.errors import UsageError
-from svgf_cli.filters.params import PRESETS, SVGFParams, resolve_params
+from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS, SVGFParams, resolve_params
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -42,6 +42,10 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "firefly_clamp": click.FloatRange(min=0.0),
     "history_clamp": click.FloatRange(min=0.0),
     "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
+    "antilag_radius": click.IntRange(1, 16),
+    "antilag_sigma": click.FloatRange(min=0.0),
+    "antilag_spatial_samples": click.FloatRange(min=1.0),
+    "antilag_tolerance": click.FloatRange(min=0.0),
 }
 
 FILTER_SECTION = "Filter parameters (each overrides its --preset value)"
@@ -167,9 +171,10 @@ def svgf_param_options(func: F) -> F:
     return click.option(
         "--preset",
         type=click.Choice(sorted(PRESETS)),
-        default="paper",
+        default=DEFAULT_PRESET,
         show_default=True,
-        help="Parameter preset; any parameter option overrides its value.",
+        help="Parameter preset: default (the paper's filter with anti-lag), paper (as"
+        " published), falcor; any parameter option overrides its value.",
     )(func)
 
 

@@ -20,7 +20,7 @@ from svgf_cli.errors import InputError, UsageError
 from svgf_cli.evaluate import metrics
 from svgf_cli.evaluate.baselines import BASELINES, Method, make_method
 from svgf_cli.evaluate.report import EvaluationReport, FrameScore, MethodResult
-from svgf_cli.filters.params import PRESETS, SVGFParams
+from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS, SVGFParams
 from svgf_cli.frame import Frame
 from svgf_cli.io.patterns import SequencePattern
 
@@ -39,8 +39,8 @@ class EvaluationRequest:
     input: str | None = None
     frames: Sequence[int] | None = None
     baselines: Sequence[str] = ()
-    params: SVGFParams = field(default_factory=lambda: PRESETS["paper"])
-    preset: str = "paper"
+    params: SVGFParams = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
+    preset: str = DEFAULT_PRESET
     layers: str = "svgf"
     contact_frames: Sequence[int] = ()
 

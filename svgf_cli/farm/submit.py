@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from svgf_cli.filters.params import DEFAULT_PRESET
 from svgf_cli.io.patterns import SequencePattern
 
 # The OpenJD template shipped in the repository (farm/openjd/); its parameters are the keys
@@ -33,7 +34,7 @@ class FarmJob:
     frames: str
     chunk_size: int
     warmup: str  # "16" or "all"
-    preset: str = "paper"
+    preset: str = DEFAULT_PRESET
     preset_aovs: str = "svgf"
     executable: str = "svgf"
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgf_cli.filters import modulate, values
+from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.edges import normal_squarings
@@ -99,6 +100,8 @@ class _Workspace:
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
+            "antilag_scratch": (scratch_shape(s, h, w), F32),
+            "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
         return shapes[name]
 
@@ -133,6 +136,7 @@ class TemporalState:
     history_length: np.ndarray
     depth: np.ndarray
     luminance_weights: tuple[np.float32, np.float32, np.float32]
+    gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None
 
 
 class Denoiser:
@@ -260,9 +264,12 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
-            self._before_accumulation(TemporalState(
+            shortened = self._before_accumulation(TemporalState(
                 names, illumination, mode, accumulated, moments, history_length, depth, weights,
+                _gradient_samples(frame) if p.antilag_gradients else None,
             ))
+            if p.antilag:
+                counts["antilag"] = shortened
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
             history_length.fill(0.0)
@@ -464,12 +471,23 @@ class Denoiser:
             counts[f"radiance_mode.{name}"] = int(total[modulate.RADIANCE_MODE])
             counts[f"implausible_albedo.{name}"] = int(total[modulate.IMPLAUSIBLE])
 
-    def _before_accumulation(self, temporal: TemporalState) -> None:
-        """Adjust the reprojected history before it is blended (the anti-lag hook)."""
+    def _before_accumulation(self, temporal: TemporalState) -> int:
+        """Adjust the reprojected history before it is blended: the optional history clamp,
+        then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
         p = self.params
         if p.history_clamp > 0.0:
             history_clamp(temporal.history_illumination, temporal.history_length,
                           temporal.current, temporal.depth, F32(p.history_clamp))
+        if not p.antilag:
+            return 0
+        work = self._work
+        assert work is not None
+        return antilag(
+            temporal.current, temporal.history_moments, temporal.history_length,
+            temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
+            p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
+            work["antilag_scratch"], work["antilag_lambda"], temporal.gradients,
+        )
 
     def _compose(
         self, frame: Frame, filtered: np.ndarray, variance: np.ndarray,
@@ -505,6 +523,9 @@ class Denoiser:
                 layers[f"variance.{name}"] = variance[index].copy()
                 layers[f"history_length.{name}"] = history_length[index].copy()
                 layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
+                if self.params.antilag and self._work is not None:
+                    layers[f"antilag.{name}"] = _cells_to_pixels(
+                        self._work["antilag_lambda"][index], height, width)
         return radiance, layers
 
     # ----------------------------------------------------------------- internals
@@ -564,6 +585,31 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
     counts[kind] = counts.get(kind, 0) + value
     if value:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
+
+
+def _gradient_samples(
+    frame: Frame,
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None:
+    """Per signal, its temporal gradient samples as (mask, previous, current), or None;
+    a sample with a non-finite value is no sample. None when no signal has any."""
+    if all(signal.gradient is None for signal in frame.signals):
+        return None
+    samples: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+    for signal in frame.signals:
+        gradient = signal.gradient
+        if gradient is None:
+            samples.append(None)
+            continue
+        finite = np.isfinite(gradient.previous) & np.isfinite(gradient.current)
+        mask = np.where(finite & (gradient.mask > 0), F32(1.0), F32(0.0))
+        samples.append((mask, np.where(finite, gradient.previous, F32(0.0)),
+                        np.where(finite, gradient.current, F32(0.0))))
+    return samples
+
+
+def _cells_to_pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:
+    """A per-cell (2x2 pixels) plane at pixel resolution (for the debug layers)."""
+    return np.ascontiguousarray(np.repeat(np.repeat(cells, 2, 0), 2, 1)[:height, :width])
 
 
 def _writable(frame: Frame) -> Frame:

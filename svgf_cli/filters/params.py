@@ -56,6 +56,33 @@ class SVGFParams:
         "Also replace short-history colour by the spatially filtered colour (Falcor; the"
         " paper filters only the variance).",
     )
+    # Anti-lag (filters/antilag.py): history that no longer matches the frame is shortened.
+    antilag: bool = _p(
+        False,
+        "Shorten the history where it disagrees with the current frame beyond the noise"
+        " (moving lights and shadows, lights switched or dimmed, moving reflections).",
+    )
+    antilag_radius: int = _p(
+        2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels)."
+    )
+    antilag_sigma: float = _p(
+        3.5,
+        "Anti-lag significance: the history is stale where it differs from the frame by more"
+        " than this many standard errors of the window's noise.",
+    )
+    antilag_spatial_samples: float = _p(
+        64.0,
+        "Anti-lag strength: pixels the spatial filter is assumed to average; the current frame"
+        " gets weight b^2 / (b^2 + var / N) for a stale history of bias b.",
+    )
+    antilag_tolerance: float = _p(
+        0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept."
+    )
+    antilag_gradients: bool = _p(
+        True,
+        "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
+        " (svgf trace --gradient-samples).",
+    )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(5, "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none.")
     feedback_iteration: int = _p(
@@ -97,6 +124,8 @@ PRESETS: dict[str, SVGFParams] = {
     # Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128, sigma_z 1, 5 iterations,
     # first iteration fed back as history.
     "paper": SVGFParams(),
+    # The recommended set: the paper's filter plus anti-lag (measured in docs/results.md).
+    "default": SVGFParams(antilag=True),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,
@@ -109,7 +138,11 @@ PRESETS: dict[str, SVGFParams] = {
 }
 
 
-def resolve_params(preset: str = "paper", **overrides: Any) -> SVGFParams:
+# The preset used when none is named (CLI, evaluation baselines, farm templates).
+DEFAULT_PRESET = "default"
+
+
+def resolve_params(preset: str = DEFAULT_PRESET, **overrides: Any) -> SVGFParams:
     """Start from a preset and apply the overrides that are not None."""
     if preset not in PRESETS:
         raise ValueError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")

@@ -54,6 +54,7 @@ FILTER_TESTS = (
     "tests/test_filters_signals.py",
     "tests/test_filters_values.py",
     "tests/test_filters_scale.py",
+    "tests/test_filters_antilag.py",
 )
 IO_TESTS = (
     "tests/test_io_presets.py",
@@ -200,6 +201,37 @@ MUTANTS: tuple[Mutant, ...] = (
           '            history["history_length"], history["history_mode"],\n'
           '        )\n',
           '        counts["history_resets"] += 0\n'),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "antilag-no-history-share", "filters",
+        "anti-lag ignores the history's own noise (short histories look stale)",
+        "svgf_cli/filters/antilag.py",
+        (("stale = diff2 > k2 * var * inv_n * (_ONE + share) + tol2 * level * level",
+          "stale = diff2 > k2 * var * inv_n + tol2 * level * level"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "antilag-no-dilation", "filters", "anti-lag weight not dilated over neighbouring cells",
+        "svgf_cli/filters/antilag.py",
+        (("        for cx in range(1, cells_x):\n"
+          "            dilated[cx] = max(dilated[cx], best[cx - 1])\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "antilag-temporal-variance-only", "filters",
+        "anti-lag noise from the history's temporal variance alone (no sample variance)",
+        "svgf_cli/filters/antilag.py",
+        (("var = max(spread * n / max(n - _ONE, _ONE), sums[4, cx] * inv_n)",
+          "var = sums[4, cx] * inv_n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "antilag-gradients-ungated", "filters",
+        "gradient samples used without their significance test",
+        "svgf_cli/filters/antilag.py",
+        (("gradient_bias = change * mean_h if significant else _ZERO",
+          "gradient_bias = change * mean_h"),),
         FILTER_TESTS,
     ),
     Mutant(

@@ -1,0 +1,217 @@
+"""The anti-lag stage against the float64 reference (``reference_svgf.antilag``), and its
+behaviour on noise alone (no false alarms), on a lighting step, on a moving edge, with
+temporal gradient samples, and through the Denoiser."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from reference_svgf import antilag as reference_antilag
+
+from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape, scratch_shape
+
+F32 = np.float32
+REC709 = np.array([0.2126, 0.7152, 0.0722], dtype=F32)
+
+
+def _reference(current, moments, history_length, depth, weights, radius, sigma,
+               spatial_samples, tolerance, moments_alpha=0.2, gradients=None):
+    """The float64 reference stage (lambda per cell, new history length)."""
+    lam, length, _ = reference_antilag(current, moments, history_length, depth, weights,
+                                       radius, sigma, spatial_samples, tolerance,
+                                       moments_alpha, gradients, MIN_SAMPLES)
+    return lam, length
+
+
+def _case(seed: int, height: int = 20, width: int = 28, num_signals: int = 2,
+          step: float = 1.0, edge_shift: int = 0, noise_sigma: float | None = None):
+    """History of a lit surface with a dark band; the current frame 1-spp-like noisy, its
+    light scaled by ``step`` and its band moved by ``edge_shift`` pixels. Noise: exponential
+    (variance = mean^2), or Gaussian with relative ``noise_sigma``."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(width)[None, :].repeat(height, 0)
+    truth_h = np.where((x >= 8) & (x < 14), 0.2, 1.0)
+    truth_c = step * np.where((x >= 8 + edge_shift) & (x < 14 + edge_shift), 0.2, 1.0)
+    current = np.empty((num_signals, 3, height, width))
+    moments = np.empty((num_signals, 2, height, width))
+    for s in range(num_signals):
+        if noise_sigma is None:
+            noise = rng.exponential(1.0, (height, width))
+            relative_var = 1.0
+        else:
+            noise = 1.0 + noise_sigma * rng.standard_normal((height, width))
+            relative_var = noise_sigma**2
+        current[s] = (truth_c * noise)[None]
+        # an 8-frame history: the first moment carries 1/8 of a sample's variance
+        spread = np.sqrt(relative_var / 8.0)
+        moments[s, 0] = truth_h * (1.0 + spread * rng.standard_normal((height, width)))
+        moments[s, 1] = moments[s, 0] ** 2 + relative_var * truth_h**2
+    depth = np.full((height, width), 3.0)
+    depth[0, :5] = 0.0  # background
+    length = np.full((num_signals, height, width), 8.0)
+    length[:, 5:7, 3:6] = 0.0  # a disocclusion
+    length[:, depth <= 0] = 0.0
+    return current.astype(F32), moments.astype(F32), length.astype(F32), depth.astype(F32)
+
+
+def _run(case, radius=2, sigma=3.0, spatial_samples=32.0, tolerance=0.02, weights=REC709,
+         gradients=None):
+    current, moments, length, depth = case
+    length = length.copy()
+    num_signals, _, height, width = current.shape
+    cells = cell_shape(height, width)
+    scratch = np.empty(scratch_shape(num_signals, height, width), F32)
+    lam = np.empty((num_signals, *cells), F32)
+    count = antilag(current, moments, length, depth, weights, radius, sigma,
+                    spatial_samples, tolerance, 0.2, scratch, lam, gradients)
+    return lam, length, count
+
+
+@pytest.mark.parametrize(
+    ("step", "shift", "radius", "weights"),
+    [(1.0, 0, 2, REC709), (0.45, 0, 2, REC709), (1.0, 4, 1, REC709),
+     (0.7, 3, 3, np.array([0.2722, 0.6741, 0.0537], F32))],
+)
+def test_matches_float64_reference(step, shift, radius, weights):
+    case = _case(3, height=21, width=27, step=step, edge_shift=shift)  # odd: partial cells
+    lam, length, count = _run(case, radius=radius, weights=weights)
+    ref_lam, ref_length = _reference(*case, weights, radius, 3.0, 32.0, 0.02)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+    assert count == int(np.count_nonzero(ref_length < case[2] - 1e-3))
+
+
+def _gradient_samples(seed, height, width, num_signals, change, noise=0.0):
+    """One sample per 3x3 stratum; the shading changed by the factor ``change`` (plus some
+    re-shading noise)."""
+    rng = np.random.default_rng(seed)
+    samples = []
+    for _ in range(num_signals):
+        mask = np.zeros((height, width), F32)
+        mask[1::3, 1::3] = 1.0
+        previous = (mask * rng.uniform(0.5, 1.5, (height, width))).astype(F32)
+        current = previous * F32(change)
+        current = (current + mask * noise * rng.standard_normal((height, width))).astype(F32)
+        samples.append((mask, previous, np.maximum(current, 0).astype(F32)))
+    return samples
+
+
+@pytest.mark.parametrize(("change", "noise"), [(1.0, 0.0), (0.8, 0.0), (0.9, 0.4)])
+def test_gradient_samples_match_float64_reference(change, noise):
+    case = _case(5, height=21, width=27, step=0.95)
+    gradients = _gradient_samples(6, 21, 27, 2, change, noise)
+    gradients[1] = None  # a signal without samples
+    lam, length, count = _run(case, gradients=gradients)
+    ref_lam, ref_length = _reference(*case, REC709, 2, 3.0, 32.0, 0.02, gradients=gradients)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+
+
+def test_gradient_samples_see_what_the_noise_hides():
+    """A 20% dimming is lost in 1-spp noise for the window statistics but plain in the
+    re-shaded samples; unchanged samples change nothing."""
+    case = _case(7, height=32, width=48, step=0.8)
+    has_history = case[2] > 0
+    _, plain, _ = _run(case, sigma=3.5)
+    unchanged = _gradient_samples(8, 32, 48, 2, 1.0)
+    _, same, _ = _run(case, sigma=3.5, gradients=unchanged)
+    dimmed = _gradient_samples(8, 32, 48, 2, 0.8)
+    _, shortened, _ = _run(case, sigma=3.5, gradients=dimmed)
+    assert np.mean(plain[has_history] < case[2][has_history]) < 0.3
+    np.testing.assert_array_equal(same, plain)
+    assert np.mean(shortened[has_history] < case[2][has_history]) > 0.9
+
+
+def test_noise_alone_keeps_the_history():
+    """Fresh 1-spp noise around an unchanged mean: (almost) no history is shortened."""
+    shortened = 0
+    total = 0
+    for seed in range(6):
+        case = _case(seed, height=32, width=48)
+        _, length, count = _run(case)
+        shortened += count
+        total += int(np.count_nonzero(case[2] > 0))
+    assert shortened / total < 0.01
+
+
+def test_lighting_step_drops_the_history():
+    """The light dims to 45%: every pixel with history is mostly reset (with 1-spp noise of
+    variance mean^2 and N = 32 the optimal weight is about 0.9)."""
+    case = _case(1, height=32, width=48, step=0.45)
+    _, length, _ = _run(case)
+    has_history = case[2] > 0
+    assert np.mean(length[has_history] < 1.0 / 0.8 - 1.0) > 0.95
+
+
+def test_moving_edge_is_local():
+    """A dark band that moved by 4 pixels under moderate noise (30%): history drops in and
+    around the band only."""
+    case = _case(2, height=32, width=60, edge_shift=4, noise_sigma=0.3)
+    _, length, _ = _run(case)
+    reset = (length[:, 8:, :] < 1.0).mean(axis=(0, 1))  # per column, rows clear of the holes
+    assert reset[8:18].min() > 0.9  # where the band was and now is
+    assert reset[30:].mean() < 0.05  # far from it only rare noise alarms (k = 3)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_scale_invariant(scale):
+    case = _case(4, step=0.6, edge_shift=2)
+    moments = case[1] * F32(scale)
+    moments[:, 1] *= F32(scale)  # the second moment scales with the square
+    scaled = (case[0] * F32(scale), moments, case[2], case[3])
+    lam, length, _ = _run(case)
+    lam_k, length_k, _ = _run(scaled)
+    np.testing.assert_allclose(lam_k, lam, rtol=1e-3, atol=1e-5)
+    np.testing.assert_allclose(length_k, length, rtol=1e-3, atol=1e-3)
+
+
+# ---------------------------------------------------------------- through the Denoiser
+
+
+def _dimming_run(params, dim_at: int, frames: int = 10, factor: float = 0.45):
+    """A static textured scene at 1 spp whose light drops to ``factor`` at ``dim_at``;
+    per-frame relative error of the output against the noise-free radiance."""
+    from synthetic import make_frame, texture, true_radiance
+
+    from svgf_cli.filters.denoiser import Denoiser
+
+    width, height = 48, 32
+    # Smooth light over a detailed albedo: the filter's error is then the noise it leaves
+    # and the lag, not blurred lighting detail.
+    illumination = texture(width, height, seed=5, low=0.6, high=1.4, period=60.0)
+    albedo = texture(width, height, seed=6, low=0.2, high=0.9, period=5.0)
+    denoiser = Denoiser(params)
+    errors = []
+    for index in range(frames):
+        level = factor if index >= dim_at else 1.0
+        frame = make_frame(width, height, illumination=illumination * level, albedo=albedo,
+                           noise_kind="exponential", seed=100 + index, split=False)
+        out = denoiser.process(frame).color
+        truth = true_radiance(illumination * level, width=width, height=height, albedo=albedo,
+                              split=False)
+        errors.append(float(np.mean(np.abs(out - truth)) / np.mean(truth)))
+    return errors
+
+
+def test_denoiser_drops_stale_history_after_a_light_change():
+    """The paper preset drags the old brightness for frames; with anti-lag the frame of the
+    change is close to a cold (spatial-only) frame and the next ones are better still."""
+    from svgf_cli.filters.params import PRESETS
+
+    paper = _dimming_run(PRESETS["paper"], dim_at=6)
+    antilag_on = _dimming_run(PRESETS["default"], dim_at=6)
+    cold = _dimming_run(PRESETS["paper"].replace(temporal=False), dim_at=6)
+    assert paper[6] > 3.0 * cold[6]  # the lag anti-lag has to remove
+    assert antilag_on[6] < 1.5 * cold[6]
+    assert antilag_on[7] < cold[7] and antilag_on[8] < cold[8]
+    assert max(antilag_on[6:]) < 0.5 * max(paper[6:])
+
+
+def test_denoiser_keeps_history_when_nothing_changes():
+    """Nothing changes: anti-lag shortens (almost) no history and the result matches the
+    paper preset's."""
+    from svgf_cli.filters.params import PRESETS
+
+    paper = _dimming_run(PRESETS["paper"], dim_at=99)
+    antilag_on = _dimming_run(PRESETS["default"], dim_at=99)
+    assert np.mean(antilag_on[3:]) < 1.05 * np.mean(paper[3:])
