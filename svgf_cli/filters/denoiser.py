@@ -1,11 +1,16 @@
 """The SVGF denoiser: owns the history buffers and runs the stages in order.
 
-Per frame: input values (``values``) -> geometry gradients -> demodulate every signal, with
-its per-pixel mode (+ optional firefly clamp) -> reproject every signal's history -> the
-pre-accumulation hook (optional history clamp; anti-lag goes here) -> accumulate -> variance
--> a-trous iterations over pairs of signals (the ``feedback_iteration`` output becomes next
-frame's colour history) -> history guard -> remodulate, sum the signals, add emission,
-restore background -> optional TAA.
+Per frame, three phases (one method each, so a bidirectional run can drive them apart):
+
+1. temporal accumulation (``_accumulate_temporally``): input values (``values``) -> geometry
+   gradients -> demodulate every signal, with its per-pixel mode (+ optional firefly clamp)
+   -> reproject every signal's history -> the pre-accumulation hook (optional history
+   clamp, anti-lag) -> accumulate;
+2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over pairs of
+   signals; the ``feedback_iteration`` output becomes next frame's colour history (stored by
+   ``_store_history``, with the history guard);
+3. composition (``_finish_frame``): remodulate, sum the signals, add emission, restore
+   background -> optional TAA.
 
 All buffers are float32 structure-of-arrays planes (the mode mask uint16), allocated once per
 resolution and signal count and reused, so memory does not grow with the sequence length.
@@ -139,6 +144,48 @@ class TemporalState:
     gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None
 
 
+@dataclass
+class _FrameRun:
+    """One frame in flight through the phases: the frame, its workspace, the planes the
+    temporal phase leaves for the later ones, the value-policy counts and the stage clock."""
+
+    frame: Frame
+    names: tuple[str, ...]
+    work: _Workspace
+    weights: tuple[np.float32, np.float32, np.float32]
+    counts: dict[str, int] = field(
+        default_factory=lambda: {"nonfinite": 0, "extreme": 0, "history_resets": 0})
+    depth: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
+    normal: np.ndarray = field(default_factory=lambda: np.empty((3, 0, 0), F32))
+    motion: np.ndarray = field(default_factory=lambda: np.empty((2, 0, 0), F32))
+    mode: np.ndarray = field(default_factory=lambda: np.empty((0, 0), np.uint16))
+    illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
+    timings: dict[str, float] = field(default_factory=dict)
+    cpu_timings: dict[str, float] = field(default_factory=dict)
+    clock: tuple[float, float] = field(
+        default_factory=lambda: (time.perf_counter(), time.process_time()))
+
+    def lap(self, stage: str) -> None:
+        """Add the wall and CPU time since the last lap to ``stage``."""
+        now = (time.perf_counter(), time.process_time())
+        self.timings[stage] = self.timings.get(stage, 0.0) + now[0] - self.clock[0]
+        self.cpu_timings[stage] = self.cpu_timings.get(stage, 0.0) + now[1] - self.clock[1]
+        self.clock = now
+
+
+@dataclass
+class _Filtered:
+    """What the spatial phase leaves: the filtered illumination (and its workspace name),
+    the name of the feedback iteration's output (the colour history), the variance
+    entering the a-trous and the history length of the accumulation it filtered."""
+
+    illumination: np.ndarray
+    name: str
+    history_name: str
+    variance: np.ndarray
+    history_length: np.ndarray
+
+
 class Denoiser:
     """Spatiotemporal variance-guided filtering of a frame sequence (Schied et al. 2017).
 
@@ -203,7 +250,28 @@ class Denoiser:
         self._frames_processed = 0
 
     def process(self, frame: Frame) -> DenoisedFrame:
-        """Denoise the next frame of the sequence."""
+        """Denoise the next frame of the sequence.
+
+        Three phases, each a method: :meth:`_accumulate_temporally` (values, geometry,
+        demodulation, reprojection, the anti-lag hook, the blend),
+        :meth:`_filter_spatially` (variance and the a-trous iterations; the output of the
+        ``feedback_iteration`` is recorded as the colour history), then the history is
+        stored and :meth:`_finish_frame` composes the output (remodulation, emission, TAA).
+        """
+        run = self._start_frame(frame)
+        self._accumulate_temporally(run)
+        work = run.work
+        filtered = self._filter_spatially(run, "accumulated", work["moments"],
+                                          work["history_length"], self.params.atrous_iterations)
+        # Hand this frame's buffers to the history by swapping (no copies); the workspace
+        # takes the stale history arrays and overwrites them next frame.
+        self._store_history(run.frame, run.depth, filtered.history_name, run.counts)
+        run.lap("history")
+        return self._finish_frame(run, filtered)
+
+    # ----------------------------------------------------------------- phases
+    def _start_frame(self, frame: Frame) -> _FrameRun:
+        """Check the frame against the sequence and open its workspace and stage clock."""
         frame.validate()
         frame = _writable(frame)
         names = frame.names
@@ -213,24 +281,20 @@ class Denoiser:
             raise ValueError(
                 f"signals changed from {'+'.join(self._signal_names)} to {'+'.join(names)}"
             )
-        height, width = frame.height, frame.width
-        work = self._workspace(height, width, len(names))
+        work = self._workspace(frame.height, frame.width, len(names))
         self._signal_names = names
+        return _FrameRun(frame, names, work, float32_weights(frame.luminance_weights))
+
+    def _accumulate_temporally(self, run: _FrameRun) -> None:
+        """Phase 1, temporal accumulation: clean the geometry, gradients, demodulate every
+        signal (+ firefly clamp), reproject every signal's history, the pre-accumulation
+        hook (history clamp, anti-lag), blend. Leaves the accumulation in the workspace's
+        ``accumulated``, ``moments`` and ``history_length``; ``run`` gets the planes the
+        later phases read (depth, unit normals, motion, modes, the demodulated frame)."""
         p = self.params
-        weights = float32_weights(frame.luminance_weights)
-        counts: dict[str, int] = {"nonfinite": 0, "extreme": 0, "history_resets": 0}
-        timings: dict[str, float] = {}
-        cpu_timings: dict[str, float] = {}
-        clock = [time.perf_counter(), time.process_time()]
-
-        def lap(stage: str) -> None:
-            now = (time.perf_counter(), time.process_time())
-            timings[stage] = timings.get(stage, 0.0) + now[0] - clock[0]
-            cpu_timings[stage] = cpu_timings.get(stage, 0.0) + now[1] - clock[1]
-            clock[:] = now
-
+        work, counts, frame = run.work, run.counts, run.frame
         depth, normal_in, motion = self._clean_geometry(frame, counts)
-        lap("values")
+        run.lap("values")
 
         normal = work["normal"]
         unit_normals(normal_in, depth, normal)
@@ -240,15 +304,20 @@ class Denoiser:
         normal_width = work["variance_b"][0]
         depth_gradients(depth, work["ddx"], work["ddy"], depth_slope)
         normal_gradient(normal, depth, normal_width)
-        lap("gradients")
+        run.lap("gradients")
 
-        illumination = work["demodulated"]
+        illumination_name = "demodulated"
+        illumination = work[illumination_name]
         mode = work["mode"]
         self._demodulate(frame.signals, depth, illumination, mode, counts)
         if p.firefly_clamp > 0.0:
-            firefly_clamp(illumination, depth, F32(p.firefly_clamp), weights, work["spare_a"])
-            illumination = work["spare_a"]
-        lap("demodulate")
+            firefly_clamp(illumination, depth, F32(p.firefly_clamp), run.weights,
+                          work["spare_a"])
+            illumination_name = "spare_a"
+            illumination = work[illumination_name]
+        run.depth, run.normal, run.motion, run.mode = depth, normal, motion, mode
+        run.illumination_name = illumination_name
+        run.lap("demodulate")
 
         # Reproject into the accumulation buffers and accumulate in place (element-wise).
         accumulated = work["accumulated"]
@@ -265,8 +334,8 @@ class Denoiser:
                 history_length,
             )
             shortened = self._before_accumulation(TemporalState(
-                names, illumination, mode, accumulated, moments, history_length, depth, weights,
-                _gradient_samples(frame) if p.antilag_gradients else None,
+                run.names, illumination, mode, accumulated, moments, history_length, depth,
+                run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
             ))
             if p.antilag:
                 counts["antilag"] = shortened
@@ -277,32 +346,46 @@ class Denoiser:
             moments.fill(0.0)
         accumulate_in_place(
             illumination, accumulated, moments, history_length, depth, F32(p.alpha),
-            F32(p.moments_alpha), F32(p.history_cap), weights,
+            F32(p.moments_alpha), F32(p.history_cap), run.weights,
         )
-        busy = {"accumulated"}  # the demodulated (and clamped) illumination is dead now
-        lap("reproject")
+        run.lap("reproject")
 
-        def scratch(*protected: str) -> str:
-            """An illumination-shaped buffer name not in ``protected``."""
+    def _filter_spatially(
+        self, run: _FrameRun, source: str, moments: np.ndarray, history_length: np.ndarray,
+        iterations: int, protected: tuple[str, ...] = (),
+    ) -> _Filtered:
+        """Phase 2, spatial filtering of the accumulation in the workspace buffer ``source``
+        (with its ``moments`` and ``history_length``): the variance (+ the optional colour
+        blur), then a-trous iterations 0 .. ``iterations - 1``. The output of the feedback
+        iteration (``feedback_iteration``, clamped to the configured iterations; -1: the
+        colour entering the a-trous) is recorded as the colour history and never
+        overwritten, nor are the buffers named in ``protected``. The demodulated frame is
+        scratch here (dead once accumulated)."""
+        p = self.params
+        work, mode, depth, normal, weights = run.work, run.mode, run.depth, run.normal, run.weights
+        busy = (source, *protected)
+
+        def scratch(*taken: str) -> str:
+            """An illumination-shaped buffer name not taken."""
             for name in _ILLUMINATION_SCRATCH:
-                if name not in protected:
+                if name not in taken and name not in protected:
                     return name
             raise AssertionError("out of scratch buffers")
 
         variance = work["variance"]
-        filtered_name = "accumulated"
+        filtered_name = source
         blurred = None
         if p.spatial_variance_blur_color:
             filtered_name = scratch(*busy)
             blurred = work[filtered_name]
         estimate_variance(
-            accumulated, moments, history_length, mode, depth, work["ddx"], work["ddy"], normal,
-            history_threshold=float(p.variance_history_threshold),
+            work[source], moments, history_length, mode, depth, work["ddx"], work["ddy"],
+            normal, history_threshold=float(p.variance_history_threshold),
             radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
             sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
             sigma_normal=p.sigma_normal, out_variance=variance, out_illumination=blurred,
         )
-        lap("variance")
+        run.lap("variance")
 
         # The colour history: the unfiltered accumulation unless an iteration feeds back.
         # That iteration's output is protected so later iterations cannot overwrite it.
@@ -318,12 +401,13 @@ class Denoiser:
             variance_names = ("variance_a", "variance", "variance_b")
         guide_luminance = work["guide_luminance"]
         guide_inverse_scale = work["guide_inverse_scale"]
+        names = run.names
         pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]
-        for iteration in range(p.atrous_iterations):
+        for iteration in range(iterations):
             out_name = scratch(filtered_name_now, history_name)
             if iteration == feedback:
                 history_name = out_name
-            propagate = iteration + 1 < p.atrous_iterations
+            propagate = iteration + 1 < iterations
             out_variance = filtered_variance  # not written when not propagated
             if propagate:
                 out_variance = next(
@@ -345,30 +429,32 @@ class Denoiser:
                 )
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
-        lap("atrous")
+        run.lap("atrous")
+        return _Filtered(filtered, filtered_name_now, history_name, variance, history_length)
 
-        # Hand this frame's buffers to the history by swapping (no copies); the workspace
-        # takes the stale history arrays and overwrites them next frame.
-        self._store_history(frame, depth, history_name, counts)
-        lap("history")
-
-        output, layers = self._compose(frame, filtered, variance, history_length, mode, depth,
-                                       counts)
-        lap("modulate")
+    def _finish_frame(self, run: _FrameRun, filtered: _Filtered) -> DenoisedFrame:
+        """Phase 3, composition: remodulate, sum the signals, add the emission, restore the
+        background (+ TAA); record the frame's stage times."""
+        p = self.params
+        output, layers = self._compose(run.frame, filtered.illumination, filtered.variance,
+                                       filtered.history_length, run.mode, run.depth,
+                                       run.counts)
+        run.lap("modulate")
 
         if p.taa:
             if self._taa_previous is None:
                 self._taa_previous = output.copy()
             else:
-                taa_resolve(output, self._taa_previous, motion, F32(p.taa_alpha), work["taa"])
-                np.copyto(self._taa_previous, work["taa"])
+                taa_resolve(output, self._taa_previous, run.motion, F32(p.taa_alpha),
+                            run.work["taa"])
+                np.copyto(self._taa_previous, run.work["taa"])
             output = self._taa_previous.copy()
-            lap("taa")
+            run.lap("taa")
 
         self._frames_processed += 1
-        self.stage_seconds = timings
-        self.stage_cpu_seconds = cpu_timings
-        return DenoisedFrame(color=output, layers=layers, counts=counts)
+        self.stage_seconds = run.timings
+        self.stage_cpu_seconds = run.cpu_timings
+        return DenoisedFrame(color=output, layers=layers, counts=run.counts)
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""
