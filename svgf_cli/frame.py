@@ -9,6 +9,9 @@ Conventions (every producer converts to these, every consumer relies on them):
 * ``motion`` is ``(2, H, W)`` backward motion in pixels: the surface seen at pixel centre
   ``(x + 0.5, y + 0.5)`` was at ``(x + 0.5 + motion[0], y + 0.5 + motion[1])`` in the
   previous frame;
+* ``motion_next`` (optional) is ``(2, H, W)`` motion to the next frame in pixels: the surface
+  seen at pixel centre ``p`` is at ``p + motion_next`` in the next frame (a bidirectional
+  run's reverse pass reads it; without it the run derives it from the next frame's motion);
 * ``mesh_id`` is ``(H, W)`` int32, ``-1`` on background;
 * ``signals`` are the noisy radiance signals, each filtered on its own (its own history,
   moments and variance) and summed after filtering. A signal's radiance **excludes**
@@ -89,6 +92,7 @@ class Frame:
     albedo: np.ndarray
     emission: np.ndarray | None = None
     luminance_weights: tuple[float, float, float] = field(default=REC709_LUMINANCE)
+    motion_next: np.ndarray | None = None
 
     # ----------------------------------------------------------------- constructors
     @classmethod
@@ -182,6 +186,8 @@ class Frame:
         _check_plane("mesh_id", self.mesh_id, (h, w), np.int32)
         if self.emission is not None:
             _check_plane("emission", self.emission, (3, h, w), f32)
+        if self.motion_next is not None:
+            _check_plane("motion_next", self.motion_next, (2, h, w), f32)
         if not self.signals:
             raise ValueError("frame has no signals")
         seen: set[str] = set()

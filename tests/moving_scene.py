@@ -80,7 +80,8 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
                 width: int = WIDTH, height: int = HEIGHT, wall_speed: float = 0.5,
                 object_velocity: tuple[float, float] = (2.5, 1.0), moving_edge: bool = False,
                 luminance_weights: tuple[float, float, float] = REC709_LUMINANCE,
-                light_step: tuple[int, float] | None = None) -> Frame:
+                light_step: tuple[int, float] | None = None,
+                motion_next: bool = False) -> Frame:
     """Frame ``t`` (0, 1, ...) of the scene. ``noise=False`` gives the noise-free frame.
 
     ``light_step`` ``(frame, factor)``: from that frame on every light (not the emitters
@@ -89,6 +90,8 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
     ``layout`` is ``"split"``, ``"combined"`` or ``"three"`` (see the module docstring).
     ``wall_speed`` (px per frame, rightwards) and ``object_velocity`` change the motion;
     other than the defaults they give inexact bilinear weights (see the module docstring).
+    ``motion_next`` also gives the frame its exact motion to the next frame (every layer
+    moves at a constant velocity: the negated backward motion; 0 on background).
     """
     if layout not in ("split", "combined", "three"):
         raise ValueError(f"unknown layout {layout!r}")
@@ -98,6 +101,7 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
     normal = np.zeros((3, height, width))
     mesh = np.full((height, width), -1, dtype=np.int32)
     motion = np.zeros((2, height, width))
+    forward_motion = np.zeros((2, height, width))
     albedo = np.zeros((3, height, width))
     direct = np.zeros((3, height, width))  # noise-free illumination, later radiance
     indirect = np.zeros((3, height, width))
@@ -117,6 +121,7 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
         normal[:, mask] = (n[:, mask] if n.ndim == 3 else n[:, None])
         mesh[mask] = ident
         motion[0, mask], motion[1, mask] = mv
+        forward_motion[0, mask], forward_motion[1, mask] = -mv[0], -mv[1]
         albedo[:, mask] = alb[:, mask]
         direct[:, mask] = light_direct[mask]
         indirect[:, mask] = light_indirect[mask]
@@ -212,6 +217,8 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
             Signal("glossy", f32(glossy_radiance), f32(glossy_colour)),
             Signal("transmission", f32(transmission_radiance), f32(transmission_colour)),
         ], **geometry)
+    if motion_next:
+        frame.motion_next = f32(forward_motion)
     frame.validate()
     return frame
 

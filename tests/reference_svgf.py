@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.frame import Frame
+from svgf_cli.frame import Frame, Signal
 
 F64 = np.float64
 REC709 = (0.2126, 0.7152, 0.0722)  # Rec.709 luminance weights, the default colour space
@@ -938,6 +938,18 @@ def antilag(current, moments, history_length, depth, weights, radius, sigma, spa
     return lam, new_length, shortened
 
 
+@dataclass
+class FrameState:
+    """A frame between the anti-lag hook and the blend: the cleaned frame, its geometry, its
+    demodulated ``illumination`` and modes, and the resampled ``history`` (per signal)."""
+
+    clean: CleanFrame
+    geom: Geometry
+    illumination: np.ndarray
+    radiance_mode: np.ndarray
+    history: Reprojected
+
+
 class ReferenceDenoiser:
     """The ``Denoiser`` pipeline in float64, stage by stage; owns the history.
 
@@ -1012,11 +1024,31 @@ class ReferenceDenoiser:
             reprojected = Reprojected(np.zeros(shape), np.zeros((shape[0], 2, *shape[2:])),
                                       np.zeros((shape[0], *shape[2:])),
                                       np.zeros((shape[0], *shape[2:]), np.int8))
+        self.before_blend(FrameState(clean, geom, illumination, radiance_mode, reprojected))
         colour, moments, length = accumulate(
             illumination, reprojected.illumination, reprojected.moments,
             reprojected.history_length, geom.depth, p.alpha, p.moments_alpha, p.history_cap,
             clean.weights)
 
+        colour, variance_before_atrous, colour_history = self.filter_spatially(
+            clean, geom, colour, moments, length, radiance_mode)
+        self.history = History(np.array(colour_history), np.array(moments), np.array(length),
+                               radiance_mode, np.ones(geom.depth.shape, bool), geom.depth,
+                               geom.unit_normal, np.array(clean.mesh_id))
+        counts["history_resets"] = reset_nonfinite_history(self.history)
+        return self.compose(clean, geom, colour, variance_before_atrous, length,
+                            radiance_mode, counts)
+
+    def before_blend(self, state: FrameState) -> None:
+        """Called with the frame's state after the anti-lag hook, before the blend (also on
+        a frame without history); a bidirectional run reads the resampled history here."""
+
+    def filter_spatially(self, clean: CleanFrame, geom: Geometry, colour: np.ndarray,
+                         moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Variance and the a-trous of an accumulation: returns (filtered colour, variance
+        entering the a-trous, the colour history: the output of ``feedback_iteration``)."""
+        p = self.params
         variance, colour = estimate_variance(colour, moments, length, radiance_mode, geom, p)
         variance_before_atrous = variance
         feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
@@ -1030,11 +1062,15 @@ class ReferenceDenoiser:
                                                 p.sigma_normal)
             if iteration == feedback:
                 colour_history = colour
-        self.history = History(np.array(colour_history), np.array(moments), np.array(length),
-                               radiance_mode, np.ones(geom.depth.shape, bool), geom.depth,
-                               geom.unit_normal, np.array(clean.mesh_id))
-        counts["history_resets"] = reset_nonfinite_history(self.history)
+        return colour, variance_before_atrous, colour_history
 
+    def compose(self, clean: CleanFrame, geom: Geometry, colour: np.ndarray,
+                variance: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray,
+                counts: dict[str, int]) -> ReferenceOutput:
+        """Remodulate, restore the background, sum the signals, add the emission (+ TAA)."""
+        p = self.params
+        eps = p.albedo_epsilon
+        variance_before_atrous = variance
         per_signal = {}
         for index, name in enumerate(clean.names):
             radiance = remodulate(colour[index], clean.albedo[index], eps)
@@ -1049,3 +1085,145 @@ class ReferenceDenoiser:
             self.taa_previous = output
         return ReferenceOutput(output, variance_before_atrous, length, radiance_mode,
                                per_signal, counts)
+
+
+# --------------------------------------------------------------------------- bidirectional
+def effective_count(h: float, alpha: float) -> float:
+    """``n(h)``: effective samples of an accumulation of ``h`` frames whose k-th frame is
+    blended with ``a_k = max(alpha, 1/k)``: the variance share ``v_1 = 1``,
+    ``v_k = (1 - a_k)^2 v_(k-1) + a_k^2``, ``n(k) = 1 / v_k``, ``n(0) = 0``; linear between
+    whole counts."""
+    def whole(k: int) -> float:
+        share = 1.0
+        for i in range(2, k + 1):
+            a = max(alpha, 1.0 / i)
+            share = (1.0 - a) ** 2 * share + a * a
+        return 1.0 / share if k >= 1 else 0.0
+
+    if h <= 0.0:
+        return 0.0
+    below = math.floor(h)
+    return whole(below) + (h - below) * (whole(below + 1) - whole(below))
+
+
+def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reprojected,
+                      depth: np.ndarray, alpha: float, moments_alpha: float,
+                      weights: Sequence[float] = REC709
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A bidirectional run's combined accumulation (``docs/bidirectional.md``): per signal
+    and surface pixel, ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` for the colour
+    (counts with ``alpha``) and the moments ``(l, l^2)`` (counts with ``moments_alpha``),
+    history length ``1 + h_f + h_r``; background: the current values, length 0."""
+    x = np.asarray(current, dtype=F64)
+    lum = luminance(x, weights)
+    x_moments = np.stack([lum, lum * lum], axis=1)
+    colour = x.copy()
+    moments = x_moments.copy()
+    num_signals, _, height, width = x.shape
+    length = np.zeros((num_signals, height, width))
+    for s in range(num_signals):
+        for y in range(height):
+            for px in range(width):
+                if depth[y, px] <= 0.0:
+                    continue
+                hf = float(forward.history_length[s, y, px])
+                hr = float(reverse.history_length[s, y, px])
+                for alpha_, target, here, f_side, r_side in (
+                    (alpha, colour, x, forward.illumination, reverse.illumination),
+                    (moments_alpha, moments, x_moments, forward.moments, reverse.moments),
+                ):
+                    nf, nr = effective_count(hf, alpha_), effective_count(hr, alpha_)
+                    target[s, :, y, px] = (here[s, :, y, px] + nf * f_side[s, :, y, px]
+                                           + nr * r_side[s, :, y, px]) / (1.0 + nf + nr)
+                length[s, y, px] = 1.0 + hf + hr
+    return colour, moments, length
+
+
+NO_MOTION = 1e9  # a derived motion's hole: leads far outside the image (no history)
+
+
+def invert_motion(next_motion: np.ndarray, next_depth: np.ndarray,
+                  depth_tolerance: float = 0.02) -> tuple[np.ndarray, int]:
+    """Motion from frame t to t + 1 from frame t + 1's backward motion, by scattering:
+    each surface pixel q of t + 1 (finite motion) lands at ``P = q + m(q)`` and splats
+    ``-m(q)`` to the 2x2 pixels around P with bilinear weights; a pixel averages the
+    candidates whose depth (in t + 1) is within ``depth_tolerance`` (relative) of its
+    nearest one; a pixel nobody lands on is a hole (``NO_MOTION``). Returns
+    (motion, holes)."""
+    m = np.asarray(next_motion, dtype=F64)
+    z = np.asarray(next_depth, dtype=F64)
+    height, width = z.shape
+    candidates: dict[tuple[int, int], list[tuple[float, float, np.ndarray]]] = {}
+    for qy in range(height):
+        for qx in range(width):
+            if z[qy, qx] <= 0.0 or not np.all(np.isfinite(m[:, qy, qx])):
+                continue
+            px, py = qx + m[0, qy, qx], qy + m[1, qy, qx]
+            x0, y0 = math.floor(px), math.floor(py)
+            fx, fy = px - x0, py - y0
+            for tx, ty, w in ((x0, y0, (1 - fx) * (1 - fy)), (x0 + 1, y0, fx * (1 - fy)),
+                              (x0, y0 + 1, (1 - fx) * fy), (x0 + 1, y0 + 1, fx * fy)):
+                if w > 0.0 and 0 <= tx < width and 0 <= ty < height:
+                    candidates.setdefault((ty, tx), []).append((z[qy, qx], w, -m[:, qy, qx]))
+    out = np.full((2, height, width), NO_MOTION)
+    for (ty, tx), found in candidates.items():
+        nearest = min(depth for depth, _, _ in found)
+        kept = [(w, v) for depth, w, v in found if depth <= nearest * (1.0 + depth_tolerance)]
+        total = sum(w for w, _ in kept)
+        out[:, ty, tx] = sum(w * v for w, v in kept) / total
+    return out, height * width - len(candidates)
+
+
+class _Capturing(ReferenceDenoiser):
+    """A pass of a bidirectional run: keeps the state of the frame before its blend."""
+
+    def __init__(self, params: SVGFParams) -> None:
+        super().__init__(params)
+        self.state: FrameState | None = None
+
+    def before_blend(self, state: FrameState) -> None:
+        self.state = state
+
+
+def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
+                            ) -> list[ReferenceOutput]:
+    """Both passes of a bidirectional run, in float64: the forward pass is the causal
+    reference; the reverse pass runs the same over the frames last to first with each
+    frame's motion to the next frame (``frame.motion_next``, else :func:`invert_motion` of
+    the later frame's), without gradient samples; at every frame the two resampled
+    histories are combined with the frame (:func:`combine_histories`), filtered spatially
+    and composed. Returns the outputs in frame order."""
+    forward = _Capturing(params)
+    kept = []
+    for frame in frames:
+        forward.process(frame)
+        assert forward.state is not None
+        kept.append(forward.state.history)
+    reverse = _Capturing(params)
+    outputs: list[ReferenceOutput] = []
+    later: Frame | None = None
+    for frame, forward_history in zip(reversed(frames), reversed(kept), strict=True):
+        if frame.motion_next is not None:
+            motion = np.asarray(frame.motion_next, dtype=F64)
+        elif later is not None:
+            motion, _ = invert_motion(clean_motion(later.motion), clean_depth(later.depth))
+        else:
+            motion = np.full((2, *frame.depth.shape), NO_MOTION)
+        reversed_frame = Frame(
+            signals=[Signal(s.name, s.radiance, s.albedo) for s in frame.signals],
+            normal=frame.normal, depth=frame.depth,
+            motion=np.ascontiguousarray(motion, dtype=np.float32), mesh_id=frame.mesh_id,
+            albedo=frame.albedo, emission=frame.emission,
+            luminance_weights=frame.luminance_weights)
+        own = reverse.process(reversed_frame)
+        state = reverse.state
+        assert state is not None
+        colour, moments, length = combine_histories(
+            state.illumination, forward_history, state.history, state.geom.depth,
+            params.alpha, params.moments_alpha, state.clean.weights)
+        filtered, variance, _ = reverse.filter_spatially(
+            state.clean, state.geom, colour, moments, length, state.radiance_mode)
+        outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,
+                                       state.radiance_mode, dict(own.counts)))
+        later = frame
+    return outputs[::-1]

@@ -27,13 +27,16 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 
 from svgf_cli.filters import modulate, values
 from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
+from svgf_cli.filters.bidirectional import SideHistory, combine_histories, effective_counts
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
@@ -45,6 +48,7 @@ from svgf_cli.filters.variance import estimate_variance
 from svgf_cli.frame import DenoisedFrame, Frame, Signal
 
 F32 = np.float32
+Kept = TypeVar("Kept")
 
 # Version of the state() layout: 2 = per-signal history length and modes, named signals.
 STATE_FORMAT = 2
@@ -71,7 +75,11 @@ _HISTORY_SHAPES = {
 }
 
 # Illumination-shaped (S, 3, H, W) scratch roles, in order of preference for a-trous outputs.
-_ILLUMINATION_SCRATCH = ("demodulated", "accumulated", "spare_a", "spare_b", "spare_c")
+# "combined" (a bidirectional run's combined accumulation) comes last: a causal run never
+# needs it, so never allocates it.
+_ILLUMINATION_SCRATCH = (
+    "demodulated", "accumulated", "spare_a", "spare_b", "spare_c", "combined",
+)
 
 
 @dataclass
@@ -99,6 +107,8 @@ class _Workspace:
             # resampled and then (in place) accumulated moments and history length
             "moments": ((s, 2, h, w), F32),
             "history_length": ((s, h, w), F32),
+            "combined_moments": ((s, 2, h, w), F32),
+            "combined_length": ((s, h, w), F32),
             "variance": ((s, h, w), F32),
             "variance_a": ((s, h, w), F32),
             "variance_b": ((s, h, w), F32),
@@ -223,6 +233,9 @@ class Denoiser:
         self.debug_layers = debug_layers
         self._squarings = normal_squarings(params.sigma_normal)
         self._rule = (F32(params.albedo_epsilon), F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
+        # Effective sample counts per history length, for a bidirectional run's combination.
+        self._colour_counts = effective_counts(params.alpha, params.history_cap)
+        self._moment_counts = effective_counts(params.moments_alpha, params.history_cap)
         self._work: _Workspace | None = None
         self._signal_names: tuple[str, ...] | None = None
         self._history: dict[str, np.ndarray] | None = None
@@ -285,12 +298,16 @@ class Denoiser:
         self._signal_names = names
         return _FrameRun(frame, names, work, float32_weights(frame.luminance_weights))
 
-    def _accumulate_temporally(self, run: _FrameRun) -> None:
+    def _accumulate_temporally(
+        self, run: _FrameRun, before_blend: Callable[[TemporalState], None] | None = None,
+    ) -> None:
         """Phase 1, temporal accumulation: clean the geometry, gradients, demodulate every
         signal (+ firefly clamp), reproject every signal's history, the pre-accumulation
         hook (history clamp, anti-lag), blend. Leaves the accumulation in the workspace's
         ``accumulated``, ``moments`` and ``history_length``; ``run`` gets the planes the
-        later phases read (depth, unit normals, motion, modes, the demodulated frame)."""
+        later phases read (depth, unit normals, motion, modes, the demodulated frame).
+        ``before_blend`` (a bidirectional run's passes) sees the resampled history after
+        the hook, also on a frame without history (length 0), and must not change it."""
         p = self.params
         work, counts, frame = run.work, run.counts, run.frame
         depth, normal_in, motion = self._clean_geometry(frame, counts)
@@ -333,10 +350,11 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
-            shortened = self._before_accumulation(TemporalState(
+            temporal = TemporalState(
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
                 run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
-            ))
+            )
+            shortened = self._before_accumulation(temporal)
             if p.antilag:
                 counts["antilag"] = shortened
         else:
@@ -344,6 +362,10 @@ class Denoiser:
             history_length.fill(0.0)
             accumulated.fill(0.0)
             moments.fill(0.0)
+            temporal = TemporalState(run.names, illumination, mode, accumulated, moments,
+                                     history_length, depth, run.weights)
+        if before_blend is not None:
+            before_blend(temporal)
         accumulate_in_place(
             illumination, accumulated, moments, history_length, depth, F32(p.alpha),
             F32(p.moments_alpha), F32(p.history_cap), run.weights,
@@ -455,6 +477,77 @@ class Denoiser:
         self.stage_seconds = run.timings
         self.stage_cpu_seconds = run.cpu_timings
         return DenoisedFrame(color=output, layers=layers, counts=run.counts)
+
+    # ----------------------------------------------------------------- bidirectional
+    def forward_step(self, frame: Frame,
+                     keep: Callable[[SideHistory], Kept] | None = None) -> Kept | SideHistory:
+        """The forward pass of a bidirectional run (``filters.two_pass``): the next frame's
+        temporal accumulation and feedback filtering, its history stored as by
+        :meth:`process` (so the pass continues bit-identically to a causal run), no output.
+        Returns ``keep`` applied to the history it resampled (after anti-lag, before the
+        blend; views of this Denoiser's buffers, valid only during the call), by default a
+        copy."""
+        run = self._start_frame(frame)
+        kept: list[Kept | SideHistory] = []
+
+        def capture(temporal: TemporalState) -> None:
+            side = SideHistory(temporal.history_illumination, temporal.history_moments,
+                               temporal.history_length)
+            kept.append(keep(side) if keep is not None else SideHistory(
+                side.colour.copy(), side.moments.copy(), side.length.copy()))
+
+        self._accumulate_temporally(run, capture)
+        own = self._feedback_filtering(run)
+        self._store_history(run.frame, run.depth, own.history_name, run.counts)
+        self._frames_processed += 1
+        return kept[0]
+
+    def reverse_step(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
+        """The reverse pass of a bidirectional run: ``frame.motion`` points to the frame
+        processed before (the next one in time). Temporal accumulation and feedback
+        filtering of its own history, as :meth:`forward_step`; with ``forward`` (the
+        forward pass's :meth:`forward_step` history at the same frame) also the
+        combination of both histories with this frame (``filters.bidirectional``),
+        filtered spatially and composed into the output. None without ``forward``
+        (a warm-up frame of the reverse pass)."""
+        if self.params.taa:
+            raise ValueError("TAA filters the output causally; it cannot run bidirectionally")
+        run = self._start_frame(frame)
+        work = run.work
+        combine = None
+        if forward is not None:
+            def combine(temporal: TemporalState) -> None:
+                combine_histories(
+                    temporal.current, forward.colour, forward.moments, forward.length,
+                    temporal.history_illumination, temporal.history_moments,
+                    temporal.history_length, temporal.depth, self._colour_counts,
+                    self._moment_counts, run.weights, work["combined"],
+                    work["combined_moments"], work["combined_length"],
+                )
+
+        self._accumulate_temporally(run, combine)
+        own = self._feedback_filtering(run, protected=("combined",) if forward else ())
+        filtered = None
+        if forward is not None:
+            filtered = self._filter_spatially(
+                run, "combined", work["combined_moments"], work["combined_length"],
+                self.params.atrous_iterations, protected=(own.history_name,),
+            )
+        self._store_history(run.frame, run.depth, own.history_name, run.counts)
+        run.lap("history")
+        if filtered is None:
+            self._frames_processed += 1
+            return None
+        return self._finish_frame(run, filtered)
+
+    def _feedback_filtering(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> _Filtered:
+        """The spatial phase of a pass's own accumulation up to its feedback iteration (what
+        its colour history needs, nothing more)."""
+        p = self.params
+        feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
+        work = run.work
+        return self._filter_spatially(run, "accumulated", work["moments"],
+                                      work["history_length"], feedback + 1, protected)
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""

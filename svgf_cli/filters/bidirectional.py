@@ -1,0 +1,216 @@
+"""Bidirectional temporal accumulation: combine a forward and a time-reversed pass.
+
+Offline, frame ``t`` can use the frames after it too. A forward pass (the causal SVGF) and a
+reverse pass (the same filter run over the frames in reverse order, motion pointing to the
+next frame) each reproject their own history at ``t``, with their own geometric tests,
+modes and anti-lag, which shortens a side's history where it disagrees with frame ``t``.
+Before either pass blends frame ``t`` in, the two resampled histories are combined with the
+current sample, counted once, per signal and pixel:
+
+* a side's history of length ``h`` (0: none) is an average of ``n(h)`` effective samples:
+  the accumulation's blend schedule ``a_k = max(alpha, 1/k)`` gives the variance share
+  ``v_1 = 1``, ``v_k = (1 - a_k)^2 v_(k-1) + a_k^2`` after ``k`` frames, and ``n(k) = 1/v_k``
+  (``k`` for ``k <= 1/alpha``, tending to ``(2 - alpha)/alpha``); ``n(0) = 0`` and a
+  fractional ``h`` (bilinear resampling, anti-lag) interpolates linearly between whole
+  counts. Colour counts use ``alpha``, moment counts ``moments_alpha``;
+* the combination is the inverse-variance average
+  ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` for the colour (``x`` this frame's
+  demodulated value) and likewise for the luminance moments ``(l, l^2)``;
+* its history length is ``1 + h_f + h_r`` (the frames it holds), which steers the variance
+  estimate (temporal where it is >= 4) as a pass's own length does; background pixels get 0
+  and their current values.
+
+The forward pass's histories are needed by the reverse pass in reverse order, so a run
+spills them (``pack_history`` / ``unpack_history``: colour, first moment and the moments'
+standard deviation as half floats, each plane scaled by its own maximum so that neither
+exposure nor fireflies leave the half range; the history length as float32).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import FASTMATH, luminance
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_ONE = F32(1.0)
+# A packed plane's largest magnitude maps here: a quarter of the half range (65504).
+HALF_TARGET = 16384.0
+
+_JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+
+
+def effective_counts(alpha: float, cap: int) -> np.ndarray:
+    """``n(k)`` for k = 0 .. cap (float32): the effective sample count of an accumulation
+    of ``k`` frames under the blend schedule ``a_k = max(alpha, 1/k)`` (module docstring)."""
+    counts = np.zeros(cap + 1, dtype=np.float64)
+    share = 1.0
+    for k in range(1, cap + 1):
+        a = max(alpha, 1.0 / k)
+        share = (1.0 - a) ** 2 * share + a * a
+        counts[k] = 1.0 / share
+    return counts.astype(F32)
+
+
+@dataclass
+class SideHistory:
+    """One pass's history at a frame, resampled at the frame's pixels after anti-lag and
+    before the blend: per signal the colour (S, 3, H, W), the luminance moments
+    (S, 2, H, W) and the history length (S, H, W), 0 where the pass has none."""
+
+    colour: np.ndarray
+    moments: np.ndarray
+    length: np.ndarray
+
+
+@njit(inline="always", **_JIT)
+def _count(table: np.ndarray, h: np.float32) -> np.float32:
+    """``n(h)``: linear between whole counts, 0 at h <= 0, the last entry beyond the table."""
+    last = table.shape[0] - 1
+    hh = min(max(h, _ZERO), F32(last))
+    below = min(np.int64(hh), last - 1) if last > 0 else np.int64(0)
+    frac = hh - F32(below)
+    upper = min(below + 1, last)
+    return table[below] + frac * (table[upper] - table[below])
+
+
+@njit(parallel=True, **_JIT)
+def combine_histories(
+    current: np.ndarray,
+    forward_colour: np.ndarray,
+    forward_moments: np.ndarray,
+    forward_length: np.ndarray,
+    reverse_colour: np.ndarray,
+    reverse_moments: np.ndarray,
+    reverse_length: np.ndarray,
+    depth: np.ndarray,
+    colour_counts: np.ndarray,
+    moment_counts: np.ndarray,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    out_colour: np.ndarray,
+    out_moments: np.ndarray,
+    out_length: np.ndarray,
+) -> None:
+    """The combined accumulation of frame ``t`` (module docstring).
+
+    ``current`` is this frame's demodulated illumination (S, 3, H, W); the forward and
+    reverse histories are :class:`SideHistory` planes; ``colour_counts`` and
+    ``moment_counts`` are :func:`effective_counts` tables for ``alpha`` and
+    ``moments_alpha``. Writes ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` per colour
+    channel and moment, and the length ``1 + h_f + h_r``; background: the current values
+    and length 0.
+    """
+    num_signals = current.shape[0]
+    height, width = depth.shape
+    for y in prange(height):
+        z = depth[y]
+        wf = np.empty(width, dtype=np.float32)
+        wr = np.empty(width, dtype=np.float32)
+        wx = np.empty(width, dtype=np.float32)
+        for s in range(num_signals):
+            hf_row = forward_length[s, y]
+            hr_row = reverse_length[s, y]
+            h_out = out_length[s, y]
+            for x in range(width):
+                hf = hf_row[x]
+                hr = hr_row[x]
+                surface = z[x] > _ZERO
+                nf = _count(colour_counts, hf) if surface else _ZERO
+                nr = _count(colour_counts, hr) if surface else _ZERO
+                inv = _ONE / (_ONE + nf + nr)
+                wf[x] = nf * inv
+                wr[x] = nr * inv
+                wx[x] = inv
+                h_out[x] = (_ONE + max(hf, _ZERO) + max(hr, _ZERO)) if surface else _ZERO
+            for c in range(3):
+                x_row = current[s, c, y]
+                f_row = forward_colour[s, c, y]
+                r_row = reverse_colour[s, c, y]
+                out = out_colour[s, c, y]
+                for x in range(width):
+                    out[x] = wx[x] * x_row[x] + wf[x] * f_row[x] + wr[x] * r_row[x]
+            for x in range(width):
+                surface = z[x] > _ZERO
+                nf = _count(moment_counts, hf_row[x]) if surface else _ZERO
+                nr = _count(moment_counts, hr_row[x]) if surface else _ZERO
+                inv = _ONE / (_ONE + nf + nr)
+                wf[x] = nf * inv
+                wr[x] = nr * inv
+                wx[x] = inv
+            r = current[s, 0, y]
+            g = current[s, 1, y]
+            b = current[s, 2, y]
+            m1 = out_moments[s, 0, y]
+            m2 = out_moments[s, 1, y]
+            f1, f2 = forward_moments[s, 0, y], forward_moments[s, 1, y]
+            r1, r2 = reverse_moments[s, 0, y], reverse_moments[s, 1, y]
+            for x in range(width):
+                lum = luminance(r[x], g[x], b[x], luminance_weights)
+                m1[x] = wx[x] * lum + wf[x] * f1[x] + wr[x] * r1[x]
+                m2[x] = wx[x] * (lum * lum) + wf[x] * f2[x] + wr[x] * r2[x]
+
+
+# ----------------------------------------------------------------------------- spill format
+def _scaled_half(plane: np.ndarray) -> tuple[np.ndarray, float]:
+    """``plane`` as half floats scaled so its largest magnitude is HALF_TARGET, and the
+    factor that restores it (``value = half * factor``)."""
+    largest = float(np.max(np.abs(plane))) if plane.size else 0.0
+    if not np.isfinite(largest) or largest <= 0.0:
+        return np.zeros(plane.shape, dtype=np.float16), 1.0
+    factor = largest / HALF_TARGET
+    half = np.multiply(plane, F32(1.0 / factor), dtype=F32).astype(np.float16)
+    return half, factor
+
+
+def pack_history(names: tuple[str, ...], history: SideHistory,
+                 half: bool = True) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """A :class:`SideHistory` as named (H, W) planes plus per-plane restore factors.
+
+    Per signal ``<name>``: ``<name>.R/G/B`` (colour), ``<name>.m1`` (first moment),
+    ``<name>.sd`` (``sqrt(max(m2 - m1^2, 0))``: the spread keeps its precision where the
+    variance is small against ``m1^2``, and its range where it is large) and
+    ``<name>.h`` (float32). With ``half`` the first five are float16 scaled by their own
+    maximum (relative rounding <= 2^-11 for any value above 1e-8 of it); else float32.
+    """
+    planes: dict[str, np.ndarray] = {}
+    factors: dict[str, float] = {}
+    for s, name in enumerate(names):
+        m1 = history.moments[s, 0]
+        spread = np.sqrt(np.maximum(history.moments[s, 1] - m1 * m1, F32(0.0)))
+        for key, plane in (("R", history.colour[s, 0]), ("G", history.colour[s, 1]),
+                           ("B", history.colour[s, 2]), ("m1", m1), ("sd", spread)):
+            channel = f"{name}.{key}"
+            if half:
+                planes[channel], factors[channel] = _scaled_half(plane)
+            else:
+                planes[channel] = np.array(plane, dtype=F32)
+                factors[channel] = 1.0
+        planes[f"{name}.h"] = np.array(history.length[s], dtype=F32)
+    return planes, factors
+
+
+def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
+                   factors: dict[str, float]) -> SideHistory:
+    """Inverse of :func:`pack_history` (float32; ``m2 = sd^2 + m1^2``)."""
+    height, width = planes[f"{names[0]}.h"].shape
+    count = len(names)
+    colour = np.empty((count, 3, height, width), dtype=F32)
+    moments = np.empty((count, 2, height, width), dtype=F32)
+    length = np.empty((count, height, width), dtype=F32)
+
+    def restored(channel: str, out: np.ndarray) -> None:
+        np.multiply(planes[channel], F32(factors.get(channel, 1.0)), out=out, dtype=F32)
+
+    for s, name in enumerate(names):
+        for c, key in enumerate("RGB"):
+            restored(f"{name}.{key}", colour[s, c])
+        restored(f"{name}.m1", moments[s, 0])
+        restored(f"{name}.sd", moments[s, 1])
+        np.multiply(moments[s, 1], moments[s, 1], out=moments[s, 1])
+        moments[s, 1] += moments[s, 0] * moments[s, 0]
+        length[s] = planes[f"{name}.h"]
+    return SideHistory(colour, moments, length)

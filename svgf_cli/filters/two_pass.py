@@ -1,0 +1,101 @@
+"""The two passes of a bidirectional run over arrays (the file driver is ``svgf_cli.bidir``).
+
+A forward pass (:meth:`Denoiser.forward_step`, frames in order) keeps, per frame, the
+history it resampled; a reverse pass (:class:`ReversePass`, frames in reverse order) combines
+it with its own history at the same frame (``filters.bidirectional``) and filters the
+combination. The reverse pass reprojects frame ``t + 1`` into ``t`` with the motion to the
+next frame: the frame's own ``motion_next`` when the renderer wrote it, else the inverse of
+frame ``t + 1``'s backward motion (``filters.invert_motion``). A-SVGF gradient samples
+describe the change from the previous frame, so the reverse pass does not use them (its
+anti-lag uses the statistical test alone).
+
+:func:`denoise_bidirectional` runs both passes over frames held in memory (tests,
+evaluation of short sequences); a file run spills the forward histories instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+from svgf_cli.filters.bidirectional import SideHistory, pack_history, unpack_history
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.invert_motion import NO_MOTION, invert_motion
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.frame import DenoisedFrame, Frame, Signal
+
+F32 = np.float32
+
+
+class ReversePass:
+    """The reverse pass: a Denoiser fed the frames last to first, each frame's motion
+    replaced by its motion to the next frame. Call :meth:`process` with the frames in
+    reverse order and, for each frame to output, the forward pass's history there."""
+
+    def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
+        self.denoiser = Denoiser(params, debug_layers=debug_layers)
+        self._later: tuple[np.ndarray, np.ndarray] | None = None  # motion, depth of t + 1
+        self.derived_holes = 0  # holes of the last derived motion (information)
+
+    def reset(self) -> None:
+        """Drop the history (a gap in the sequence): the next frame starts cold."""
+        self.denoiser.reset()
+        self._later = None
+
+    def motion_to_next(self, frame: Frame) -> np.ndarray:
+        """``frame.motion_next``, else the inverse of the later frame's backward motion,
+        else (the last frame of the sequence) no motion anywhere."""
+        if frame.motion_next is not None:
+            return frame.motion_next
+        motion = np.empty((2, frame.height, frame.width), dtype=F32)
+        if self._later is None or self._later[1].shape != frame.depth.shape:
+            motion.fill(NO_MOTION)
+            self.derived_holes = frame.height * frame.width
+        else:
+            self.derived_holes = invert_motion(self._later[0], self._later[1], motion)
+        return motion
+
+    def process(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
+        """The next frame (going backwards in time); the output when ``forward`` is given."""
+        reverse = dataclasses.replace(
+            frame,
+            motion=self.motion_to_next(frame),
+            motion_next=None,
+            signals=[Signal(s.name, s.radiance, s.albedo) for s in frame.signals],
+        )
+        self._later = (_finite(frame.motion, NO_MOTION), _finite(frame.depth, F32(0.0)))
+        return self.denoiser.reverse_step(reverse, forward)
+
+
+def denoise_bidirectional(
+    frames: Sequence[Frame], params: SVGFParams, *, debug_layers: bool = False,
+    half: bool = False,
+) -> list[DenoisedFrame]:
+    """Both passes over ``frames`` (in order) held in memory; the outputs in order.
+
+    ``half`` stores the forward histories as a file run spills them (half floats), to
+    measure what that costs."""
+    forward = Denoiser(params)
+    kept: list[SideHistory] = []
+    for frame in frames:
+        if half:
+            packed = forward.forward_step(frame, lambda h, n=frame.names: pack_history(n, h))
+            kept.append(unpack_history(frame.names, *packed))
+        else:
+            kept.append(forward.forward_step(frame))
+    reverse = ReversePass(params, debug_layers=debug_layers)
+    outputs: list[DenoisedFrame] = []
+    for frame, history in zip(reversed(frames), reversed(kept), strict=True):
+        result = reverse.process(frame, history)
+        assert result is not None
+        outputs.append(result)
+    return outputs[::-1]
+
+
+def _finite(plane: np.ndarray, replacement: np.float32) -> np.ndarray:
+    """``plane`` itself when every value is finite, else a copy with ``replacement`` there
+    (the inversion runs with fast-math flags that assume finite values)."""
+    finite = np.isfinite(plane)
+    return plane if finite.all() else np.where(finite, plane, replacement).astype(F32)

@@ -1,0 +1,184 @@
+"""Bidirectional filtering: the combination and motion-inversion kernels against their
+float64 references, the spill format's error, and both passes of the whole Denoiser against
+``reference_svgf.reference_bidirectional`` frame by frame (the tolerance and its reasoning
+are those of ``test_reference_denoiser``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import reference_svgf as ref
+from moving_scene import ACESCG_LUMINANCE, scene_sequence
+
+from svgf_cli.filters.bidirectional import (
+    SideHistory,
+    combine_histories,
+    effective_counts,
+    pack_history,
+    unpack_history,
+)
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.fastmath import float32_weights
+from svgf_cli.filters.invert_motion import NO_MOTION, invert_motion
+from svgf_cli.filters.params import resolve_params
+from svgf_cli.filters.two_pass import denoise_bidirectional
+
+F32 = np.float32
+TOLERANCE = 2e-4
+
+
+def _close(got: np.ndarray, want: np.ndarray, what: str) -> None:
+    scale = float(np.max(np.abs(want)))
+    np.testing.assert_allclose(got, want, rtol=TOLERANCE, atol=TOLERANCE * scale, err_msg=what)
+
+
+@pytest.mark.parametrize("alpha", [0.2, 0.05, 0.3])
+def test_effective_counts_follow_the_blend_schedule(alpha: float) -> None:
+    table = effective_counts(alpha, 32)
+    for k in range(33):
+        assert table[k] == pytest.approx(ref.effective_count(k, alpha), rel=1e-6)
+    # a uniform mean while 1/k >= alpha, then rising towards the exponential average's
+    # (2 - a)/a (reached by 32 frames for alpha 0.2 and 0.3, not yet for 0.05)
+    uniform = np.arange(1, int(1 / alpha) + 1)
+    np.testing.assert_allclose(table[uniform], uniform, rtol=1e-6)
+    assert np.all(np.diff(table) >= 0) and table[32] <= (2 - alpha) / alpha * (1 + 1e-6)
+    if alpha >= 0.2:
+        assert table[32] == pytest.approx((2 - alpha) / alpha, rel=1e-3)
+
+
+def _random_side(rng: np.random.Generator, lengths: np.ndarray) -> SideHistory:
+    shape = lengths.shape
+    colour = rng.exponential(1.0, (shape[0], 3, *shape[1:])).astype(F32)
+    m1 = rng.exponential(1.0, shape).astype(F32)
+    moments = np.stack([m1, m1 * m1 * rng.uniform(1.0, 3.0, shape).astype(F32)], axis=1)
+    return SideHistory(colour, moments.astype(F32), lengths.astype(F32))
+
+
+def test_combine_histories_matches_the_reference() -> None:
+    rng = np.random.default_rng(3)
+    shape = (2, 9, 11)
+    choices = np.array([0.0, 0.4, 1.0, 2.5, 3.0, 7.25, 32.0])
+    forward = _random_side(rng, rng.choice(choices, shape))
+    reverse = _random_side(rng, rng.choice(choices, shape))
+    forward.length[:, :2] = reverse.length[:, :2] = 0.0  # neither side has history there
+    current = rng.exponential(2.0, (shape[0], 3, *shape[1:])).astype(F32)
+    depth = np.where(rng.random(shape[1:]) < 0.15, 0.0, 4.0).astype(F32)
+    params = resolve_params("falcor")  # alpha 0.05, moments alpha 0.2: the two tables differ
+    out = (np.zeros_like(current), np.zeros_like(forward.moments),
+           np.zeros_like(forward.length))
+    combine_histories(current, forward.colour, forward.moments, forward.length, reverse.colour,
+                      reverse.moments, reverse.length, depth, effective_counts(params.alpha, 32),
+                      effective_counts(params.moments_alpha, 32),
+                      float32_weights(ACESCG_LUMINANCE), *out)
+
+    def side(s: SideHistory) -> ref.Reprojected:
+        return ref.Reprojected(s.colour, s.moments, s.length, np.zeros(s.length.shape))
+
+    want = ref.combine_histories(current, side(forward), side(reverse), depth, params.alpha,
+                                 params.moments_alpha, ACESCG_LUMINANCE)
+    for got, expected, what in zip(out, want, ("colour", "moments", "length"), strict=True):
+        np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6, err_msg=what)
+    # the current sample counts once: with no history on either side the result is it
+    alone = (forward.length == 0) & (reverse.length == 0) & (depth > 0)
+    assert alone.any()
+    np.testing.assert_array_equal(np.moveaxis(out[0], 1, 0)[:, alone],
+                                  np.moveaxis(current, 1, 0)[:, alone])
+    assert np.all(out[2][:, depth <= 0] == 0)
+
+
+def _two_layer_motion(rng: np.random.Generator, height: int = 14, width: int = 20
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Backward motion and depth of a frame: a near block moving by a sub-pixel amount over a
+    far plane moving the other way, some background."""
+    depth = np.full((height, width), 9.0, F32) + rng.uniform(0, 0.01, (height, width)).astype(F32)
+    motion = np.zeros((2, height, width), F32)
+    motion[0], motion[1] = 0.35, -0.2
+    block = np.zeros((height, width), bool)
+    block[3:9, 5:12] = True
+    depth[block] = 3.0
+    motion[0, block], motion[1, block] = -2.6, 1.3
+    depth[:, -2:] = 0.0  # background
+    return motion, depth
+
+
+def test_invert_motion_matches_the_reference() -> None:
+    motion, depth = _two_layer_motion(np.random.default_rng(0))
+    out = np.zeros_like(motion)
+    holes = invert_motion(motion, depth, out)
+    want, want_holes = ref.invert_motion(motion, depth)
+    assert holes == want_holes > 0
+    np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-5)
+    # the block's own pixels carry its inverse motion; the far plane its own
+    landed = out[0] != NO_MOTION
+    assert np.any(np.isclose(out[0][landed], 2.6)) and np.any(np.isclose(out[0][landed], -0.35))
+
+
+def test_pack_history_error_is_half_rounding_at_any_exposure() -> None:
+    rng = np.random.default_rng(1)
+    lengths = rng.choice(np.array([0.0, 1.0, 3.5, 32.0]), (2, 12, 16))
+    side = _random_side(rng, lengths)
+    side.colour[0, 1, 4, 4] = 5e4  # a firefly far above the rest
+    for scale in (1e-4, 1.0, 1e4):
+        scaled = SideHistory(side.colour * F32(scale), side.moments * F32(scale)
+                             * np.array([1, scale], F32)[None, :, None, None], side.length)
+        names = ("a", "b")
+        planes, factors = pack_history(names, scaled)
+        assert planes["a.R"].dtype == np.float16 and planes["a.h"].dtype == np.float32
+        back = unpack_history(names, planes, factors)
+        np.testing.assert_array_equal(back.length, scaled.length)
+        np.testing.assert_allclose(back.colour, scaled.colour, rtol=2.0**-11, atol=0)
+        np.testing.assert_allclose(back.moments[:, 0], scaled.moments[:, 0], rtol=2.0**-11)
+        spread = scaled.moments[:, 1] - scaled.moments[:, 0] ** 2
+        np.testing.assert_allclose(back.moments[:, 1] - back.moments[:, 0] ** 2, spread,
+                                   rtol=5e-3, atol=2e-3 * float(spread.max()))
+
+
+def test_forward_step_keeps_the_causal_history() -> None:
+    """The forward pass continues exactly as a causal run: its stored history is the same."""
+    params = resolve_params("default")
+    frames = scene_sequence(4)
+    causal, forward = Denoiser(params), Denoiser(params)
+    for frame in frames:
+        causal.process(frame)
+        forward.forward_step(frame)
+    a, b = causal.state(), forward.state()
+    for key in ("history_illumination", "history_moments", "history_length", "history_mode"):
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+CASES = {
+    "default, motion to the next frame": (resolve_params("default"), {"motion_next": True}),
+    "default, derived motion": (resolve_params("default"), {}),
+    "falcor, three signals, light step": (
+        resolve_params("falcor", firefly_clamp=2.0, history_clamp=1.5),
+        {"layout": "three", "luminance_weights": ACESCG_LUMINANCE, "light_step": (3, 0.4),
+         "motion_next": True}),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_bidirectional_denoiser_matches_the_float64_reference(case: str) -> None:
+    params, scene = CASES[case]
+    frames = scene_sequence(5, **scene)
+    got = denoise_bidirectional(frames, params, debug_layers=True)
+    want = ref.reference_bidirectional(frames, params)
+    for t, (g, w) in enumerate(zip(got, want, strict=True)):
+        where = f"frame {t}"
+        for index, name in enumerate(frames[t].names):
+            length, want_length = g.layers[f"history_length.{name}"], w.history_length[index]
+            whole = want_length == np.round(want_length)  # exact: they steer the variance
+            np.testing.assert_array_equal(length[whole], want_length[whole], err_msg=where)
+            _close(length, want_length, f"{where}: {name} history length")
+            rgb = np.stack([g.layers[f"{name}.{c}"] for c in "RGB"])
+            _close(rgb, w.radiance[name], f"{where}: {name}")
+        _close(g.color, w.color, f"{where}: colour")
+        assert g.counts == w.counts, where
+    # Both directions reach every frame: the first frame holds the later frames' history.
+    first = want[0].history_length
+    assert first.max() >= 5 and np.mean(first[first > 0] > 1) > 0.8
+
+
+def test_bidirectional_refuses_taa() -> None:
+    frames = scene_sequence(2)
+    with pytest.raises(ValueError, match="TAA"):
+        denoise_bidirectional(frames, resolve_params("paper", taa=True))
