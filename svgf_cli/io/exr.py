@@ -33,6 +33,7 @@ from svgf_cli.io.layers import (
     resolve_layers,
     resolve_output_colour,
     to_backward_pixels,
+    to_next_pixels,
 )
 from svgf_cli.io.source import SourceFile, SourcePart, decode_source, one_line
 
@@ -701,7 +702,7 @@ def read_frame(
         elif role == "normal":
             changed = _scrub("normal", data, path, warnings, clamp_negative=False)
             changed += _renormalise(data)
-        elif role in ("motion", "alpha"):
+        elif role in ("motion", "motion_next", "alpha"):
             changed = _scrub(role, data, path, warnings, clamp_negative=False)
         else:  # id: read as is (the mesh id is derived from it below)
             changed = 0
@@ -743,6 +744,8 @@ def read_frame(
         frame = Frame.direct_indirect(values["direct"], values["indirect"], **geometry)
     else:
         frame = Frame.combined(values["color"], **geometry)
+    if "motion_next" in values:
+        frame.motion_next = to_next_pixels(values["motion_next"], convention)
     frame.validate()
     return ReadResult(
         frame=frame,

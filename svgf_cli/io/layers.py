@@ -22,6 +22,7 @@ ROLES = (
     "normal",
     "depth",
     "motion",
+    "motion_next",
     "id",
     "alpha",
 )
@@ -36,13 +37,14 @@ ROLE_WIDTH = {
     "normal": 3,
     "depth": 1,
     "motion": 2,
+    "motion_next": 2,
     "id": 1,
     "alpha": 1,
 }
 
 # Always required; a signal (direct+indirect, or color) is required on top.
 REQUIRED_ROLES = ("albedo", "normal", "depth", "motion")
-OPTIONAL_ROLES = ("emission", "id", "alpha")
+OPTIONAL_ROLES = ("emission", "motion_next", "id", "alpha")
 
 MOTION_CONVENTIONS = ("backward-pixels", "forward-pixels", "cycles")
 
@@ -77,6 +79,8 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "normal": (_xyz("N"), _rgb("N")),
         "depth": (("Z",),),
         "motion": (("motion.X", "motion.Y"),),
+        # svgf trace --motion-next: forward motion to the next frame, pixels, y down.
+        "motion_next": (("motion_next.X", "motion_next.Y"),),
         "id": (("id",),),
         "alpha": (("A",),),
     },
@@ -94,6 +98,8 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "normal": (_xyz("Normal"), _xyz("Denoising Normal")),
         "depth": (("Depth.Z",), ("Denoising Depth.Z",)),
         "motion": (("Vector.X", "Vector.Y"),),
+        # Vector.ZW: current - next position, pixels, y up (docs/cycles.md, measured).
+        "motion_next": (("Vector.Z", "Vector.W"),),
         "id": (("IndexOB.X",), ("IndexOB.V",)),
         "alpha": (("Noisy Image.A",), ("Combined.A",)),
     },
@@ -108,6 +114,8 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "normal": (_xyz("N"), _rgb("N")),
         "depth": (("Z",), ("Z.Z",), ("Z.R",)),
         "motion": (("motionvector.R", "motionvector.G"), ("motionvector.X", "motionvector.Y")),
+        # No pass of its own: a bidirectional run inverts the next frame's motion.
+        "motion_next": (),
         "id": (("ID",), ("ID.R",), ("id",)),
         "alpha": (("A",), ("RGBA.A",)),
     },
@@ -122,6 +130,7 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "normal": (_xyz("N"), _rgb("N")),
         "depth": (("Pz",), ("depth",), ("depth.Z",), ("Z",)),
         "motion": (("motionvector.X", "motionvector.Y"), ("motionvector.R", "motionvector.G")),
+        "motion_next": (),  # derived, as for Arnold
         "id": (("objid",), ("primid",), ("id",)),
         "alpha": (("A",), ("C.A",)),
     },
@@ -409,6 +418,30 @@ def to_backward_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
         out[0] = xy[0]
         np.negative(xy[1], out=out[1])
         return out
+    raise ValueError(
+        f"unknown motion convention {convention!r} (choose from {', '.join(MOTION_CONVENTIONS)})"
+    )
+
+
+def to_next_pixels(xy: np.ndarray, convention: str) -> np.ndarray:
+    """Convert a ``(2, H, W)`` motion-to-the-next-frame field to the canonical forward form
+    (the surface at pixel centre ``p`` is at ``p + v`` in the next frame, pixels, y down).
+
+    The next-frame channels come with the motion role's convention: ``cycles`` reads
+    Blender's ``Vector.ZW`` (current - next, pixels, +Y up), so forward = (-Z, W); every
+    other convention reads them as already forward, in pixels, y down (what ``svgf trace
+    --motion-next`` writes).
+    """
+    xy = np.asarray(xy, dtype=np.float32)
+    if xy.ndim != 3 or xy.shape[0] != 2:
+        raise ValueError(f"motion_next must be (2, H, W), got {xy.shape}")
+    if convention == "cycles":
+        out = np.empty_like(xy, dtype=np.float32)
+        np.negative(xy[0], out=out[0])
+        out[1] = xy[1]
+        return out
+    if convention in MOTION_CONVENTIONS:
+        return np.ascontiguousarray(xy, dtype=np.float32)
     raise ValueError(
         f"unknown motion convention {convention!r} (choose from {', '.join(MOTION_CONVENTIONS)})"
     )
