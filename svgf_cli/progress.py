@@ -60,6 +60,10 @@ class Progress:
         self.verbose = verbose
         self.total = total
         self.done = 0
+        # A bidirectional run makes two passes over its output frames (set by the caller):
+        # the percentage counts forward-pass frames (``forward``) and written ones.
+        self.passes = 1
+        self.forward = 0
         self.seconds_written = 0.0
         # s/frame over the most recent frames: the first ones pay for JIT compilation.
         self.recent: deque[float] = deque(maxlen=RATE_WINDOW)
@@ -94,6 +98,31 @@ class Progress:
         else:
             print(f"Warmup: {index}/{total} (frame {frame})", file=self.out, flush=True)
 
+    def forward_done(self, frame: int) -> None:
+        """A bidirectional run's forward pass processed output frame ``frame`` (half of its
+        work: the percentage counts both passes once ``passes`` is 2)."""
+        self.forward += 1
+        if not self.show_progress:
+            return
+        total = max(self.total, self.forward)
+        percent = self._percent()
+        if self.mode == "json":
+            self._json({"event": "forward", "frame": frame, "index": self.forward,
+                        "total": total, "percent": percent})
+        elif self.mode == "bar":
+            bar = self._open_bar()
+            bar.set_description_str(f"forward pass, frame {frame}", refresh=False)
+            bar.total = total * self.passes
+            bar.update(self.forward + self.done - bar.n)
+        else:
+            print(f"Progress: {percent}% (forward pass, frame {frame}, "
+                  f"{self.forward}/{total})", file=self.out, flush=True)
+
+    def _percent(self) -> int:
+        """Work done: written frames, plus forward-pass frames in a bidirectional run."""
+        total = max(self.total, self.done) * self.passes
+        return int(100 * (self.done + self.forward) / total) if total else 100
+
     def frame_done(self, frame: int, seconds: float) -> None:
         """An output frame was written; ``seconds`` is its wall time."""
         self.done += 1
@@ -102,7 +131,7 @@ class Progress:
         if not self.show_progress:
             return
         total = max(self.total, self.done)
-        percent = int(100 * self.done / total) if total else 100
+        percent = self._percent()
         mean = sum(self.recent) / len(self.recent)
         if self.mode == "json":
             self._json(
@@ -118,8 +147,8 @@ class Progress:
         elif self.mode == "bar":
             bar = self._open_bar()
             bar.set_description_str(f"frame {frame}", refresh=False)
-            bar.total = total
-            bar.update(self.done - bar.n)
+            bar.total = total * self.passes
+            bar.update(self.done + self.forward - bar.n)
         else:
             print(
                 f"Progress: {percent}% (frame {frame}, {self.done}/{total}, {mean:.2f} s/frame)",

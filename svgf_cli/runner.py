@@ -64,6 +64,7 @@ class RunConfig:
     warmup_label: str = "all"
     threads: int | None = None
     colour_only: bool = False  # --colour-only: only the colour layer and its alpha
+    scratch_dir: Path | None = None  # --scratch-dir (bidirectional); None: the system's
 
 
 @dataclass
@@ -571,15 +572,18 @@ class FrameFilter:
         except ValueError as exc:
             raise InputError(f"cannot use history: {exc}", str(history.path)) from None
 
-    def process(self, task: FrameTask, result: Any) -> tuple[Any, float]:
+    def process(
+        self, task: FrameTask, result: Any, step: Callable[[Any], Any] | None = None
+    ) -> tuple[Any, float]:
         """Filter an admitted frame (after a history reset when ``task`` asks for one), let
         go of its input planes, report the Denoiser's warnings. Returns the denoised frame
-        and the seconds the filter took."""
+        and the seconds the filter took. ``step`` replaces ``denoiser.process`` (a pass of
+        a bidirectional run)."""
         if task.reset_history:
             self.denoiser.reset()
         started = time.perf_counter()
         try:
-            denoised = self.denoiser.process(result.frame)
+            denoised = (step or self.denoiser.process)(result.frame)
         except ValueError as exc:
             raise InputError(str(exc), str(task.input)) from None
         seconds = time.perf_counter() - started
@@ -720,6 +724,11 @@ def run_sequence(
     before it are written, nothing for it), UsageError for a history file from other
     parameters, Interrupted after a SIGINT/SIGTERM once the frame in flight is written.
     """
+    if config.params.bidirectional:
+        from svgf_cli.bidir import run_bidirectional
+
+        return run_bidirectional(tasks, config, progress, stop=stop,
+                                 on_first_frame=on_first_frame, read=read)
     stats = RunStats()
     if not tasks:
         return stats

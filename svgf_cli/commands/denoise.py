@@ -29,7 +29,14 @@ from svgf_cli.progress import PROGRESS_MODES, Progress
 DEBUG_CHANNEL_EXAMPLE = ("variance", "history_length")  # data layers, for the codec check
 
 
-def _check_combinations(o: dict[str, Any]) -> None:
+def _check_combinations(o: dict[str, Any], bidirectional: bool) -> None:
+    if bidirectional and (o["save_history"] or o["load_history"]):
+        raise UsageError(
+            "--save-history/--load-history continue a causal run; a bidirectional run "
+            "replays warm-up on both sides instead (--warmup)"
+        )
+    if o["scratch_dir"] is not None and not bidirectional:
+        raise UsageError("--scratch-dir is for --bidirectional runs")
     if o["workers"] is not None and o["scheduler"] is not None:
         raise UsageError("--workers and --scheduler contradict each other; give one")
     distributed = o["workers"] is not None or o["scheduler"] is not None
@@ -50,7 +57,10 @@ SECTIONS = [
          "load_history"],
     ),  # fmt: skip
     ("Presets and layers", ["preset", "preset_aovs", "aovs", "motion_convention"]),
-    ("Run and progress", ["threads", "progress_mode", "quiet", "verbose", "dry_run", "check_only"]),
+    (
+        "Run and progress",
+        ["threads", "scratch_dir", "progress_mode", "quiet", "verbose", "dry_run", "check_only"],
+    ),
     ("Farm chunks and Dask", ["chunk_size", "workers", "scheduler"]),
 ]
 
@@ -147,6 +157,15 @@ SECTIONS = [
     help="Continue from a saved history (replaces warm-up).",
 )
 @click.option(
+    "--scratch-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    metavar="DIR",
+    help="Where --bidirectional keeps the forward pass's state between the passes (about "
+    "35 MB per 1080p output frame; removed when the run ends) [default: the system's "
+    "temporary folder].",
+)
+@click.option(
     "--threads",
     type=click.IntRange(min=0),
     default=None,
@@ -203,7 +222,7 @@ def command(**options: Any) -> None:
 
     params = params_from_options(options["preset"], options)
     warmup, warmup_note = _resolve_warmup(options)
-    _check_combinations(options)
+    _check_combinations(options, params.bidirectional)
     mapping = build_mapping(options["preset_aovs"], options["aovs"], options["motion_convention"])
     compression = options["compression"]
     debug_names = [f"svgf.{n}" for n in DEBUG_CHANNEL_EXAMPLE] if options["debug_aovs"] else []
@@ -223,6 +242,7 @@ def command(**options: Any) -> None:
         overwrite=options["overwrite"],
         chunk_size=options["chunk_size"],
         history_last_frame=history.last_frame if history is not None else None,
+        bidirectional=params.bidirectional,
     )
     progress = Progress(
         options["progress_mode"],
@@ -256,10 +276,19 @@ def command(**options: Any) -> None:
     selected = len(job.selected)
     progress.info(
         f"Frames: {job.frames_to_write} to write of {selected} selected, "
-        f"{len(job.timeline)} on disk; warm-up {warmup_label(warmup)}{warmup_note}"
+        f"{len(job.timeline)} on disk; warm-up {warmup_label(warmup)}"
+        + (" before and after each chunk" if params.bidirectional else "")
+        + warmup_note
         + (f"; {len(job.skipped_existing)} existing skipped" if job.skipped_existing else "")
         + (f"; history from {history.path} (frame {history.last_frame})" if history else "")
     )
+    if params.bidirectional:
+        from svgf_cli.bidir import scratch_note
+
+        progress.info(
+            "Bidirectional: a forward and a reverse pass, combined per pixel; forward "
+            f"state kept in a scratch folder under {scratch_note(options['scratch_dir'])}"
+        )
     for warning in job.warnings:
         progress.warning(warning)
     if options["check_only"]:
@@ -295,6 +324,7 @@ def command(**options: Any) -> None:
         compression=compression,
         debug_aovs=options["debug_aovs"],
         warmup_label=warmup_label(warmup),
+        scratch_dir=options["scratch_dir"],
         # Dask workers set their own threads; a remote scheduler's workers keep theirs
         # unless --threads was given.
         threads=(threads if options["workers"] else options["threads"]) if distributed else None,

@@ -199,7 +199,10 @@ def params_from_options(preset: str, kwargs: Mapping[str, Any]) -> SVGFParams:
 
 
 def _check_ranges(params: SVGFParams) -> None:
-    """The one check click's range types cannot make: it involves two options."""
+    """The checks click's range types cannot make: they involve two options."""
+    if params.bidirectional and params.taa:
+        raise UsageError("--taa filters the output causally; it cannot be combined with "
+                         "--bidirectional")
     if not -1 <= params.feedback_iteration < max(params.atrous_iterations, 1):
         raise UsageError(
             f"--feedback-iteration {params.feedback_iteration}: must be -1 or an iteration "

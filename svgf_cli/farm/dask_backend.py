@@ -49,7 +49,9 @@ def run_chunk_task(
 ) -> dict[str, Any]:
     """The body of one Dask task; returns a small summary (no pixels travel back)."""
     set_compute_threads(config.threads)
-    todo = trim_tail(pending_tasks(tasks, overwrite))
+    todo = pending_tasks(tasks, overwrite)
+    if not config.params.bidirectional:  # a bidirectional chunk's tail is its reverse warm-up
+        todo = trim_tail(todo)
     if not any(t.output is not None for t in todo):
         return {"written": [], "processed": 0, "seconds": 0.0, "pid": os.getpid()}
     quiet = Progress("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())

@@ -99,11 +99,13 @@ def build_job(
     overwrite: bool = False,
     chunk_size: int | None = None,
     history_last_frame: int | None = None,
+    bidirectional: bool = False,
 ) -> DenoiseJob:
     """Resolve inputs, outputs, frames, warm-up and chunks; raise before anything is written.
 
     ``warmup`` None means "all" (replay from the first frame of the sequence, or from the
-    frame after ``history_last_frame`` when a history file is loaded).
+    frame after ``history_last_frame`` when a history file is loaded); ``bidirectional``
+    adds the same warm-up after each chunk (the reverse pass's).
     """
     if skip_existing and overwrite:
         raise UsageError("--skip-existing and --overwrite contradict each other")
@@ -165,7 +167,8 @@ def build_job(
         )
     write_frames = [f for f in selected if not (skip_existing and f in existing)]
 
-    chunks = plan_chunks(write_frames, [f for f, _ in usable], chunk_size=chunk_size, warmup=warmup)
+    chunks = plan_chunks(write_frames, [f for f, _ in usable], chunk_size=chunk_size,
+                         warmup=warmup, bidirectional=bidirectional)
     chunk_tasks: list[list[FrameTask]] = []
     for chunk in chunks:
         write = set(chunk.write)

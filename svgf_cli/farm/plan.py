@@ -1,7 +1,8 @@
 """Chunk plans: which frames a chunk replays for history and which it writes.
 
 SVGF is recursive, so a chunk that starts mid-sequence replays a warm-up window of earlier
-frames (processed, never written) before its first output frame. The plan is independent of
+frames (processed, never written) before its first output frame; a bidirectional run's
+reverse pass likewise replays the frames after its last output frame. The plan is independent of
 any execution engine: the local runner, `svgf plan` and the Dask backend all consume it.
 """
 
@@ -58,13 +59,16 @@ def plan_chunks(
     *,
     chunk_size: int | None,
     warmup: int | None,
+    bidirectional: bool = False,
 ) -> list[Chunk]:
     """Split ``write_frames`` into chunks of at most ``chunk_size`` output frames.
 
     ``timeline`` lists every frame that can be processed, in processing order; each written
     frame must be in it. ``warmup`` counts timeline frames replayed before a chunk's first
     output (clamped at the timeline start); None means "all": replay from the first frame of
-    the timeline, which reproduces the sequential run exactly.
+    the timeline, which reproduces the sequential run exactly. ``bidirectional``: the
+    reverse pass needs the same warm-up after the chunk's last output (clamped at the
+    timeline end; "all": to the last frame of the timeline).
     """
     if chunk_size is not None and chunk_size < 1:
         raise ValueError(f"chunk size must be at least 1, got {chunk_size}")
@@ -81,7 +85,10 @@ def plan_chunks(
     chunks: list[Chunk] = []
     for index, begin in enumerate(range(0, len(ordered), size)):
         group = tuple(ordered[begin : begin + size])
-        first = position[group[0]]
+        first, last = position[group[0]], position[group[-1]]
         start = 0 if warmup is None else max(0, first - warmup)
-        chunks.append(Chunk(index, timeline[start], group[-1], group))
+        end = last
+        if bidirectional:
+            end = len(timeline) - 1 if warmup is None else min(len(timeline) - 1, last + warmup)
+        chunks.append(Chunk(index, timeline[start], timeline[end], group))
     return chunks

@@ -40,6 +40,12 @@ class SVGFParams:
     normal_tolerance: float = _p(
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01)."
     )
+    bidirectional: bool = _p(
+        False,
+        "Offline: also run the filter backwards in time and combine both passes' histories"
+        " per pixel before the spatial filter (frames after the current one count too;"
+        " about twice the work; docs/bidirectional.md).",
+    )
     # Variance estimation (paper section 4.2).
     variance_history_threshold: int = _p(
         4, "Below this history length the variance is estimated spatially (7x7 bilateral)."
