@@ -1108,11 +1108,12 @@ def effective_count(h: float, alpha: float) -> float:
 
 def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reprojected,
                       depth: np.ndarray, alpha: float, moments_alpha: float,
-                      weights: Sequence[float] = REC709
+                      weights: Sequence[float] = REC709, history_cap: int = 32,
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A bidirectional run's combined accumulation (``docs/bidirectional.md``): per signal
     and surface pixel, ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` for the colour
     (counts with ``alpha``) and the moments ``(l, l^2)`` (counts with ``moments_alpha``),
+    whose variance ``m2 - m1^2`` is then scaled by ``min(1, n(cap) / (1 + n_f + n_r))``;
     history length ``1 + h_f + h_r``; background: the current values, length 0."""
     x = np.asarray(current, dtype=F64)
     lum = luminance(x, weights)
@@ -1135,6 +1136,11 @@ def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reproj
                     nf, nr = effective_count(hf, alpha_), effective_count(hr, alpha_)
                     target[s, :, y, px] = (here[s, :, y, px] + nf * f_side[s, :, y, px]
                                            + nr * r_side[s, :, y, px]) / (1.0 + nf + nr)
+                # the variance relative to a long causal history's count n_ref
+                nf, nr = effective_count(hf, moments_alpha), effective_count(hr, moments_alpha)
+                shrink = min(1.0, effective_count(history_cap, moments_alpha) / (1 + nf + nr))
+                m1 = moments[s, 0, y, px]
+                moments[s, 1, y, px] = m1 * m1 + shrink * max(moments[s, 1, y, px] - m1 * m1, 0)
                 length[s, y, px] = 1.0 + hf + hr
     return colour, moments, length
 
@@ -1220,7 +1226,7 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
         assert state is not None
         colour, moments, length = combine_histories(
             state.illumination, forward_history, state.history, state.geom.depth,
-            params.alpha, params.moments_alpha, state.clean.weights)
+            params.alpha, params.moments_alpha, state.clean.weights, params.history_cap)
         filtered, variance, _ = reverse.filter_spatially(
             state.clean, state.geom, colour, moments, length, state.radiance_mode)
         outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,

@@ -69,7 +69,8 @@ def test_combine_histories_matches_the_reference() -> None:
     combine_histories(current, forward.colour, forward.moments, forward.length, reverse.colour,
                       reverse.moments, reverse.length, depth, effective_counts(params.alpha, 32),
                       effective_counts(params.moments_alpha, 32),
-                      float32_weights(ACESCG_LUMINANCE), *out)
+                      float32_weights(ACESCG_LUMINANCE),
+                      effective_counts(params.moments_alpha, 32)[-1], *out)
 
     def side(s: SideHistory) -> ref.Reprojected:
         return ref.Reprojected(s.colour, s.moments, s.length, np.zeros(s.length.shape))

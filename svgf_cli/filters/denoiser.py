@@ -521,7 +521,8 @@ class Denoiser:
                     temporal.current, forward.colour, forward.moments, forward.length,
                     temporal.history_illumination, temporal.history_moments,
                     temporal.history_length, temporal.depth, self._colour_counts,
-                    self._moment_counts, run.weights, work["combined"],
+                    self._moment_counts, run.weights, self._moment_counts[-1],
+                    work["combined"],
                     work["combined_moments"], work["combined_length"],
                 )
 
