@@ -63,6 +63,14 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
     "[default: the first frame of --frames].",
 )
 @click.option(
+    "--last-frame",
+    type=int,
+    default=None,
+    metavar="L",
+    help="Last frame of the sequence; a --bidirectional run's warm-up after a chunk never "
+    "reads past it [default: the last frame of --frames].",
+)
+@click.option(
     "--format",
     "output_format",
     type=click.Choice(["json", "commands", "openjd", "deadline"]),
@@ -89,6 +97,7 @@ def command(
     chunk_size: int,
     warmup: int | None,
     first_frame: int | None,
+    last_frame: int | None,
     output_format: str,
     executable: str,
     out_dir: Path | None,
@@ -96,7 +105,9 @@ def command(
 ) -> None:
     """Split FRAMES into chunks with a causal warm-up, for farm submission.
 
-    Each chunk reads [first - W, last] and writes [first, last]. The arguments after `--`
+    Each chunk reads [first - W, last] and writes [first, last] ([first - W, last + W] with
+    --bidirectional among the denoise arguments: its reverse pass warms up after the
+    chunk). The arguments after `--`
     (inputs, -o, options) go into every chunk's `svgf denoise` command (--format commands,
     deadline) or into the OpenJD template's job parameters (--format openjd).
     """
@@ -110,10 +121,16 @@ def command(
     clashes = [a for a in denoise_args if a.split("=")[0] in _PLANNED_OPTIONS]
     if clashes:
         raise UsageError(f"{clashes[0]} is set by the plan; remove it from the denoise arguments")
+    end = frames[-1] if last_frame is None else last_frame
+    if end < frames[-1]:
+        raise UsageError(f"--last-frame {end} is before the last requested frame {frames[-1]}")
+    flags = [a for a in denoise_args if a in ("--bidirectional", "--no-bidirectional")]
+    bidirectional = bool(flags) and flags[-1] == "--bidirectional"
     warmup_frames = warmup
-    # The timeline is every frame from the sequence start; the plan does not look at disk.
-    timeline = list(range(start, frames[-1] + 1))
-    chunks = plan_chunks(frames, timeline, chunk_size=chunk_size, warmup=warmup_frames)
+    # The timeline is every frame of the sequence; the plan does not look at disk.
+    timeline = list(range(start, end + 1))
+    chunks = plan_chunks(frames, timeline, chunk_size=chunk_size, warmup=warmup_frames,
+                         bidirectional=bidirectional)
     if output_format == "json":
         click.echo(json.dumps([c.to_json() for c in chunks], indent=None))
         return

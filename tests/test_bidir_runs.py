@@ -1,0 +1,157 @@
+"""`svgf denoise --bidirectional` on files: chunks with warm-up on both sides, resume, the
+scratch folder's life, the plan, and what is refused."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from exr_fixtures import ExrImage, read_exr
+from test_cli_support import exit_code, reference_run, run_cli, sequence_folder
+
+from svgf_cli.farm.plan import plan_chunks
+from svgf_cli.io.spill import ScratchFolder
+
+FRAMES = range(1, 11)
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return sequence_folder(tmp_path_factory, FRAMES)
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("scratch")
+
+
+@pytest.fixture(scope="module")
+def one_run(sequence: Path, scratch: Path,
+            tmp_path_factory: pytest.TempPathFactory) -> dict[int, ExrImage]:
+    """One uninterrupted bidirectional run (float colour): frame -> its output."""
+    outputs = reference_run(tmp_path_factory, sequence, "--float", "--bidirectional",
+                            "--scratch-dir", scratch)
+    return {f: read_exr(p) for f, p in outputs.items()}
+
+
+def _args(sequence: Path, out: Path, scratch: Path, *extra: object) -> list[object]:
+    return ["denoise", sequence / "in.####.exr", "-o", out / "o.####.exr", "--float",
+            "--bidirectional", "--scratch-dir", scratch, *extra]
+
+
+def test_chunks_with_warmup_all_equal_one_run(
+    sequence: Path, scratch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    one_run: dict[int, ExrImage],
+) -> None:
+    code, stdout, err = run_cli(_args(sequence, tmp_path, scratch, "--chunk-size", "4",
+                                      "--warmup", "all"), capsys)
+    assert code == 0, err
+    for f in FRAMES:
+        assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(one_run[f]), f
+    # each chunk's forward pass reports its frames, and the percentage counts both passes
+    assert "(forward pass, frame 1, 1/10)" in stdout and "Progress: 100% (frame" in stdout
+    assert list(scratch.iterdir()) == []  # every run removed its scratch folder
+
+
+def test_it_differs_from_the_causal_run_most_on_the_first_frame(
+    sequence: Path, tmp_path_factory: pytest.TempPathFactory, one_run: dict[int, ExrImage],
+) -> None:
+    causal = {f: read_exr(p) for f, p in reference_run(tmp_path_factory, sequence,
+                                                      "--float").items()}
+    change = [float(np.abs(one_run[f].rgb() - causal[f].rgb()).mean()) for f in FRAMES]
+    assert min(change) > 0  # the later frames count everywhere
+    assert change[0] > change[4]  # a cold causal start is where it shows most
+
+
+def test_numeric_warmup_reads_after_the_chunk_too(
+    sequence: Path, scratch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    one_run: dict[int, ExrImage],
+) -> None:
+    code, stdout, err = run_cli(_args(sequence, tmp_path, scratch, "--frames", "4-6",
+                                      "--warmup", "2", "--dry-run"), capsys)
+    assert code == 0, err
+    assert "chunk 0: process 2-8 (7 frames, 4 history-only), write 4-6" in stdout
+    code, _, err = run_cli(_args(sequence, tmp_path, scratch, "--frames", "4-6",
+                                 "--warmup", "3"), capsys)
+    assert code == 0, err
+    frame = read_exr(tmp_path / "o.0005.exr").rgb()
+    exact = one_run[5].rgb()
+    assert 0 < np.abs(frame - exact).mean() / np.abs(exact).mean() < 0.05
+
+
+def test_resume_with_skip_existing_gives_the_same_frames(
+    sequence: Path, scratch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    one_run: dict[int, ExrImage],
+) -> None:
+    # What an interrupted reverse pass leaves: the last frames (its warm-up with --frames
+    # reaches back to frame 1, so they are exact).
+    code, _, err = run_cli(_args(sequence, tmp_path, scratch, "--frames", "7-10"), capsys)
+    assert code == 0, err
+    code, stdout, err = run_cli(_args(sequence, tmp_path, scratch, "--skip-existing"), capsys)
+    assert code == 0, err
+    assert "4 existing skipped" in stdout
+    for f in FRAMES:
+        assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(one_run[f]), f
+
+
+def test_a_bad_frame_fails_the_run_and_removes_the_scratch(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+) -> None:
+    broken = tmp_path / "in"
+    broken.mkdir()
+    for f in FRAMES:
+        data = (sequence / f"in.{f:04d}.exr").read_bytes()
+        (broken / f"in.{f:04d}.exr").write_bytes(data[: len(data) // 2] if f == 6 else data)
+    scratch = tmp_path / "scratch"
+    code, _, err = run_cli(_args(broken, tmp_path, scratch), capsys)
+    assert code == 3 and "in.0006.exr" in err
+    assert list(scratch.iterdir()) == []
+    assert not list(tmp_path.glob("o.*.exr"))  # outputs come from the reverse pass only
+
+
+def test_a_dead_runs_scratch_is_removed_and_a_live_ones_kept(tmp_path: Path) -> None:
+    with ScratchFolder(tmp_path) as live:
+        name = live.path.name
+        dead_pid = 2**22 + 12345
+        while _alive(dead_pid):
+            dead_pid += 1
+        host_ns, _, rest = name[len(".svgf-scratch."):].partition(".")
+        dead = tmp_path / f".svgf-scratch.{host_ns}.{dead_pid}.{rest.split('.')[-1]}"
+        dead.mkdir()
+        (dead / "3.exr").write_bytes(b"x")
+        other = tmp_path / "keep.me"
+        other.mkdir()
+        with ScratchFolder(tmp_path) as second:
+            assert not dead.exists() and live.path.exists() and other.exists()
+            assert second.path != live.path
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.me"]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def test_plan_adds_the_warmup_after_each_chunk() -> None:
+    chunks = plan_chunks(list(range(1, 11)), list(range(1, 13)), chunk_size=4, warmup=2,
+                         bidirectional=True)
+    assert [(c.read_start, c.read_end) for c in chunks] == [(1, 6), (3, 10), (7, 12)]
+    every = plan_chunks(list(range(3, 8)), list(range(1, 13)), chunk_size=2, warmup=None,
+                        bidirectional=True)
+    assert {(c.read_start, c.read_end) for c in every} == {(1, 12)}
+    causal = plan_chunks(list(range(1, 11)), list(range(1, 13)), chunk_size=4, warmup=2)
+    assert [c.read_end for c in causal] == [4, 8, 10]
+
+
+@pytest.mark.parametrize("extra", [["--taa"], ["--save-history", "h.npz"]])
+def test_refused_combinations(sequence: Path, tmp_path: Path, extra: list[str]) -> None:
+    assert exit_code(_args(sequence, tmp_path, tmp_path, *extra)) == 2
+    assert exit_code(["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr",
+                      "--scratch-dir", tmp_path]) == 2
