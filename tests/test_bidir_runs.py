@@ -3,6 +3,7 @@ scratch folder's life, the plan, and what is refused."""
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -155,3 +156,20 @@ def test_refused_combinations(sequence: Path, tmp_path: Path, extra: list[str]) 
     assert exit_code(_args(sequence, tmp_path, tmp_path, *extra)) == 2
     assert exit_code(["denoise", sequence / "in.####.exr", "-o", tmp_path / "o.####.exr",
                       "--scratch-dir", tmp_path]) == 2
+
+
+def test_evaluate_compares_forward_with_bidirectional(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str],
+) -> None:
+    seq = Path(__file__).resolve().parent.parent / "testdata" / "seq"
+    report = tmp_path / "r.json"
+    code, stdout, err = run_cli(
+        ["evaluate", seq / "ref.####.exr", "-r", seq / "ref.####.exr", "-i", seq / "in.####.exr",
+         "--frames", "1-3", "--baseline", "forward", "--baseline", "bidirectional", "-q",
+         "--json", report], capsys)
+    assert code == 0, err
+    methods = {m["name"]: m for m in json.loads(report.read_text())["methods"]}
+    forward = [f["relmse"] for f in methods["forward"]["frames"]]
+    both = [f["relmse"] for f in methods["bidirectional"]["frames"]]
+    assert len(forward) == len(both) == 3 and forward != both
+    assert both[0] < forward[0]  # the cold start is where the later frames help most

@@ -110,7 +110,9 @@ def command(
     temporal (flicker) error on tone-mapped images. With --input and --baseline the raw
     input, Intel OIDN, plain temporal accumulation and a-trous without temporal reuse are
     produced in memory and ranked alongside. The SVGF parameter options set the parameters
-    of the accumulate/atrous baselines (use the ones the sequence was denoised with).
+    of the accumulate/atrous/forward/bidirectional baselines (use the ones the sequence was
+    denoised with); --baseline forward --baseline bidirectional compares the causal filter
+    with the bidirectional one (docs/bidirectional.md).
     """
     from svgf_cli.evaluate.contact import default_contact_frames, write_contact_sheet
     from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation

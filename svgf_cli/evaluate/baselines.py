@@ -8,6 +8,11 @@
   accumulation through the motion vectors, no spatial filter.
 * ``atrous``: our SVGF pipeline with ``temporal=False``: the edge-aware a-trous wavelet filter
   with spatial variance, every frame cold.
+* ``forward``: our SVGF pipeline as given but causal (``bidirectional=False``);
+* ``bidirectional``: the same with ``bidirectional=True``, run by the real file driver
+  (``svgf_cli.bidir``: both passes, the forward state spilled to a scratch folder) into a
+  temporary folder before scoring, then read back frame by frame. Together the two compare
+  forward-only against bidirectional on any sequence, whichever the denoised files are.
 * ``input``: the raw noisy radiance itself (not a baseline one chooses; added by ``--input``).
 
 Every method turns one :class:`Frame` into one ``(3, H, W)`` float32 radiance image. The
@@ -16,6 +21,10 @@ stateful ones must see the frames in order.
 
 from __future__ import annotations
 
+import io
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
@@ -24,7 +33,9 @@ from svgf_cli.errors import UsageError
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame
 
-BASELINES: tuple[str, ...] = ("oidn", "accumulate", "atrous")
+BASELINES: tuple[str, ...] = ("oidn", "accumulate", "atrous", "forward", "bidirectional")
+# Baselines that carry history: they must see every frame between the scored ones.
+TEMPORAL_BASELINES = ("accumulate", "forward", "bidirectional")
 
 OIDN_MISSING = (
     "--baseline oidn needs Intel Open Image Denoise for Python: pip install 'svgf[oidn]' "
@@ -112,18 +123,66 @@ def baseline_params(name: str, params: SVGFParams) -> SVGFParams:
     """The SVGF parameters a denoiser baseline runs with, derived from the user's ``params``."""
     if name == "accumulate":
         # No spatial filter at all; the history is therefore the unfiltered accumulation.
-        return params.replace(atrous_iterations=0, feedback_iteration=-1)
+        return params.replace(atrous_iterations=0, feedback_iteration=-1, bidirectional=False)
     if name == "atrous":
-        return params.replace(temporal=False)
+        return params.replace(temporal=False, bidirectional=False)
+    if name == "forward":
+        return params.replace(bidirectional=False)
+    if name == "bidirectional":
+        return params.replace(bidirectional=True, taa=False)
     raise ValueError(f"{name!r} is not an SVGF-derived baseline")
 
 
-def make_method(name: str, params: SVGFParams) -> Method:
-    """A fresh method instance for one pass over a sequence."""
+class BidirectionalMethod:
+    """SVGF with ``bidirectional=True`` over the whole input sequence, run up front by the
+    file driver into a temporary folder (float colour only); :meth:`process` returns the
+    next frame's output. The folder is removed by :meth:`close` or at exit."""
+
+    name = "bidirectional"
+
+    def __init__(self, params: SVGFParams, inputs: Sequence[tuple[int, Path]],
+                 layers: str) -> None:
+        from svgf_cli.io.exr import read_rgb
+        from svgf_cli.io.layers import build_mapping
+        from svgf_cli.progress import Progress
+        from svgf_cli.runner import FrameTask, RunConfig, run_sequence
+
+        self._folder = tempfile.TemporaryDirectory(prefix="svgf-evaluate-")
+        self._read = read_rgb
+        mapping = build_mapping(layers)
+        self._mapping = mapping
+        self._outputs = [Path(self._folder.name) / f"o.{f}.exr" for f, _ in inputs]
+        tasks = [FrameTask(f, path, out) for (f, path), out in
+                 zip(inputs, self._outputs, strict=True)]
+        config = RunConfig(params=baseline_params("bidirectional", params), preset="evaluate",
+                           mapping=mapping, float_colour=True, colour_only=True)
+        quiet = Progress("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())
+        quiet.show_progress = False
+        run_sequence(tasks, config, quiet)
+        self._next = 0
+
+    def process(self, frame: Frame) -> np.ndarray:
+        image, _ = self._read(self._outputs[self._next], self._mapping)
+        self._next += 1
+        return np.ascontiguousarray(image, dtype=np.float32)
+
+    def close(self) -> None:
+        self._folder.cleanup()
+
+
+def make_method(name: str, params: SVGFParams,
+                inputs: Sequence[tuple[int, Path]] | None = None,
+                layers: str = "svgf") -> Method:
+    """A fresh method instance for one pass over a sequence (``inputs``, the frames it is
+    fed with their files, and the AOV preset ``layers``: for ``bidirectional``)."""
     if name == "oidn":
         return OidnMethod()
-    if name in ("accumulate", "atrous"):
+    if name in ("accumulate", "atrous", "forward"):
         return DenoiserMethod(name, baseline_params(name, params))
+    if name == "bidirectional":
+        if inputs is None:
+            raise UsageError("--baseline bidirectional needs the input frames (--input)")
+        return BidirectionalMethod(params, inputs, layers)
     if name == "input":
         return InputMethod()
     raise UsageError(f"unknown baseline {name!r} (choose from {', '.join(BASELINES)})")

@@ -18,7 +18,7 @@ import numpy as np
 from svgf_cli import __version__
 from svgf_cli.errors import InputError, UsageError
 from svgf_cli.evaluate import metrics
-from svgf_cli.evaluate.baselines import BASELINES, Method, make_method
+from svgf_cli.evaluate.baselines import BASELINES, TEMPORAL_BASELINES, Method, make_method
 from svgf_cli.evaluate.report import EvaluationReport, FrameScore, MethodResult
 from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS, SVGFParams
 from svgf_cli.frame import Frame
@@ -112,7 +112,7 @@ def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str,
         "temporal": "consecutive frame numbers only; undefined on a method's first frame",
         "baselines": list(request.baselines),
     }
-    if any(b in ("accumulate", "atrous") for b in request.baselines):
+    if any(b in ("accumulate", "atrous", "forward", "bidirectional") for b in request.baselines):
         settings["preset"] = request.preset
         settings["params"] = json.loads(request.params.to_json())
     if oidn_version is not None:
@@ -136,6 +136,8 @@ def _source(name: str, request: EvaluationRequest) -> str:
         "oidn": "baseline: Intel OIDN per frame (RT, HDR, clean albedo + normal)",
         "accumulate": "baseline: SVGF temporal accumulation only (atrous_iterations=0)",
         "atrous": "baseline: SVGF a-trous without temporal reuse (temporal=False)",
+        "forward": "baseline: SVGF, causal (bidirectional=False)",
+        "bidirectional": "baseline: SVGF, bidirectional (bidirectional=True)",
     }[name]
 
 
@@ -156,7 +158,8 @@ def run_evaluation(
     in_pattern = SequencePattern.parse(request.input) if request.input else None
     frames = resolve_frames(out_pattern, request.output, request.frames)
     # Temporal baselines must see every frame in between, not only the scored ones.
-    fed = list(range(frames[0], frames[-1] + 1)) if "accumulate" in baselines else frames
+    temporal = any(b in TEMPORAL_BASELINES for b in baselines)
+    fed = list(range(frames[0], frames[-1] + 1)) if temporal else frames
     for frame in frames:
         _require(out_pattern.path(frame), "denoised output", frame)
         _require(ref_pattern.path(frame), "reference", frame)
@@ -170,7 +173,9 @@ def run_evaluation(
     tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)))]
     oidn_version = None
     for name in baselines:
-        method = make_method(name, request.params)
+        assert in_pattern is not None
+        method = make_method(name, request.params, [(f, in_pattern.path(f)) for f in fed],
+                             request.layers)
         tracks.append(_Track(MethodResult(name, _source(name, request)), method))
         if name == "oidn":
             from importlib.metadata import version
