@@ -82,7 +82,7 @@ def write_inputs(folder: Path, width: int, height: int, frames: int) -> None:
             write_exr(path, synthetic_frame(width, height, f), compression="zip")
 
 
-def run_cli(pattern: Path, out: Path, frames: int) -> dict[str, float]:
+def run_cli(pattern: Path, out: Path, frames: int, *extra: str) -> dict[str, float]:
     """One `svgf denoise` process; timings from its JSON progress, memory from wait4."""
     args = [
         sys.executable,
@@ -97,6 +97,7 @@ def run_cli(pattern: Path, out: Path, frames: int) -> dict[str, float]:
         "--overwrite",
         "--progress",
         "json",
+        *extra,
     ]
     started = time.perf_counter()
     proc = subprocess.Popen(
@@ -138,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=6, help="frames per run (N)")
     parser.add_argument("--sizes", default="1280x720,1920x1080")
     parser.add_argument("--workdir", type=Path, default=None, help="keep inputs here")
+    parser.add_argument("--modes", default="causal",
+                        help="comma-separated: causal, bidirectional (docs/bidirectional.md)")
     args = parser.parse_args(argv)
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     n = args.frames
@@ -151,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{'compute':>8} {'write':>6} {'peak MB':>8} {'CPU s':>7}",
             flush=True,
         )
+        modes = args.modes.split(",")
         for width, height in sizes:
             folder = root / f"in_{width}x{height}"
             t0 = time.perf_counter()
@@ -161,22 +165,30 @@ def main(argv: list[str] | None = None) -> int:
                 "MB/frame)",
                 flush=True,
             )
-            cpu = {}
-            for frames in (n, 2 * n):
-                r = run_cli(folder / "in.####.exr", root / f"out_{width}x{height}", frames)
-                cpu[frames] = r["cpu"]
+            per_mode = {}
+            for mode in modes:
+                extra = ("--bidirectional",) if mode == "bidirectional" else ()
+                cpu = {}
+                for frames in (n, 2 * n):
+                    r = run_cli(folder / "in.####.exr", root / f"out_{width}x{height}", frames,
+                                *extra)
+                    cpu[frames] = r["cpu"]
+                    print(
+                        f"{width}x{height:<5} {frames:>6} {r['steady']:>8.3f} "
+                        f"{r['first_frame']:>6.2f} {r['read']:>6.3f} {r['compute']:>8.3f} "
+                        f"{r['write']:>6.3f} {r['rss_mb']:>8.0f} {r['cpu']:>7.1f}  {mode}",
+                        flush=True,
+                    )
+                per_frame = per_mode[mode] = (cpu[2 * n] - cpu[n]) / n
                 print(
-                    f"{width}x{height:<5} {frames:>6} {r['steady']:>8.3f} "
-                    f"{r['first_frame']:>6.2f} {r['read']:>6.3f} {r['compute']:>8.3f} "
-                    f"{r['write']:>6.3f} {r['rss_mb']:>8.0f} {r['cpu']:>7.1f}",
+                    f"  {mode}: CPU seconds per frame (the {n} extra frames of the longer run):"
+                    f" {per_frame:.2f}; on 2 fully used cores that is >= {per_frame / 2:.2f}"
+                    " s/frame",
                     flush=True,
                 )
-            per_frame = (cpu[2 * n] - cpu[n]) / n
-            print(
-                f"  CPU seconds per frame (the {n} extra frames of the longer run): "
-                f"{per_frame:.2f}; on 2 fully used cores that is >= {per_frame / 2:.2f} s/frame",
-                flush=True,
-            )
+            if len(per_mode) == 2:
+                ratio = per_mode["bidirectional"] / per_mode["causal"]
+                print(f"  bidirectional / causal CPU seconds per frame: {ratio:.2f}", flush=True)
     print(
         "s/frame: mean wall per frame after the first written one; 1st: seconds to the "
         "first written frame, process start included; read/compute/write: mean seconds per "
