@@ -181,16 +181,16 @@ MUTANTS: tuple[Mutant, ...] = (
         "history-length-of-signal-0", "filters",
         "per-signal history length replaced by signal 0's",
         "svgf_cli/filters/denoiser.py",
-        (("            self._before_accumulation(TemporalState(",
+        (("            shortened = self._before_accumulation(temporal)",
           "            history_length[1:] = history_length[0]\n"
-          "            self._before_accumulation(TemporalState("),),
+          "            shortened = self._before_accumulation(temporal)"),),
         FILTER_TESTS,
     ),
     Mutant(
         "rec709-weights", "filters", "luminance weights ignored (Rec.709 constants used)",
         "svgf_cli/filters/denoiser.py",
-        (("weights = float32_weights(frame.luminance_weights)",
-          "weights = float32_weights((0.2126, 0.7152, 0.0722))"),),
+        (("float32_weights(frame.luminance_weights))",
+          "float32_weights((0.2126, 0.7152, 0.0722)))"),),
         FILTER_TESTS,
     ),
     Mutant(
