@@ -3,8 +3,10 @@ scratch folder's life, the plan, and what is refused."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,11 @@ from exr_fixtures import ExrImage, read_exr
 from test_cli_support import exit_code, reference_run, run_cli, sequence_folder
 
 from svgf_cli.farm.plan import plan_chunks
+from svgf_cli.filters.params import resolve_params
+from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.spill import ScratchFolder
+from svgf_cli.progress import Progress
+from svgf_cli.runner import FrameTask, Interrupted, RunConfig, StopFlag, run_sequence
 
 FRAMES = range(1, 11)
 
@@ -173,3 +179,39 @@ def test_evaluate_compares_forward_with_bidirectional(
     both = [f["relmse"] for f in methods["bidirectional"]["frames"]]
     assert len(forward) == len(both) == 3 and forward != both
     assert both[0] < forward[0]  # the cold start is where the later frames help most
+
+
+class _StopAfter(StopFlag):
+    """A stop request (SIGTERM) that arrives after ``polls`` frames were finished."""
+
+    def __init__(self, polls: int) -> None:
+        super().__init__()
+        self._left = polls
+
+    def __bool__(self) -> bool:
+        self._left -= 1
+        if self._left < 0:
+            self.signum = signal.SIGTERM
+        return self.signum is not None
+
+
+@pytest.mark.parametrize(("polls", "written"), [(3, []), (12, [10, 9, 8])])
+def test_a_signal_stops_either_pass_and_removes_the_scratch(
+    sequence: Path, tmp_path: Path, polls: int, written: list[int],
+    one_run: dict[int, ExrImage],
+) -> None:
+    """Stopped in the forward pass (nothing written) or in the reverse one (the last frames
+    written, complete and exact): the scratch folder is gone either way."""
+    scratch = tmp_path / "scratch"
+    config = RunConfig(params=resolve_params("default", bidirectional=True), preset="default",
+                       mapping=build_mapping("svgf"), float_colour=True, scratch_dir=scratch)
+    tasks = [FrameTask(f, sequence / f"in.{f:04d}.exr", tmp_path / f"o.{f:04d}.exr")
+             for f in FRAMES]
+    quiet = Progress("lines", 10, quiet=True, out=io.StringIO(), err=io.StringIO())
+    with pytest.raises(Interrupted) as stopped:
+        run_sequence(tasks, config, quiet, stop=_StopAfter(polls))
+    assert stopped.value.exit_code == 143
+    assert list(scratch.iterdir()) == []
+    assert sorted(int(p.name.split(".")[1]) for p in tmp_path.glob("o.*.exr")) == sorted(written)
+    for f in written:
+        assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(one_run[f]), f
