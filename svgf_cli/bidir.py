@@ -187,6 +187,7 @@ def _reverse_pass(
             if task.output is not None:
                 _, packed, _ = next(states)
                 forward = unpack_history(result.frame.names, *packed)
+                packed = None  # the unpacked copy is all the combination needs
             denoised, _ = frames.process(
                 task, result, lambda f, h=forward: frames.denoiser.process(f, h))
             forward = None

@@ -75,11 +75,7 @@ _HISTORY_SHAPES = {
 }
 
 # Illumination-shaped (S, 3, H, W) scratch roles, in order of preference for a-trous outputs.
-# "combined" (a bidirectional run's combined accumulation) comes last: a causal run never
-# needs it, so never allocates it.
-_ILLUMINATION_SCRATCH = (
-    "demodulated", "accumulated", "spare_a", "spare_b", "spare_c", "combined",
-)
+_ILLUMINATION_SCRATCH = ("demodulated", "accumulated", "spare_a", "spare_b", "spare_c")
 
 
 @dataclass
@@ -374,7 +370,7 @@ class Denoiser:
 
     def _filter_spatially(
         self, run: _FrameRun, source: str, moments: np.ndarray, history_length: np.ndarray,
-        iterations: int, protected: tuple[str, ...] = (),
+        iterations: int, protected: tuple[str, ...] = (), feeds_back: bool = True,
     ) -> _Filtered:
         """Phase 2, spatial filtering of the accumulation in the workspace buffer ``source``
         (with its ``moments`` and ``history_length``): the variance (+ the optional colour
@@ -382,7 +378,9 @@ class Denoiser:
         iteration (``feedback_iteration``, clamped to the configured iterations; -1: the
         colour entering the a-trous) is recorded as the colour history and never
         overwritten, nor are the buffers named in ``protected``. The demodulated frame is
-        scratch here (dead once accumulated)."""
+        scratch here (dead once accumulated). Without ``feeds_back`` (a bidirectional run's
+        combined accumulation, which is no pass's history) nothing is kept, which saves a
+        buffer."""
         p = self.params
         work, mode, depth, normal, weights = run.work, run.mode, run.depth, run.normal, run.weights
         busy = (source, *protected)
@@ -412,7 +410,7 @@ class Denoiser:
         # The colour history: the unfiltered accumulation unless an iteration feeds back.
         # That iteration's output is protected so later iterations cannot overwrite it.
         # The last iteration's propagated variance is never read, so it is not computed.
-        feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
+        feedback = min(p.feedback_iteration, p.atrous_iterations - 1) if feeds_back else -1
         history_name = filtered_name
         filtered_name_now = filtered_name
         filtered = work[filtered_name]
@@ -426,7 +424,7 @@ class Denoiser:
         names = run.names
         pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]
         for iteration in range(iterations):
-            out_name = scratch(filtered_name_now, history_name)
+            out_name = scratch(filtered_name_now, history_name if feeds_back else "")
             if iteration == feedback:
                 history_name = out_name
             propagate = iteration + 1 < iterations
@@ -514,6 +512,9 @@ class Denoiser:
             raise ValueError("TAA filters the output causally; it cannot run bidirectionally")
         run = self._start_frame(frame)
         work = run.work
+        # The combined colour takes a spare buffer that is neither the pass's own
+        # accumulation nor the demodulated frame (which the firefly clamp puts in spare_a).
+        combined = "spare_b" if self.params.firefly_clamp > 0.0 else "spare_a"
         combine = None
         if forward is not None:
             def combine(temporal: TemporalState) -> None:
@@ -522,17 +523,16 @@ class Denoiser:
                     temporal.history_illumination, temporal.history_moments,
                     temporal.history_length, temporal.depth, self._colour_counts,
                     self._moment_counts, run.weights, self._moment_counts[-1],
-                    work["combined"],
-                    work["combined_moments"], work["combined_length"],
+                    work[combined], work["combined_moments"], work["combined_length"],
                 )
 
         self._accumulate_temporally(run, combine)
-        own = self._feedback_filtering(run, protected=("combined",) if forward else ())
+        own = self._feedback_filtering(run, protected=(combined,) if forward else ())
         filtered = None
         if forward is not None:
             filtered = self._filter_spatially(
-                run, "combined", work["combined_moments"], work["combined_length"],
-                self.params.atrous_iterations, protected=(own.history_name,),
+                run, combined, work["combined_moments"], work["combined_length"],
+                self.params.atrous_iterations, protected=(own.history_name,), feeds_back=False,
             )
         self._store_history(run.frame, run.depth, own.history_name, run.counts)
         run.lap("history")
