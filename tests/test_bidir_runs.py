@@ -215,3 +215,16 @@ def test_a_signal_stops_either_pass_and_removes_the_scratch(
     assert sorted(int(p.name.split(".")[1]) for p in tmp_path.glob("o.*.exr")) == sorted(written)
     for f in written:
         assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(one_run[f]), f
+
+
+def test_svgf_plan_sees_bidirectional_among_the_denoise_arguments(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    plan = ["plan", "--frames", "1-10", "--chunk-size", "4", "--warmup", "2",
+            "--last-frame", "12", "--", "in.####.exr", "-o", "o.####.exr"]
+    code, stdout, err = run_cli([*plan, "--bidirectional"], capsys)
+    assert code == 0, err
+    assert [c["read"] for c in json.loads(stdout)] == [[1, 6], [3, 10], [7, 12]]
+    code, stdout, _ = run_cli(plan, capsys)
+    assert [c["read"] for c in json.loads(stdout)] == [[1, 4], [3, 8], [7, 10]]
+    assert exit_code(plan[:7] + ["--last-frame", "9", "--", "i.####.exr", "-o", "o"]) == 2
