@@ -180,13 +180,14 @@ def _reverse_pass(
         WriteBehind(frame_writer(config), progress, stats) as writes,
     ):
         frame_started = time.perf_counter()
+        buffers = None  # the unpacked forward state: one set of buffers for the whole pass
         for task, result, _ in reads:
             frames.admit(task, result)
             writes.poll()
             forward = None
             if task.output is not None:
                 _, packed, _ = next(states)
-                forward = unpack_history(result.frame.names, *packed)
+                forward = buffers = unpack_history(result.frame.names, *packed, out=buffers)
                 packed = None  # the unpacked copy is all the combination needs
             denoised, _ = frames.process(
                 task, result, lambda f, h=forward: frames.denoiser.process(f, h))

@@ -208,13 +208,17 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
 
 
 def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
-                   factors: dict[str, float]) -> SideHistory:
-    """Inverse of :func:`pack_history` (float32; ``m2 = sd^2 + m1^2``)."""
+                   factors: dict[str, float], out: SideHistory | None = None) -> SideHistory:
+    """Inverse of :func:`pack_history` (float32; ``m2 = sd^2 + m1^2``), into ``out`` when
+    it has the right shapes (a run reuses one set of buffers: no per-frame allocation)."""
     height, width = planes[f"{names[0]}.h"].shape
     count = len(names)
-    colour = np.empty((count, 3, height, width), dtype=F32)
-    moments = np.empty((count, 2, height, width), dtype=F32)
-    length = np.empty((count, height, width), dtype=F32)
+    if out is not None and out.length.shape == (count, height, width):
+        colour, moments, length = out.colour, out.moments, out.length
+    else:
+        colour = np.empty((count, 3, height, width), dtype=F32)
+        moments = np.empty((count, 2, height, width), dtype=F32)
+        length = np.empty((count, height, width), dtype=F32)
 
     def restored(channel: str, out: np.ndarray) -> None:
         np.multiply(planes[channel], F32(factors.get(channel, 1.0)), out=out, dtype=F32)

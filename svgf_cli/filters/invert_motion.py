@@ -40,15 +40,17 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_
 
 def invert_motion(
     next_motion: np.ndarray, next_depth: np.ndarray, out: np.ndarray,
-    depth_tolerance: float = DEPTH_TOLERANCE,
+    depth_tolerance: float = DEPTH_TOLERANCE, scratch: np.ndarray | None = None,
 ) -> int:
     """Fill ``out`` (2, H, W) with the motion from frame ``t`` to ``t + 1`` given frame
     ``t + 1``'s backward motion (2, H, W) and depth (H, W) (module docstring). Returns the
-    number of holes (pixels set to ``NO_MOTION``)."""
+    number of holes (pixels set to ``NO_MOTION``). ``scratch``: an optional (2, H, W)
+    float32 buffer to work in (else one is allocated)."""
     height, width = next_depth.shape
-    nearest = np.empty((height, width), dtype=F32)
-    weight = np.empty((height, width), dtype=F32)
-    return int(_scatter(next_motion, next_depth, F32(depth_tolerance), nearest, weight, out))
+    if scratch is None or scratch.shape != (2, height, width):
+        scratch = np.empty((2, height, width), dtype=F32)
+    return int(_scatter(next_motion, next_depth, F32(depth_tolerance), scratch[0], scratch[1],
+                        out))
 
 
 @njit(inline="always", **_JIT)

@@ -38,6 +38,10 @@ class ReversePass:
         self.denoiser = Denoiser(params, debug_layers=debug_layers)
         self._later: tuple[np.ndarray, np.ndarray] | None = None  # motion, depth of t + 1
         self.derived_holes = 0  # holes of the last derived motion (information)
+        # The derived motion and the inversion's scratch, reused frame after frame (the
+        # Denoiser keeps no reference to a frame's motion).
+        self._derived: np.ndarray | None = None
+        self._scratch: np.ndarray | None = None
 
     def reset(self) -> None:
         """Drop the history (a gap in the sequence): the next frame starts cold."""
@@ -49,12 +53,17 @@ class ReversePass:
         else (the last frame of the sequence) no motion anywhere."""
         if frame.motion_next is not None:
             return frame.motion_next
-        motion = np.empty((2, frame.height, frame.width), dtype=F32)
+        shape = (2, frame.height, frame.width)
+        if self._derived is None or self._derived.shape != shape:
+            self._derived = np.empty(shape, dtype=F32)
+            self._scratch = np.empty(shape, dtype=F32)
+        motion = self._derived
         if self._later is None or self._later[1].shape != frame.depth.shape:
             motion.fill(NO_MOTION)
             self.derived_holes = frame.height * frame.width
         else:
-            self.derived_holes = invert_motion(self._later[0], self._later[1], motion)
+            self.derived_holes = invert_motion(self._later[0], self._later[1], motion,
+                                               scratch=self._scratch)
         return motion
 
     def process(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
