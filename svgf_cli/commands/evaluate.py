@@ -31,6 +31,16 @@ def _frames(spec: str | None, option: str) -> list[int] | None:
         raise UsageError(f"{option}: {exc}") from exc
 
 
+def _compare(values: tuple[str, ...]) -> list[tuple[str, str]]:
+    pairs = []
+    for value in values:
+        name, sep, pattern = value.partition("=")
+        if not sep or not name or not pattern:
+            raise UsageError(f"--compare {value!r}: expected NAME=PATTERN")
+        pairs.append((name, pattern))
+    return pairs
+
+
 def _write_text(path: str, text: str) -> None:
     """Atomically (hidden unique temporary, then rename; see svgf_cli.io.atomic)."""
     from svgf_cli.io.atomic import write_atomically
@@ -66,6 +76,14 @@ def _write_text(path: str, text: str) -> None:
     type=click.Choice(BASELINES),
     help="Also produce and score this method from --input (repeatable).",
 )
+@click.option(
+    "--compare",
+    "compare",
+    multiple=True,
+    metavar="NAME=PATTERN",
+    help="Also score this denoised sequence (e.g. another preset's output) as method NAME "
+    "(repeatable).",
+)
 @click.option("--frames", metavar="SPEC", help="Frames to evaluate, e.g. 1-10 or 1,5,9.")
 @click.option("--json", "json_path", metavar="FILE", help="Write the full report as JSON.")
 @click.option("--plot", "plot_path", metavar="FILE.png", help="Write per-frame error plots.")
@@ -93,6 +111,7 @@ def command(
     reference: str,
     input_pattern: str | None,
     baselines: tuple[str, ...],
+    compare: tuple[str, ...],
     frames: str | None,
     json_path: str | None,
     plot_path: str | None,
@@ -106,11 +125,13 @@ def command(
 ) -> None:
     """Score DENOISED_PATTERN (e.g. 'out/den.####.exr') against --reference.
 
-    Per frame and as a mean: RMSE and relMSE on linear radiance; PSNR, SSIM, FLIP and the
-    temporal (flicker) error on tone-mapped images. With --input and --baseline the raw
-    input, Intel OIDN, plain temporal accumulation and a-trous without temporal reuse are
-    produced in memory and ranked alongside. The SVGF parameter options set the parameters
-    of the accumulate/atrous baselines (use the ones the sequence was denoised with).
+    Per frame and as a mean: RMSE, relMSE, trimmed relMSE and hot pixels on linear
+    radiance; PSNR, SSIM, FLIP and the temporal (flicker) error on tone-mapped images.
+    With --input and --baseline the raw input, Intel OIDN, plain temporal accumulation and
+    a-trous without temporal reuse are produced in memory and ranked alongside; --compare
+    adds more denoised sequences (e.g. other presets). The SVGF parameter options set the
+    parameters of the accumulate/atrous baselines (use the ones the sequence was denoised
+    with).
     """
     from svgf_cli.evaluate.contact import default_contact_frames, write_contact_sheet
     from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
@@ -138,6 +159,7 @@ def command(
         preset=preset,
         layers=layers,
         contact_frames=contact_list or (),
+        compare=_compare(compare),
     )
     log = None if quiet else (lambda msg: click.echo(f"evaluate: {msg}", err=True))
     report, contacts = run_evaluation(request, log=log)

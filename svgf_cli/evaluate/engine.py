@@ -43,6 +43,8 @@ class EvaluationRequest:
     preset: str = DEFAULT_PRESET
     layers: str = "svgf"
     contact_frames: Sequence[int] = ()
+    # More denoised sequences scored from files like ``output``: (method name, pattern).
+    compare: Sequence[tuple[str, str]] = ()
 
 
 @dataclass
@@ -60,7 +62,8 @@ class _Track:
     """One method's running state: its results and its previous display image."""
 
     result: MethodResult
-    method: Method | None = None  # None: read from files (the svgf output)
+    method: Method | None = None  # None: read from files (``pattern``)
+    pattern: SequencePattern | None = None
     previous: np.ndarray | None = None
     previous_frame: int | None = None
 
@@ -126,6 +129,17 @@ def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str,
     return settings
 
 
+def _check_compare(request: EvaluationRequest, baselines: Sequence[str]) -> None:
+    """Compared sequences need names of their own (not svgf, input or a baseline's)."""
+    taken = {SVGF, INPUT, *baselines}
+    for name, _pattern in request.compare:
+        if not name or any(c.isspace() for c in name):
+            raise UsageError(f"compared method name {name!r} must be a word without spaces")
+        if name in taken:
+            raise UsageError(f"compared method name {name!r} is used twice or is reserved")
+        taken.add(name)
+
+
 def _source(name: str, request: EvaluationRequest) -> str:
     if name == SVGF:
         return SequencePattern.parse(request.output).display
@@ -151,7 +165,9 @@ def run_evaluation(
     if baselines and request.input is None:
         raise UsageError("--baseline needs --input: the baselines run on the noisy input frames")
 
+    _check_compare(request, baselines)
     out_pattern = SequencePattern.parse(request.output)
+    compare_patterns = [(n, SequencePattern.parse(p)) for n, p in request.compare]
     ref_pattern = SequencePattern.parse(request.reference)
     in_pattern = SequencePattern.parse(request.input) if request.input else None
     frames = resolve_frames(out_pattern, request.output, request.frames)
@@ -159,6 +175,8 @@ def run_evaluation(
     fed = list(range(frames[0], frames[-1] + 1)) if "accumulate" in baselines else frames
     for frame in frames:
         _require(out_pattern.path(frame), "denoised output", frame)
+        for name, pattern in compare_patterns:
+            _require(pattern.path(frame), f"{name} output", frame)
         _require(ref_pattern.path(frame), "reference", frame)
     if in_pattern is not None:
         for frame in fed:
@@ -167,7 +185,9 @@ def run_evaluation(
     if missing_contact:
         raise UsageError(f"--contact-frames {missing_contact[0]} is not an evaluated frame")
 
-    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)))]
+    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)), None, out_pattern)]
+    for name, pattern in compare_patterns:
+        tracks.append(_Track(MethodResult(name, pattern.display), None, pattern))
     oidn_version = None
     for name in baselines:
         method = make_method(name, request.params)
@@ -212,8 +232,8 @@ def run_evaluation(
         ref_display = metrics.tone_map(reference)
         contact = ContactFrame(frame, ref_display, {}, None) if frame in contact_wanted else None
         for track in tracks:
-            if track.method is None:
-                path = out_pattern.path(frame)
+            if track.pattern is not None:
+                path = track.pattern.path(frame)
                 image, _ = read_rgb(path, mapping)
                 _check_shape(image, reference, path, ref_path)
                 file = str(path)
@@ -283,12 +303,16 @@ def score_frame(
     temporal = None
     if previous is not None and ref_previous is not None:
         temporal = metrics.temporal_error(display, previous, ref_display, ref_previous)
+    hot_max, hot_share = metrics.hot_pixels(image, reference)
     values = {
         "rmse": metrics.rmse(image, reference),
         "relmse": metrics.relmse(image, reference),
+        "relmse_trimmed": metrics.relmse_trimmed(image, reference),
         "psnr": metrics.psnr(display, ref_display),
         "ssim": metrics.ssim(display, ref_display),
         "flip": flip_mean,
         "temporal": temporal,
+        "hot_max": hot_max,
+        "hot_share": hot_share,
     }
     return FrameScore(frame, values), display, flip_map
