@@ -44,11 +44,11 @@ def test_gradient_samples_reach_the_filter_and_change_the_output(
 ) -> None:
     frames = range(1, 4)
     inputs = _sequence(tmp_path / "in", GLOSSY, frames)
-    err = _denoise(capsys, inputs, tmp_path / "on")
-    assert "signals: lobes (auto;" in err
+    err = _denoise(capsys, inputs, tmp_path / "on", "--signals", "lobes")
+    assert "signals: lobes (asked for lobes;" in err
     assert "glossy = (GlossDir + GlossInd) x GlossCol, demodulated by GlossCol; gradient " \
            "samples gradient.glossy" in err
-    _denoise(capsys, inputs, tmp_path / "off", "--no-antilag-gradients")
+    _denoise(capsys, inputs, tmp_path / "off", "--signals", "lobes", "--no-antilag-gradients")
     with_samples = _outputs(tmp_path / "on", frames, "svgf")
     without = _outputs(tmp_path / "off", frames, "svgf")
     # Frame 1 has no history to shorten; from frame 2 on the light has moved and the
@@ -70,8 +70,8 @@ def test_failed_check_warns_once_and_filters_the_combined_colour(
     err = _denoise(capsys, inputs, tmp_path / "auto", "--preset-aovs", "cycles")
     warnings = [line for line in err.splitlines() if "light passes" in line]
     assert len(warnings) == 1, warnings
-    assert f"WARNING: {inputs / 'in.0005.exr'}: the light passes of signal set lobes do not " \
-           "add up to the colour on" in warnings[0]
+    assert f"WARNING: {inputs / 'in.0005.exr'}: the light passes of signal set " \
+           "direct-indirect do not add up to the colour on" in warnings[0]
     assert "filtering the combined colour for the whole run" in warnings[0]
     assert "signals: combined (auto;" in err
     _denoise(capsys, inputs, tmp_path / "combined", "--preset-aovs", "cycles",
@@ -87,11 +87,11 @@ def test_a_later_frame_failing_the_check_keeps_the_first_frames_set(
     inputs = _sequence(tmp_path / "in", METAL, range(4, 6))
     cycles_copy(METAL / "in.0006.exr", inputs / "in.0006.exr", scale={"DiffInd": 0.5})
     err = _denoise(capsys, inputs, tmp_path / "out", "--preset-aovs", "cycles")
-    assert "signals: lobes (auto;" in err
+    assert "signals: direct-indirect (auto;" in err
     warnings = [line for line in err.splitlines() if "light passes" in line]
     assert len(warnings) == 1, warnings
-    assert "in.0006.exr" in warnings[0] and "keeping lobes, chosen on the first frame" \
-        in warnings[0]
+    assert "in.0006.exr" in warnings[0] and "keeping direct-indirect, chosen on the first " \
+        "frame" in warnings[0]
     assert (tmp_path / "out" / "den.0006.exr").exists()
 
 
@@ -103,12 +103,15 @@ def test_inspect_shows_the_sets_and_checks_the_light_passes(
                             "--json"], capsys)
     assert code == 0
     report = json.loads(out)["files"][0]
-    assert report["signal_set"] == "lobes"
-    assert report["signal_sets_offered"] == ["lobes", "lobes-split", "direct-indirect",
+    assert report["signal_set"] == "direct-indirect"
+    assert report["signal_sets_offered"] == ["direct-indirect", "lobes-split", "lobes",
                                              "combined"]
-    assert report["signals"] == ["diffuse", "glossy", "transmission"]
+    assert report["signals"] == ["direct", "indirect"]
     assert report["signal_plan"][0]["terms"] == [
-        {"light": ["diffuse_direct", "diffuse_indirect"], "colour": "diffuse_color"}]
+        {"light": [f"{lobe}_direct"], "colour": f"{lobe}_color"}
+        for lobe in ("diffuse", "glossy", "transmission")]
+    assert report["signal_plan"][1]["albedo"] == ["diffuse_color", "glossy_color",
+                                                  "transmission_color"]
     assert report["emission_roles"] == ["emission", "environment"]
     assert report["light_pass_check_result"]["failing"] == 0
     assert report["roles"]["environment"] == ["ViewLayer.Env.R", "ViewLayer.Env.G",

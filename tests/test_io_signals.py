@@ -105,13 +105,16 @@ def test_cycles_direct_indirect_is_demodulated_by_the_capped_sum_of_the_colour_p
     assert rgb(layers, "Denoising Albedo").max() > 1.05 >= expected.max()
 
 
-def test_auto_takes_lobes_on_cycles_and_the_tracers_lobe_files() -> None:
-    assert read_frame(ROLL / "in.0001.exr", build_mapping("cycles")).plan.set == "lobes"
-    glossy = read_frame(GLOSSY / "in.0002.exr", build_mapping("svgf"))
-    assert glossy.plan.set == "lobes" and glossy.frame.names == ("diffuse", "glossy")
-    # Without lobe passes the tracer's own direct and indirect layers are the best set.
-    plain = read_frame(LIGHT_STEP / "in.0002.exr", build_mapping("svgf"))
-    assert plain.plan.set == "direct-indirect" and plain.plan.checked is False
+def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:
+    cycles = read_frame(ROLL / "in.0001.exr", build_mapping("cycles"))
+    assert cycles.plan.set == "direct-indirect" and cycles.plan.checked  # from the lobes
+    assert cycles.plan.offered == ("direct-indirect", "lobes-split", "lobes", "combined")
+    # The tracer's own direct and indirect layers, lobe passes or not (no check needed).
+    for sequence in (GLOSSY, LIGHT_STEP):
+        traced = read_frame(sequence / "in.0002.exr", build_mapping("svgf"))
+        assert traced.plan.set == "direct-indirect" and traced.plan.checked is False
+    assert read_frame(LIGHT_STEP / "in.0002.exr", build_mapping("svgf")).plan.offered == (
+        "direct-indirect", "combined")
 
 
 def test_a_missing_lobe_falls_back_to_combined_with_one_warning(tmp_path: Path) -> None:
@@ -119,7 +122,7 @@ def test_a_missing_lobe_falls_back_to_combined_with_one_warning(tmp_path: Path) 
                          drop=("GlossDir", "GlossInd", "GlossCol"))
     mapping = build_mapping("cycles")
     result = read_frame(broken, mapping)
-    assert result.plan.set == "combined"
+    assert result.plan.set == "combined"  # auto took direct-indirect, from the lobes
     assert result.frame.names == ("color",)
     assert result.sum_check is not None and not result.sum_check.passed
     share = result.sum_check.share
@@ -137,7 +140,8 @@ def test_a_missing_lobe_falls_back_to_combined_with_one_warning(tmp_path: Path) 
 
 
 def test_a_later_frame_failing_the_check_keeps_the_set_and_warns(tmp_path: Path) -> None:
-    fixed, decided = fix_signal_set(METAL / "in.0005.exr", build_mapping("cycles"))
+    fixed, decided = fix_signal_set(METAL / "in.0005.exr",
+                                    build_mapping("cycles", signals="lobes"))
     assert fixed.signals == "lobes" and decided.signal_warning is None
     # A light group or holdout: the diffuse light no longer adds up.
     broken = cycles_copy(METAL / "in.0006.exr", tmp_path / "in.0006.exr",
@@ -185,6 +189,7 @@ def test_a_lobe_with_one_light_pass_offers_no_lobe_set() -> None:
     resolved = resolve_layers(mapping, names, "f.exr")
     plan = plan_signals(mapping, resolved, names, "f.exr")
     assert plan is not None and plan.set == "combined" and plan.offered == ("combined",)
+    assert read_frame(ROLL / "in.0001.exr", mapping).plan.set != "combined"
     assert "lobe sets unavailable: diffuse has only its direct light" in resolved.notes
 
 
@@ -229,7 +234,7 @@ def test_arnold_lobe_aovs_are_radiance_and_its_direct_excludes_emission(tmp_path
     def layer(name: str) -> np.ndarray:
         return np.stack([planes[f"{name}.{c}"] for c in "RGB"])
 
-    lobes = read_frame(tmp_path / "a.exr", build_mapping("arnold"))
+    lobes = read_frame(tmp_path / "a.exr", build_mapping("arnold", signals="lobes"))
     assert lobes.plan.set == "lobes" and lobes.frame.names == ("diffuse", "glossy")
     np.testing.assert_array_equal(lobes.frame.signal("diffuse").radiance,
                                   layer("diffuse_direct") + layer("diffuse_indirect"))
