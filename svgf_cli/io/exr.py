@@ -11,6 +11,7 @@ a `Frame`), `read_rgb` (plain R,G,B). Writing: `write_exr` (atomic, checked), wi
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field, replace
@@ -27,6 +28,7 @@ from svgf_cli.io import atomic
 from svgf_cli.io.colour import LuminanceWeights, luminance_weights
 from svgf_cli.io.layers import (
     RADIANCE_ROLES,
+    REQUIRED_ROLES,
     LayerMapping,
     ResolvedLayers,
     build_mapping,
@@ -601,6 +603,10 @@ def _scrub(
 ) -> int:
     """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem.
     Returns how many values were changed."""
+    # Fast path for clean data (almost every plane): min and max propagate NaN.
+    low, high = float(data.min()), float(data.max())
+    if math.isfinite(low) and math.isfinite(high) and (low >= 0 or not clamp_negative):
+        return 0
     bad = ~np.isfinite(data)
     count = int(np.count_nonzero(bad))
     if count:
@@ -707,10 +713,11 @@ def read_frame(
     if fallback is not None:
         roles = list(dict.fromkeys([*roles, *fallback.roles()]))
     names = [name for role in roles for name in (resolved[role] or ())]
-    gradient = [plan.gradient_mask] if plan.gradient_mask else []
-    gradient += [name for _, pair in plan.gradient_channels for name in pair]
+    gradient = [p.gradient_mask for p in (plan, fallback) if p and p.gradient_mask]
+    gradient += [name for p in (plan, fallback) if p
+                 for _, pair in p.gradient_channels for name in pair]
     colour_channels = resolve_output_colour(mapping, info.channels)
-    planes = _read_channels(info, [*names, *gradient],
+    planes = _read_channels(info, list(dict.fromkeys([*names, *gradient])),
                             also_in_window=colour_channels or ())
 
     # The output replaces the colour channels: the writer never needs their input values.
@@ -718,10 +725,14 @@ def read_frame(
     for name in (colour_channels or ()) if not colour_is_read else ():
         planes.source.release(name)
     # Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
-    # the source reference the copy instead of holding the same values twice.
+    # the source reference the copy instead of holding the same values twice. The G-buffer
+    # is gathered now; the signals' roles when the composition asks for them.
     warnings: list[str] = []
     values: dict[str, np.ndarray] = {}
-    for role in roles:
+
+    def fetch(role: str) -> np.ndarray:
+        if role in values:
+            return values[role]
         channel_names = resolved[role]
         assert channel_names is not None
         data = values[role] = planes.gather(channel_names)
@@ -738,6 +749,16 @@ def read_frame(
             changed = 0
         if not changed:
             planes.share(channel_names, data)
+        return data
+
+    gbuffer = [r for r in (*REQUIRED_ROLES, "id", "alpha") if resolved[r] is not None]
+    for role in gbuffer:
+        fetch(role)
+    kept = {*gbuffer, *(fallback.roles() if fallback else ())}
+
+    def release(role: str) -> None:
+        if role not in kept:
+            values.pop(role, None)
 
     gathered: dict[str, np.ndarray] = {}
 
@@ -746,17 +767,17 @@ def read_frame(
             gathered[name] = planes.gather((name,))[0]
         return gathered[name]
 
-    signals, emission = compose_signals(plan, values.__getitem__, channel)
+    signals, emission = compose_signals(plan, fetch, channel, release)
     sum_check = signal_warning = None
     if plan.checked:
-        sum_check = check_sum(signals, emission, values["color"])
+        sum_check = check_sum(signals, emission, fetch("color"))
         if not sum_check.passed:
             signal_warning = _sum_warning(path, plan, sum_check, fallback is None)
             warnings.append(signal_warning)
             if fallback is not None:
                 plan = fallback
                 resolved.plan = plan
-                signals, emission = compose_signals(plan, values.__getitem__, channel)
+                signals, emission = compose_signals(plan, fetch, channel, release)
     # The output replaces the colour channels: the writer never needs their input values.
     for name in colour_channels or ():
         planes.source.release(name)

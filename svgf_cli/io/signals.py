@@ -409,31 +409,77 @@ def _sum(planes: Sequence[np.ndarray]) -> np.ndarray:
     return total
 
 
+class _Roles:
+    """Role planes for one composition: fetched on first use, let go after the last one, so a
+    frame's light passes are not all held at once."""
+
+    def __init__(self, plan: SignalPlan, fetch: Callable[[str], np.ndarray],
+                 release: Callable[[str], None]) -> None:
+        uses: dict[str, int] = {}
+        for recipe in plan.signals:
+            for term in recipe.terms:
+                for role in (*term.light, *((term.colour,) if term.colour else ())):
+                    uses[role] = uses.get(role, 0) + 1
+            for role in recipe.albedo:
+                uses[role] = uses.get(role, 0) + 1
+        for role in plan.emission:
+            uses[role] = uses.get(role, 0) + 1
+        self._uses = uses
+        self._fetch = fetch
+        self._release = release
+
+    def __call__(self, role: str) -> np.ndarray:
+        plane = self._fetch(role)
+        self._uses[role] -= 1
+        if self._uses[role] == 0:
+            self._release(role)
+        return plane
+
+
+def _term(term: Term, role: _Roles) -> tuple[np.ndarray, bool]:
+    """A term's radiance and whether it is a fresh array (safe to modify in place)."""
+    lights = [role(r) for r in term.light]
+    light, fresh = _sum(lights), len(lights) > 1
+    if term.colour is not None:
+        colour = role(term.colour)
+        if fresh:
+            np.multiply(light, colour, out=light)
+        else:
+            light, fresh = np.multiply(light, colour, dtype=np.float32), True
+    return light, fresh
+
+
 def compose_signals(
     plan: SignalPlan,
-    role: Callable[[str], np.ndarray],
+    fetch: Callable[[str], np.ndarray],
     channel: Callable[[str], np.ndarray],
+    release: Callable[[str], None] = lambda _role: None,
 ) -> tuple[list[Signal], np.ndarray | None]:
-    """The plan's signals and emission from ``role(name)`` (a cleaned (3, H, W) float32
+    """The plan's signals and emission from ``fetch(role)`` (a cleaned (3, H, W) float32
     plane) and ``channel(name)`` (an (H, W) float32 channel, for gradient samples).
+    ``release(role)`` is called after a role's last use.
 
     Radiance from lobe passes is ``(Dir + Ind) x Col`` in float32, the renderer's own
     identity, so the signals add up to its colour to within the storage rounding. Returned
     arrays may be the role planes themselves: callers must not modify them.
     """
+    role = _Roles(plan, fetch, release)
     emission = _sum([role(r) for r in plan.emission]) if plan.emission else None
     white: np.ndarray | None = None
     signals: list[Signal] = []
     for recipe in plan.signals:
-        parts = []
-        for term in recipe.terms:
-            light = _sum([role(r) for r in term.light])
-            if term.colour is not None:
-                light = np.multiply(light, role(term.colour), dtype=np.float32)
-            parts.append(light)
-        radiance = _sum(parts)
+        radiance, fresh = _term(recipe.terms[0], role)
+        for term in recipe.terms[1:]:
+            part, _ = _term(term, role)
+            if fresh:
+                radiance += part
+            else:
+                radiance, fresh = np.add(radiance, part, dtype=np.float32), True
         if recipe.minus_emission and emission is not None:
-            radiance = np.subtract(radiance, emission, dtype=np.float32)
+            if fresh:
+                radiance -= emission
+            else:
+                radiance = np.subtract(radiance, emission, dtype=np.float32)
         if not recipe.albedo:
             if white is None:
                 white = np.ones_like(radiance)
@@ -441,7 +487,8 @@ def compose_signals(
         elif len(recipe.albedo) == 1:
             albedo = role(recipe.albedo[0])
         else:
-            albedo = np.minimum(_sum([role(r) for r in recipe.albedo]), np.float32(1.0))
+            albedo = _sum([role(r) for r in recipe.albedo])
+            np.minimum(albedo, np.float32(1.0), out=albedo)
         signals.append(Signal(recipe.name, np.ascontiguousarray(radiance), albedo,
                               _gradient(plan, recipe, channel)))
     return signals, emission
@@ -488,14 +535,18 @@ class SumCheck:
 def check_sum(signals: Sequence[Signal], emission: np.ndarray | None,
               colour: np.ndarray) -> SumCheck:
     """Per pixel and channel: ``|sum - colour| <= CHECK_RELATIVE max(sum, colour) + floor``,
-    ``floor = CHECK_FLOOR mean(colour) + CHECK_ABSOLUTE`` (see the constants)."""
+    ``floor = CHECK_FLOOR mean(colour) + CHECK_ABSOLUTE`` (see the constants). Two planes of
+    scratch memory."""
     total = np.zeros_like(colour) if emission is None else emission.copy()
     for signal in signals:
         total += signal.radiance
-    error = np.abs(total - colour)
+    error = np.subtract(total, colour, dtype=np.float32)
+    np.abs(error, out=error)
     floor = np.float32(CHECK_FLOOR * float(np.mean(colour, dtype=np.float64)) + CHECK_ABSOLUTE)
-    tolerance = np.float32(CHECK_RELATIVE) * np.maximum(total, colour) + floor
-    ratio = error / tolerance
+    tolerance = np.maximum(total, colour, out=total)
+    tolerance *= np.float32(CHECK_RELATIVE)
+    tolerance += floor
+    ratio = np.divide(error, tolerance, out=error)
     failing = int(np.count_nonzero((ratio > 1.0).any(axis=0)))
     worst = float(ratio.max()) if ratio.size else 0.0
     return SumCheck(failing, int(colour.shape[1] * colour.shape[2]), worst)
