@@ -20,7 +20,6 @@ bench/out/signals/). The commands run in-process (one numba JIT for all).
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -110,13 +109,11 @@ def measure(name: str) -> list[str]:
             pattern = str(out / "den.####.exr")
             argv = ["denoise", inputs, "-o", pattern, "--preset-aovs", preset,
                     "--signals", variant.signals, "-q", "--overwrite", *variant.options]
-            started = time.process_time()
             try:
                 svgf(argv)
             except SystemExit as exc:
                 if exc.code:
                     raise RuntimeError(f"svgf {' '.join(argv)} exited {exc.code}") from None
-            cpu = time.process_time() - started
             request = EvaluationRequest(
                 output=pattern, reference=str(ROOT / folder / "ref.####.exr"),
                 input=inputs, baselines=("oidn",) if index == 0 else (), layers=preset,
@@ -129,8 +126,7 @@ def measure(name: str) -> list[str]:
             peaks = peak(pattern, reference, frames,
                          lambda f, p=pattern, m=mapping: read_rgb(
                              p.replace("####", f"{f:04d}"), m)[0])
-            lines.append(row(f"svgf `{variant.label}`", methods["svgf"], peaks)
-                         + f" <!-- {cpu:.0f} CPU s -->")
+            lines.append(row(f"svgf `{variant.label}`", methods["svgf"], peaks))
             print(lines[-1], flush=True)
             if index == 0:
                 baseline_rows = _baselines(inputs, preset, variant.signals, reference, frames,
