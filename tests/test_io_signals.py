@@ -152,6 +152,40 @@ def test_a_later_frame_failing_the_check_keeps_the_set_and_warns(tmp_path: Path)
     assert result.signal_warning is not None and "keeping lobes" in result.signal_warning
 
 
+def _with_volume(src: Path, dst: Path, passes: bool) -> tuple[Path, np.ndarray]:
+    """``src`` with volume light (a fog patch over the left third) added to Combined, and
+    its VolumeDir/VolumeInd passes written when ``passes``."""
+    layers = {n: p.astype(np.float32) for n, p in channels(src).items()}
+    h, w = layers["ViewLayer.Combined.R"].shape
+    fog = np.zeros((h, w), np.float32)
+    fog[:, : w // 3] = 0.25
+    for i, c in enumerate("RGB"):
+        layers[f"ViewLayer.Combined.{c}"] += fog * (1 + i) + fog * 0.5
+        if passes:
+            layers[f"ViewLayer.VolumeDir.{c}"] = fog * (1 + i)
+            layers[f"ViewLayer.VolumeInd.{c}"] = fog * 0.5
+    write_exr(dst, layers)
+    return dst, fog
+
+
+def test_volume_light_is_its_own_lobe_and_missing_volume_passes_fall_back(
+    tmp_path: Path,
+) -> None:
+    with_passes, fog = _with_volume(ROLL / "in.0003.exr", tmp_path / "v.exr", passes=True)
+    result = read_frame(with_passes, build_mapping("cycles", signals="lobes"))
+    assert result.frame.names == ("diffuse", "glossy", "transmission", "volume")
+    volume = result.frame.signal("volume")
+    np.testing.assert_array_equal(volume.radiance[1], 2 * fog + 0.5 * fog)
+    np.testing.assert_array_equal(volume.albedo, np.ones_like(volume.albedo))  # no colour
+    assert result.sum_check.failing == 0
+    direct = read_frame(with_passes, build_mapping("cycles")).frame.signal("direct")
+    assert direct.radiance[0][:, 0].min() >= 0.25  # volume direct light is direct light
+    without, _ = _with_volume(ROLL / "in.0003.exr", tmp_path / "n.exr", passes=False)
+    result = read_frame(without, build_mapping("cycles"))
+    assert result.plan.set == "combined"
+    assert abs(result.sum_check.share - 1 / 3) < 0.02  # the fog's third of the image
+
+
 def test_a_few_pixels_off_are_tolerated() -> None:
     frame = read_frame(ROLL / "in.0003.exr", build_mapping("cycles", signals="lobes")).frame
     colour = frame.total_radiance()

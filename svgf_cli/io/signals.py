@@ -279,11 +279,11 @@ def _gradient_channels(
 
 
 def _gradient_for(name: str, samples: dict[str, tuple[str, str]]) -> tuple[str, ...]:
-    """The samples that measure signal ``name``'s change: its own, or for the combined
-    colour the sum of direct and indirect. Signals of `lobes-split` get none: the diffuse
-    samples measure direct + indirect, which is neither half (a moving shadow changes the
-    direct light alone, and the sum's relative change understates it there and invents one
-    for the indirect light)."""
+    """The samples that measure signal ``name``'s change: its own (by name), or for the
+    combined colour the sum of direct and indirect. The diffuse signals of `lobes-split` get
+    none from ``diffuse``: those samples measure direct + indirect, which is neither half (a
+    moving shadow changes the direct light alone; the sum's relative change understates it
+    there and invents one for the indirect light)."""
     if name in samples:
         return (name,)
     if name == "color" and all(n in samples for n in _COMBINED_GRADIENT):
@@ -306,9 +306,9 @@ def _recipes(
 
     def lobe_signal(lobe: str, parts: tuple[str, ...] = ("direct", "indirect"),
                     signal: str | None = None) -> SignalRecipe:
-        albedo = (colour(lobe),) if colour(lobe) else ()
+        own = colour(lobe)
         light = tuple(f"{lobe}_{part}" for part in parts)
-        return SignalRecipe(signal or lobe, (Term(light, times(lobe)),), albedo)  # type: ignore[arg-type]
+        return SignalRecipe(signal or lobe, (Term(light, times(lobe)),), (own,) if own else ())
 
     if name == "lobes":
         return tuple(lobe_signal(lobe) for lobe in lobes.present), True
@@ -379,8 +379,7 @@ def plan_signals(
     if mask is not None:
         recipes = tuple(
             SignalRecipe(r.name, r.terms, r.albedo, r.minus_emission,
-                         () if chosen == "lobes-split" and r.name.startswith("diffuse_")
-                         else _gradient_for(r.name, samples))
+                         _gradient_for(r.name, samples))
             for r in recipes
         )
     used = {name for r in recipes for name in r.gradient}
