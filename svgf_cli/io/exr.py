@@ -754,10 +754,9 @@ def read_frame(
     gbuffer = [r for r in (*REQUIRED_ROLES, "id", "alpha") if resolved[r] is not None]
     for role in gbuffer:
         fetch(role)
-    kept = {*gbuffer, *(fallback.roles() if fallback else ())}
 
     def release(role: str) -> None:
-        if role not in kept:
+        if role not in gbuffer:
             values.pop(role, None)
 
     gathered: dict[str, np.ndarray] = {}
@@ -778,6 +777,8 @@ def read_frame(
                 plan = fallback
                 resolved.plan = plan
                 signals, emission = compose_signals(plan, fetch, channel, release)
+        # A role gathered again for the fallback is cleaned again: report its fixes once.
+        warnings[:] = dict.fromkeys(warnings)
     # The output replaces the colour channels: the writer never needs their input values.
     for name in colour_channels or ():
         planes.source.release(name)

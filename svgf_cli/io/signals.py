@@ -534,18 +534,21 @@ class SumCheck:
 def check_sum(signals: Sequence[Signal], emission: np.ndarray | None,
               colour: np.ndarray) -> SumCheck:
     """Per pixel and channel: ``|sum - colour| <= CHECK_RELATIVE max(sum, colour) + floor``,
-    ``floor = CHECK_FLOOR mean(colour) + CHECK_ABSOLUTE`` (see the constants). Two planes of
-    scratch memory."""
-    total = np.zeros_like(colour) if emission is None else emission.copy()
-    for signal in signals:
-        total += signal.radiance
-    error = np.subtract(total, colour, dtype=np.float32)
-    np.abs(error, out=error)
+    ``floor = CHECK_FLOOR mean(colour) + CHECK_ABSOLUTE`` (see the constants). One channel
+    at a time: two (H, W) planes of scratch memory."""
     floor = np.float32(CHECK_FLOOR * float(np.mean(colour, dtype=np.float64)) + CHECK_ABSOLUTE)
-    tolerance = np.maximum(total, colour, out=total)
-    tolerance *= np.float32(CHECK_RELATIVE)
-    tolerance += floor
-    ratio = np.divide(error, tolerance, out=error)
-    failing = int(np.count_nonzero((ratio > 1.0).any(axis=0)))
-    worst = float(ratio.max()) if ratio.size else 0.0
-    return SumCheck(failing, int(colour.shape[1] * colour.shape[2]), worst)
+    failing = np.zeros(colour.shape[1:], dtype=bool)
+    worst = 0.0
+    for c in range(colour.shape[0]):
+        total = np.zeros_like(colour[c]) if emission is None else emission[c].copy()
+        for signal in signals:
+            total += signal.radiance[c]
+        error = np.subtract(total, colour[c], dtype=np.float32)
+        np.abs(error, out=error)
+        tolerance = np.maximum(total, colour[c], out=total)
+        tolerance *= np.float32(CHECK_RELATIVE)
+        tolerance += floor
+        ratio = np.divide(error, tolerance, out=error)
+        failing |= ratio > 1.0
+        worst = max(worst, float(ratio.max()) if ratio.size else 0.0)
+    return SumCheck(int(np.count_nonzero(failing)), int(failing.size), worst)
