@@ -122,3 +122,18 @@ def test_inspect_shows_the_sets_and_checks_the_light_passes(
     assert code == 0
     assert "signals: lobes-split (asked for lobes-split;" in out
     assert "light-pass check (FAILED: svgf denoise filters the combined colour)" in out
+
+
+def test_evaluate_reads_the_input_as_the_signal_set_asked_for(tmp_path: Path) -> None:
+    from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
+
+    inputs = str(GLOSSY / "in.####.exr")
+    for signals, used in (("auto", "direct-indirect"), ("lobes", "lobes")):
+        request = EvaluationRequest(output=inputs, reference=str(GLOSSY / "ref.####.exr"),
+                                    input=inputs, frames=[1, 2], signals=signals)
+        report, _ = run_evaluation(request)
+        assert report.settings["signals"] == used
+        # the raw input row is the signals plus the emission: the file's colour, up to the
+        # half rounding of the stored passes
+        methods = {m.name: m for m in report.methods}
+        assert abs(methods["input"].mean("relmse") - methods["svgf"].mean("relmse")) < 1e-3

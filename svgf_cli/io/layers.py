@@ -418,6 +418,13 @@ def _suffix_index(channel_names: Iterable[str]) -> dict[str, list[str]]:
     return index
 
 
+def match_channels(wanted: tuple[str, ...], channel_names: Sequence[str]) -> tuple[str, ...] | None:
+    """``wanted`` as the file names it (exactly, or under one unambiguous view-layer
+    prefix, as roles are matched), or None."""
+    found, _ = _match_tuple(wanted, set(channel_names), _suffix_index(channel_names))
+    return found
+
+
 def _format_have(channel_names: Sequence[str], limit: int = 40) -> str:
     shown = ", ".join(channel_names[:limit])
     if len(channel_names) > limit:

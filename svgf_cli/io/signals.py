@@ -35,8 +35,7 @@ from svgf_cli.io.layers import (
     SIGNAL_SETS,
     LayerMapping,
     ResolvedLayers,
-    _match_tuple,
-    _suffix_index,
+    match_channels,
 )
 
 # Which set `--signals auto` takes: the first one the file offers, per AOV preset. Chosen by
@@ -262,8 +261,7 @@ def _gradient_channels(
 ) -> tuple[str | None, dict[str, tuple[str, str]]]:
     """The gradient layer's mask channel and, per sample name, its (prev, curr) channels."""
     present = set(channel_names)
-    by_suffix = _suffix_index(channel_names)
-    mask, _ = _match_tuple(("gradient.mask",), present, by_suffix)
+    mask = match_channels(("gradient.mask",), channel_names)
     if mask is None:
         return None, {}
     samples: dict[str, tuple[str, str]] = {}
