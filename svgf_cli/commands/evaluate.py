@@ -17,7 +17,7 @@ from svgf_cli.commands.options import (
 )
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.evaluate.baselines import BASELINES
-from svgf_cli.io.layers import AOV_PRESETS
+from svgf_cli.io.layers import AOV_PRESETS, SIGNAL_CHOICES
 
 
 def _frames(spec: str | None, option: str) -> list[int] | None:
@@ -103,6 +103,13 @@ def _write_text(path: str, text: str) -> None:
     show_default=True,
     help="AOV channel-name preset used to read --input (as in `svgf denoise`).",
 )
+@click.option(
+    "--signals",
+    type=click.Choice(SIGNAL_CHOICES),
+    default="auto",
+    show_default=True,
+    help="Signal set the --input frames are read as (as in `svgf denoise`).",
+)
 @click.option("--per-frame", is_flag=True, help="Also print every method's per-frame table.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines on stderr.")
 @svgf_param_options
@@ -118,6 +125,7 @@ def command(
     sheet_path: str | None,
     contact_frames: str | None,
     layers: str,
+    signals: str,
     per_frame: bool,
     quiet: bool,
     preset: str,
@@ -158,6 +166,7 @@ def command(
         params=params,
         preset=preset,
         layers=layers,
+        signals=signals,
         contact_frames=contact_list or (),
         compare=_compare(compare),
     )

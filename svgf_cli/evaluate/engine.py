@@ -42,6 +42,7 @@ class EvaluationRequest:
     params: SVGFParams = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
     preset: str = DEFAULT_PRESET
     layers: str = "svgf"
+    signals: str = "auto"
     contact_frames: Sequence[int] = ()
     # More denoised sequences scored from files like ``output``: (method name, pattern).
     compare: Sequence[tuple[str, str]] = ()
@@ -99,7 +100,9 @@ def _check_shape(image: np.ndarray, reference: np.ndarray, path: Path, ref_path:
         )
 
 
-def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str, object]:
+def _settings(
+    request: EvaluationRequest, oidn_version: str | None, signals: str | None = None
+) -> dict[str, object]:
     settings: dict[str, object] = {
         "svgf_version": __version__,
         "tone_map": metrics.TONE_MAP_DESCRIPTION,
@@ -115,6 +118,8 @@ def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str,
         "temporal": "consecutive frame numbers only; undefined on a method's first frame",
         "baselines": list(request.baselines),
     }
+    if signals is not None:  # the set the --input frames were read as
+        settings["signals"] = signals
     if any(b in ("accumulate", "atrous") for b in request.baselines):
         settings["preset"] = request.preset
         settings["params"] = json.loads(request.params.to_json())
@@ -200,10 +205,16 @@ def run_evaluation(
         input_method = make_method(INPUT, request.params)
         tracks.append(_Track(MethodResult(INPUT, _source(INPUT, request)), input_method))
 
-    from svgf_cli.io.exr import read_frame, read_rgb
+    from svgf_cli.io.exr import fix_signal_set, read_frame, read_rgb
     from svgf_cli.io.layers import build_mapping
 
-    mapping = build_mapping(request.layers)
+    mapping = build_mapping(request.layers, signals=request.signals)
+    if in_pattern is not None:
+        # One signal set for the whole input sequence, decided on its first frame.
+        mapping, decided = fix_signal_set(in_pattern.path(fed[0]), mapping)
+        if decided.signal_warning:
+            say(f"WARNING: {decided.signal_warning}")
+        del decided
     scored = set(frames)
     contact_wanted = set(request.contact_frames)
     contacts: list[ContactFrame] = []
@@ -277,7 +288,7 @@ def run_evaluation(
             "reference": request.reference,
             "input": request.input,
         },
-        settings=_settings(request, oidn_version),
+        settings=_settings(request, oidn_version, mapping.signals if in_pattern else None),
     )
     return report, contacts
 
