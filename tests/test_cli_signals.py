@@ -71,7 +71,7 @@ def test_failed_check_warns_once_and_filters_the_combined_colour(
     warnings = [line for line in err.splitlines() if "light passes" in line]
     assert len(warnings) == 1, warnings
     assert f"WARNING: {inputs / 'in.0005.exr'}: the light passes of signal set " \
-           "direct-indirect do not add up to the colour on" in warnings[0]
+           "lobes-split do not add up to the colour on" in warnings[0]
     assert "filtering the combined colour for the whole run" in warnings[0]
     assert "signals: combined (auto;" in err
     _denoise(capsys, inputs, tmp_path / "combined", "--preset-aovs", "cycles",
@@ -87,10 +87,10 @@ def test_a_later_frame_failing_the_check_keeps_the_first_frames_set(
     inputs = _sequence(tmp_path / "in", METAL, range(4, 6))
     cycles_copy(METAL / "in.0006.exr", inputs / "in.0006.exr", scale={"DiffInd": 0.5})
     err = _denoise(capsys, inputs, tmp_path / "out", "--preset-aovs", "cycles")
-    assert "signals: direct-indirect (auto;" in err
+    assert "signals: lobes-split (auto;" in err
     warnings = [line for line in err.splitlines() if "light passes" in line]
     assert len(warnings) == 1, warnings
-    assert "in.0006.exr" in warnings[0] and "keeping direct-indirect, chosen on the first " \
+    assert "in.0006.exr" in warnings[0] and "keeping lobes-split, chosen on the first " \
         "frame" in warnings[0]
     assert (tmp_path / "out" / "den.0006.exr").exists()
 
@@ -99,12 +99,18 @@ def test_inspect_shows_the_sets_and_checks_the_light_passes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     frame = METAL / "in.0006.exr"
+    code, out, _ = run_cli(["inspect", str(frame), "--preset-aovs", "cycles", "--json"],
+                           capsys)
+    assert code == 0
+    auto = json.loads(out)["files"][0]
+    assert auto["signal_set"] == "lobes-split"
+    assert auto["signals"] == ["diffuse_direct", "diffuse_indirect", "glossy", "transmission"]
     code, out, _ = run_cli(["inspect", str(frame), "--preset-aovs", "cycles", "--check",
-                            "--json"], capsys)
+                            "--signals", "direct-indirect", "--json"], capsys)
     assert code == 0
     report = json.loads(out)["files"][0]
     assert report["signal_set"] == "direct-indirect"
-    assert report["signal_sets_offered"] == ["direct-indirect", "lobes-split", "lobes",
+    assert report["signal_sets_offered"] == ["lobes-split", "direct-indirect", "lobes",
                                              "combined"]
     assert report["signals"] == ["direct", "indirect"]
     assert report["signal_plan"][0]["terms"] == [
@@ -128,7 +134,7 @@ def test_evaluate_reads_the_input_as_the_signal_set_asked_for(tmp_path: Path) ->
     from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
 
     inputs = str(GLOSSY / "in.####.exr")
-    for signals, used in (("auto", "direct-indirect"), ("lobes", "lobes")):
+    for signals, used in (("auto", "lobes-split"), ("lobes", "lobes")):
         request = EvaluationRequest(output=inputs, reference=str(GLOSSY / "ref.####.exr"),
                                     input=inputs, frames=[1, 2], signals=signals)
         report, _ = run_evaluation(request)

@@ -107,14 +107,18 @@ def test_cycles_direct_indirect_is_demodulated_by_the_capped_sum_of_the_colour_p
 
 def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:
     cycles = read_frame(ROLL / "in.0001.exr", build_mapping("cycles"))
-    assert cycles.plan.set == "direct-indirect" and cycles.plan.checked  # from the lobes
-    assert cycles.plan.offered == ("direct-indirect", "lobes-split", "lobes", "combined")
-    # The tracer's own direct and indirect layers, lobe passes or not (no check needed).
-    for sequence in (GLOSSY, LIGHT_STEP):
-        traced = read_frame(sequence / "in.0002.exr", build_mapping("svgf"))
-        assert traced.plan.set == "direct-indirect" and traced.plan.checked is False
-    assert read_frame(LIGHT_STEP / "in.0002.exr", build_mapping("svgf")).plan.offered == (
-        "direct-indirect", "combined")
+    assert cycles.plan.set == "lobes-split" and cycles.plan.checked  # from the lobes
+    assert cycles.plan.offered == ("lobes-split", "direct-indirect", "lobes", "combined")
+    # The glossy lobe is a signal of its own, marked glossy (the filter's glossy rules).
+    glossy = {s.name: s.glossy for s in cycles.frame.signals}
+    assert glossy == {"diffuse_direct": False, "diffuse_indirect": False, "glossy": True,
+                      "transmission": True}
+    # The tracer's lobe passes where it wrote them, else its own direct and indirect layers.
+    traced = read_frame(GLOSSY / "in.0002.exr", build_mapping("svgf"))
+    assert traced.plan.set == "lobes-split" and traced.plan.checked
+    plain = read_frame(LIGHT_STEP / "in.0002.exr", build_mapping("svgf"))
+    assert plain.plan.set == "direct-indirect" and plain.plan.checked is False
+    assert plain.plan.offered == ("direct-indirect", "combined")
 
 
 def test_a_missing_lobe_falls_back_to_combined_with_one_warning(tmp_path: Path) -> None:
@@ -122,7 +126,7 @@ def test_a_missing_lobe_falls_back_to_combined_with_one_warning(tmp_path: Path) 
                          drop=("GlossDir", "GlossInd", "GlossCol"))
     mapping = build_mapping("cycles")
     result = read_frame(broken, mapping)
-    assert result.plan.set == "combined"  # auto took direct-indirect, from the lobes
+    assert result.plan.set == "combined"  # auto took lobes-split, from the lobes
     assert result.frame.names == ("color",)
     assert result.sum_check is not None and not result.sum_check.passed
     share = result.sum_check.share
@@ -178,7 +182,8 @@ def test_volume_light_is_its_own_lobe_and_missing_volume_passes_fall_back(
     np.testing.assert_array_equal(volume.radiance[1], 2 * fog + 0.5 * fog)
     np.testing.assert_array_equal(volume.albedo, np.ones_like(volume.albedo))  # no colour
     assert result.sum_check.failing == 0
-    direct = read_frame(with_passes, build_mapping("cycles")).frame.signal("direct")
+    direct = read_frame(with_passes, build_mapping("cycles", signals="direct-indirect")
+                        ).frame.signal("direct")
     assert direct.radiance[0][:, 0].min() >= 0.25  # volume direct light is direct light
     without, _ = _with_volume(ROLL / "in.0003.exr", tmp_path / "n.exr", passes=False)
     result = read_frame(without, build_mapping("cycles"))

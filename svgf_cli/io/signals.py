@@ -21,6 +21,7 @@ passes), in which case the reader falls back to ``combined``.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -39,11 +40,12 @@ from svgf_cli.io.layers import (
 )
 
 # Which set `--signals auto` takes: the first one the file offers, per AOV preset. Chosen by
-# the measurements in docs/signals.md: on Cycles' roll and metal and the tracer's glossy
-# sequence, direct-indirect has the lowest relMSE and temporal error on all three and the
-# lowest FLIP on two (lobes-split is within 1-10 % of it, lobes and combined behind); the
+# the measurements in docs/signals.md (bench/signal_sets.py, default preset): lobes-split
+# keeps the glossy lobe a signal of its own, so the filter's glossy rules apply to it; on
+# Cycles' metal that is 0.35 relMSE against 12.5 for direct-indirect, on the tracer's
+# glossy sequence 0.011 against 0.015, on Cycles' roll within 1 % of direct-indirect. The
 # unverified presets follow the same order.
-_ORDER = ("direct-indirect", "lobes-split", "lobes", "combined")
+_ORDER = ("lobes-split", "direct-indirect", "lobes", "combined")
 AUTO_ORDER: dict[str, tuple[str, ...]] = {
     "svgf": _ORDER, "cycles": _ORDER, "arnold": _ORDER, "karma": _ORDER,
 }
@@ -99,6 +101,12 @@ class SignalRecipe:
     albedo: tuple[str, ...]
     minus_emission: bool = False
     gradient: tuple[str, ...] = ()
+    glossy: bool = False
+
+
+# Lobes whose light follows reflections or refractions rather than the surface
+# (``Signal.glossy``: the filter clamps their history to the current neighbourhood).
+GLOSSY_LOBES = frozenset({"glossy", "transmission"})
 
 
 @dataclass(frozen=True)
@@ -156,6 +164,8 @@ class SignalPlan:
             if recipe.gradient:
                 shown = " + ".join(_layer(channels[name]) for name in recipe.gradient)
                 line += f"; gradient samples {shown}"
+            if recipe.glossy:
+                line += "; glossy (follows reflections)"
             lines.append(line)
         emission = " + ".join(_layer(resolved[r]) for r in self.emission) or "none"
         lines.append(f"    emission = {emission} (not filtered, added back)")
@@ -306,7 +316,8 @@ def _recipes(
                     signal: str | None = None) -> SignalRecipe:
         own = colour(lobe)
         light = tuple(f"{lobe}_{part}" for part in parts)
-        return SignalRecipe(signal or lobe, (Term(light, times(lobe)),), (own,) if own else ())
+        return SignalRecipe(signal or lobe, (Term(light, times(lobe)),), (own,) if own else (),
+                            glossy=lobe in GLOSSY_LOBES)
 
     if name == "lobes":
         return tuple(lobe_signal(lobe) for lobe in lobes.present), True
@@ -376,9 +387,7 @@ def plan_signals(
     mask, samples = _gradient_channels(channel_names)
     if mask is not None:
         recipes = tuple(
-            SignalRecipe(r.name, r.terms, r.albedo, r.minus_emission,
-                         _gradient_for(r.name, samples))
-            for r in recipes
+            dataclasses.replace(r, gradient=_gradient_for(r.name, samples)) for r in recipes
         )
     used = {name for r in recipes for name in r.gradient}
     emission = tuple(role for role in ("emission", "environment") if resolved[role] is not None)
@@ -487,7 +496,7 @@ def compose_signals(
             albedo = _sum([role(r) for r in recipe.albedo])
             np.minimum(albedo, np.float32(1.0), out=albedo)
         signals.append(Signal(recipe.name, np.ascontiguousarray(radiance), albedo,
-                              _gradient(plan, recipe, channel)))
+                              _gradient(plan, recipe, channel), glossy=recipe.glossy))
     return signals, emission
 
 
