@@ -72,12 +72,17 @@ class Signal:
     filtered as ``radiance / albedo`` where that is a plausible reflectance (every channel
     at most ~1, not black) and as plain radiance elsewhere (see ``filters.modulate``).
     ``gradient`` optionally holds its temporal gradient samples (used by anti-lag).
+    ``glossy`` marks light that follows reflections (or refractions) rather than the
+    surface: a glossy or transmission lobe. Its reprojected history is not where the
+    reflection now is, so the filter clamps it to the current neighbourhood and stops the
+    spatial filter at smaller luminance differences (``SVGFParams.glossy_*``).
     """
 
     name: str
     radiance: np.ndarray
     albedo: np.ndarray
     gradient: TemporalGradient | None = None
+    glossy: bool = False
 
 
 @dataclass(kw_only=True)

@@ -214,8 +214,9 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
         transmission_radiance[:, sky] = 0.0
         frame = Frame(signals=[
             Signal("diffuse", f32(direct_radiance - emission + indirect_radiance), f32(albedo)),
-            Signal("glossy", f32(glossy_radiance), f32(glossy_colour)),
-            Signal("transmission", f32(transmission_radiance), f32(transmission_colour)),
+            Signal("glossy", f32(glossy_radiance), f32(glossy_colour), glossy=True),
+            Signal("transmission", f32(transmission_radiance), f32(transmission_colour),
+                   glossy=True),
         ], **geometry)
     if motion_next:
         frame.motion_next = f32(forward_motion)

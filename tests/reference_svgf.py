@@ -152,6 +152,7 @@ class CleanFrame:
     mesh_id: np.ndarray
     weights: tuple[float, float, float]
     counts: dict[str, int] = field(default_factory=dict)
+    glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
 
 
 def _count(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
@@ -194,6 +195,7 @@ def apply_value_policy(frame: Frame) -> CleanFrame:
         emission=emission, depth=clean_depth(frame.depth), normal=clean_normal(frame.normal),
         motion=clean_motion(frame.motion), mesh_id=np.asarray(frame.mesh_id),
         weights=(weights[0], weights[1], weights[2]), counts=counts,
+        glossy=[s.glossy for s in frame.signals],
     )
 
 
@@ -692,10 +694,11 @@ def atrous_steps(iterations: int) -> list[int]:
 
 
 def luminance_stop_guides(illumination: np.ndarray, variance: np.ndarray,
-                          depth: np.ndarray, sigma_luminance: float,
+                          depth: np.ndarray, sigma_luminance: float | Sequence[float],
                           weights: Sequence[float] = REC709) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel and signal: ``l(p) = max(0, luminance)`` (the frame's weights) and
-    ``1 / max(sigma_l sqrt(g3x3(Var(p)) + (1e-5 l(p))^2), 1e-20)``.
+    ``1 / max(sigma_l sqrt(g3x3(Var(p)) + (1e-5 l(p))^2), 1e-20)``; ``sigma_l`` is one
+    number or one per signal (glossy signals have their own).
 
     ``g3x3`` is the 3x3 Gaussian (1/4 centre, 1/8 edge, 1/16 corner) renormalised over the
     in-image surface pixels; a pixel with none of those keeps its own variance. The floor on
@@ -720,7 +723,10 @@ def luminance_stop_guides(illumination: np.ndarray, variance: np.ndarray,
     filtered = np.where(weight > 0.0, total / np.where(weight > 0.0, weight, 1.0), v)
     lum = np.maximum(luminance(c, weights), 0.0)
     deviation = np.sqrt(np.maximum(filtered, 0.0) + (RELATIVE_DEVIATION_FLOOR * lum) ** 2)
-    return lum, 1.0 / np.maximum(sigma_luminance * deviation, MIN_SCALE)
+    sigma = np.asarray(sigma_luminance, dtype=F64)
+    if sigma.ndim == 1:
+        sigma = sigma[:, None, None]
+    return lum, 1.0 / np.maximum(sigma * deviation, MIN_SCALE)
 
 
 def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
@@ -852,6 +858,7 @@ class TemporalState:
     history: Reprojected
     depth: np.ndarray
     weights: tuple[float, float, float]
+    glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
 
 
 def antilag_gradient_change(mask, previous, current, radius, sigma):
@@ -978,6 +985,14 @@ class ReferenceDenoiser:
             reprojected.illumination = history_clamp(
                 reprojected.illumination, reprojected.history_length, temporal.current,
                 temporal.depth, p.history_clamp)
+        if p.glossy_history_clamp > 0.0:
+            # Glossy signals: their own clamp to the current neighbourhood (one at a time).
+            for s, glossy in enumerate(temporal.glossy):
+                if glossy:
+                    one = slice(s, s + 1)
+                    reprojected.illumination[one] = history_clamp(
+                        reprojected.illumination[one], reprojected.history_length[one],
+                        temporal.current[one], temporal.depth, p.glossy_history_clamp)
         if not p.antilag:
             return None
         _, length, shortened = antilag(
@@ -1016,7 +1031,8 @@ class ReferenceDenoiser:
                                     self.history, p.depth_tolerance, p.depth_slack,
                                     p.normal_tolerance)
             shortened = self.before_accumulation(TemporalState(
-                illumination, radiance_mode, reprojected, geom.depth, clean.weights))
+                illumination, radiance_mode, reprojected, geom.depth, clean.weights,
+                clean.glossy))
             if shortened is not None:
                 counts["antilag"] = shortened
             self.last_reprojected = reprojected
@@ -1054,7 +1070,9 @@ class ReferenceDenoiser:
         feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
         colour_history = colour
         for iteration, step in enumerate(atrous_steps(p.atrous_iterations)):
-            guides = luminance_stop_guides(colour, variance, geom.depth, p.sigma_luminance,
+            sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
+                      else p.sigma_luminance for glossy in clean.glossy]
+            guides = luminance_stop_guides(colour, variance, geom.depth, sigmas,
                                            clean.weights)
             colour, variance = atrous_iteration(colour, variance, guides[0], radiance_mode,
                                                 guides[1], geom.depth, geom.ddx, geom.ddy,

@@ -96,6 +96,37 @@ def test_reports_are_deterministic(seq: dict[str, str], capsys: pytest.CaptureFi
     assert texts[0] == texts[1]
 
 
+def test_compare_scores_more_denoised_sequences(
+    seq: dict[str, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = Path(seq["dir"])
+    other = d / "other"
+    other.mkdir()
+    for frame in range(1, FRAMES + 1):  # a worse 'denoiser': 20 % too bright
+        ref, _ = read_rgb(d / "seq" / f"ref.{frame:04d}.exr")
+        _write_rgb(other / f"den.{frame:04d}.exr", ref * np.float32(1.2))
+    code, out, err = run(
+        capsys, seq["output"], "-r", seq["reference"], "--compare",
+        f"bright={other / 'den.####.exr'}", "--json", str(d / "c.json"),
+    )
+    assert code == 0, err
+    report = json.loads((d / "c.json").read_text())
+    assert [m["name"] for m in report["methods"]] == ["svgf", "bright"]
+    assert report["ranking"]["relmse"] == ["svgf", "bright"]
+    bright = report["methods"][1]
+    # A 20 % gain: per pixel 0.04 r^2 / (r^2 + 0.01), 16x the 5 % gain's error.
+    svgf_relmse = report["methods"][0]["mean"]["relmse"]
+    assert bright["mean"]["relmse"] == pytest.approx(16 * svgf_relmse, rel=1e-3)
+    assert "bright" in out
+    code, _, err = run(capsys, seq["output"], "-r", seq["reference"], "--compare", "svgf=x")
+    assert code == 2 and "reserved" in err
+    code, _, err = run(capsys, seq["output"], "-r", seq["reference"], "--compare", "nopattern")
+    assert code == 2 and "NAME=PATTERN" in err
+    missing = f"gone={d / 'nowhere' / 'den.####.exr'}"
+    code, _, err = run(capsys, seq["output"], "-r", seq["reference"], "--compare", missing)
+    assert code == 3 and "gone output for frame 1 not found" in err
+
+
 def test_missing_reference_frame_is_an_input_error(
     seq: dict[str, str], capsys: pytest.CaptureFixture[str]
 ) -> None:

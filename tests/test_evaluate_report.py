@@ -19,10 +19,13 @@ def _scores(frame: int, scale: float, temporal: float | None = None) -> FrameSco
     values = {
         "rmse": 0.1 * scale,
         "relmse": 0.01 * scale,
+        "relmse_trimmed": 0.009 * scale,
         "psnr": 30.0 / scale,
         "ssim": 1.0 - 0.1 * scale,
         "flip": 0.05 * scale,
         "temporal": temporal,
+        "hot_max": 1.5 * scale,
+        "hot_share": 0.001 * scale,
     }
     return FrameScore(frame, values, file=f"f.{frame}.exr")
 
@@ -74,8 +77,9 @@ def test_json_schema_and_strictness() -> None:
     assert [m["key"] for m in data["metrics"]] == list(METRIC_KEYS)
     assert {m["name"] for m in data["methods"]} == {"svgf", "atrous", "input"}
     svgf = next(m for m in data["methods"] if m["name"] == "svgf")
-    assert set(svgf) == {"name", "source", "flagged", "mean", "rank", "frames"}
-    assert set(svgf["mean"]) == set(METRIC_KEYS)
+    assert set(svgf) == {"name", "source", "flagged", "mean", "summary", "rank", "frames"}
+    assert set(svgf["mean"]) == set(METRIC_KEYS) == set(svgf["summary"])
+    assert {m["key"]: m["summary"] for m in data["metrics"]}["hot_max"] == "max"
     assert set(svgf["rank"]) == {*METRIC_KEYS, "overall"}
     assert svgf["frames"][0]["psnr"] == "inf"  # JSON has no infinity
     assert svgf["frames"][0]["temporal"] is None
@@ -99,3 +103,21 @@ def test_table_names_every_method_and_the_flagged_frame() -> None:
     first_rows = [line.split()[0] for line in lines[3:6]]
     assert first_rows == ["svgf", "input", "atrous"]
     assert "svgf per frame" in table
+
+
+def test_hot_max_is_summarised_by_its_worst_frame_and_stays_out_of_the_overall_rank() -> None:
+    def frame(n: int, hot: float, relmse: float) -> FrameScore:
+        values = dict.fromkeys(METRIC_KEYS, 1.0)
+        values.update(hot_max=hot, relmse=relmse, temporal=None)
+        return FrameScore(n, values)
+
+    # "a" has one very hot frame but the better relMSE; "b" is lukewarm on both frames.
+    a = MethodResult("a", "a", [frame(1, 1.0, 0.01), frame(2, 9.0, 0.01)])
+    b = MethodResult("b", "b", [frame(1, 4.0, 0.02), frame(2, 4.0, 0.02)])
+    report = EvaluationReport([1, 2], [a, b], {}, {})
+    assert a.mean("hot_max") == 5.0 and a.summary("hot_max") == 9.0
+    assert b.summary("hot_max") == 4.0
+    assert report.ranks("hot_max") == {"b": 1, "a": 2}, "ranked on the worst frame"
+    # Overall: only the overall metrics count (relMSE decides; every other one ties).
+    assert report.overall_ranks() == {"a": 1, "b": 2}
+    assert a.summary("relmse") == a.mean("relmse")

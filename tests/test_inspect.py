@@ -37,7 +37,8 @@ def test_text_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert "R                            half" in out
     assert "motion.Y                     float" in out
     assert "normal: N.X, N.Y, N.Z" in out
-    assert "signals: color" in out
+    assert "signals: combined (auto; offered in auto order: combined)" in out
+    assert "color = R,G,B, demodulated by albedo" in out
     assert "missing: nothing" in out
     assert "worldToCamera" in out
 

@@ -23,7 +23,7 @@ from svgf_cli.commands.options import (
 )
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
-from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS
+from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS, SIGNAL_CHOICES
 from svgf_cli.progress import PROGRESS_MODES, Progress
 
 DEBUG_CHANNEL_EXAMPLE = ("variance", "history_length")  # data layers, for the codec check
@@ -56,7 +56,7 @@ SECTIONS = [
         ["frames_spec", "warmup", "skip_existing", "overwrite", "allow_gaps", "save_history",
          "load_history"],
     ),  # fmt: skip
-    ("Presets and layers", ["preset", "preset_aovs", "aovs", "motion_convention"]),
+    ("Presets and layers", ["preset", "preset_aovs", "signals", "aovs", "motion_convention"]),
     (
         "Run and progress",
         ["threads", "scratch_dir", "progress_mode", "quiet", "verbose", "dry_run", "check_only"],
@@ -87,6 +87,15 @@ SECTIONS = [
     default="svgf",
     show_default=True,
     help="Channel names of the renderer that wrote the inputs.",
+)
+@click.option(
+    "--signals",
+    type=click.Choice(SIGNAL_CHOICES),
+    default="auto",
+    show_default=True,
+    help="Signals the light is filtered as: one per light lobe, lobes with diffuse direct "
+    "and indirect apart, direct + indirect, or the combined colour; auto: the best set the "
+    "first frame supports (docs/signals.md).",
 )
 @click.option(
     "--aov",
@@ -216,14 +225,23 @@ def command(**options: Any) -> None:
     """
     from svgf_cli.farm.job import build_job
     from svgf_cli.io.atomic import remove_stale_temporaries
-    from svgf_cli.io.exr import check_compression, compression_name, read_info, refuse_multiview
+    from svgf_cli.io.exr import (
+        check_compression,
+        compression_name,
+        fix_signal_set,
+        read_info,
+        refuse_multiview,
+    )
     from svgf_cli.io.layers import build_mapping, resolve_layers, resolve_output_colour
+    from svgf_cli.io.signals import plan_signals
     from svgf_cli.runner import RunConfig, RunStats, load_history, run_sequence, stop_on_signals
 
     params = params_from_options(options["preset"], options)
     warmup, warmup_note = _resolve_warmup(options)
     _check_combinations(options, params.bidirectional)
-    mapping = build_mapping(options["preset_aovs"], options["aovs"], options["motion_convention"])
+    mapping = build_mapping(
+        options["preset_aovs"], options["aovs"], options["motion_convention"], options["signals"]
+    )
     compression = options["compression"]
     debug_names = [f"svgf.{n}" for n in DEBUG_CHANNEL_EXAMPLE] if options["debug_aovs"] else []
     if compression is not None:
@@ -256,6 +274,11 @@ def command(**options: Any) -> None:
     info = read_info(first_input)
     refuse_multiview(info)
     resolved = resolve_layers(mapping, info.channels, str(first_input))
+    # The signal set is decided once, on the sequence's first frame, so that every chunk and
+    # farm task of a sequence filters the same signals (they cannot change mid-run).
+    mapping, decided = fix_signal_set(job.timeline[0][1], mapping)
+    resolved.plan = plan_signals(mapping, resolved, info.channels, str(first_input))
+    resolved.requested_signals = options["signals"]
     colour = resolve_output_colour(mapping, info.channels)
     if compression is not None and not options["colour_only"]:
         # Every input channel is written too: a lossy codec must not touch its data layers.
@@ -291,6 +314,9 @@ def command(**options: Any) -> None:
         )
     for warning in job.warnings:
         progress.warning(warning)
+    if decided.signal_warning:
+        progress.warning(decided.signal_warning)
+    del decided
     if options["check_only"]:
         _check_inputs(job, mapping, progress)
         return

@@ -17,7 +17,7 @@ from svgf_cli.commands.options import (
 )
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.evaluate.baselines import BASELINES
-from svgf_cli.io.layers import AOV_PRESETS
+from svgf_cli.io.layers import AOV_PRESETS, SIGNAL_CHOICES
 
 
 def _frames(spec: str | None, option: str) -> list[int] | None:
@@ -29,6 +29,16 @@ def _frames(spec: str | None, option: str) -> list[int] | None:
         return parse_frame_spec(spec)
     except ValueError as exc:
         raise UsageError(f"{option}: {exc}") from exc
+
+
+def _compare(values: tuple[str, ...]) -> list[tuple[str, str]]:
+    pairs = []
+    for value in values:
+        name, sep, pattern = value.partition("=")
+        if not sep or not name or not pattern:
+            raise UsageError(f"--compare {value!r}: expected NAME=PATTERN")
+        pairs.append((name, pattern))
+    return pairs
 
 
 def _write_text(path: str, text: str) -> None:
@@ -66,6 +76,14 @@ def _write_text(path: str, text: str) -> None:
     type=click.Choice(BASELINES),
     help="Also produce and score this method from --input (repeatable).",
 )
+@click.option(
+    "--compare",
+    "compare",
+    multiple=True,
+    metavar="NAME=PATTERN",
+    help="Also score this denoised sequence (e.g. another preset's output) as method NAME "
+    "(repeatable).",
+)
 @click.option("--frames", metavar="SPEC", help="Frames to evaluate, e.g. 1-10 or 1,5,9.")
 @click.option("--json", "json_path", metavar="FILE", help="Write the full report as JSON.")
 @click.option("--plot", "plot_path", metavar="FILE.png", help="Write per-frame error plots.")
@@ -85,6 +103,13 @@ def _write_text(path: str, text: str) -> None:
     show_default=True,
     help="AOV channel-name preset used to read --input (as in `svgf denoise`).",
 )
+@click.option(
+    "--signals",
+    type=click.Choice(SIGNAL_CHOICES),
+    default="auto",
+    show_default=True,
+    help="Signal set the --input frames are read as (as in `svgf denoise`).",
+)
 @click.option("--per-frame", is_flag=True, help="Also print every method's per-frame table.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines on stderr.")
 @svgf_param_options
@@ -93,12 +118,14 @@ def command(
     reference: str,
     input_pattern: str | None,
     baselines: tuple[str, ...],
+    compare: tuple[str, ...],
     frames: str | None,
     json_path: str | None,
     plot_path: str | None,
     sheet_path: str | None,
     contact_frames: str | None,
     layers: str,
+    signals: str,
     per_frame: bool,
     quiet: bool,
     preset: str,
@@ -106,13 +133,14 @@ def command(
 ) -> None:
     """Score DENOISED_PATTERN (e.g. 'out/den.####.exr') against --reference.
 
-    Per frame and as a mean: RMSE and relMSE on linear radiance; PSNR, SSIM, FLIP and the
-    temporal (flicker) error on tone-mapped images. With --input and --baseline the raw
-    input, Intel OIDN, plain temporal accumulation and a-trous without temporal reuse are
-    produced in memory and ranked alongside. The SVGF parameter options set the parameters
-    of the accumulate/atrous/forward/bidirectional baselines (use the ones the sequence was
-    denoised with); --baseline forward --baseline bidirectional compares the causal filter
-    with the bidirectional one (docs/bidirectional.md).
+    Per frame and as a mean: RMSE, relMSE, trimmed relMSE and hot pixels on linear
+    radiance; PSNR, SSIM, FLIP and the temporal (flicker) error on tone-mapped images.
+    With --input and --baseline the raw input, Intel OIDN, plain temporal accumulation and
+    a-trous without temporal reuse are produced in memory and ranked alongside; --compare
+    adds more denoised sequences (e.g. other presets). The SVGF parameter options set the
+    parameters of the accumulate/atrous/forward/bidirectional baselines (use the ones the
+    sequence was denoised with); --baseline forward --baseline bidirectional compares the
+    causal filter with the bidirectional one (docs/bidirectional.md).
     """
     from svgf_cli.evaluate.contact import default_contact_frames, write_contact_sheet
     from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
@@ -139,7 +167,9 @@ def command(
         params=params,
         preset=preset,
         layers=layers,
+        signals=signals,
         contact_frames=contact_list or (),
+        compare=_compare(compare),
     )
     log = None if quiet else (lambda msg: click.echo(f"evaluate: {msg}", err=True))
     report, contacts = run_evaluation(request, log=log)

@@ -9,17 +9,26 @@ import click
 import numpy as np
 
 from svgf_cli.errors import InputError
-from svgf_cli.io.exr import ExrInfo, TypedAttribute, io_threads, read_info, refuse_multiview
+from svgf_cli.io.exr import (
+    ExrInfo,
+    TypedAttribute,
+    io_threads,
+    read_frame,
+    read_info,
+    refuse_multiview,
+)
 from svgf_cli.io.layers import (
     AOV_PRESETS,
     MOTION_CONVENTIONS,
     ROLES,
+    SIGNAL_CHOICES,
     LayerMapping,
     ResolvedLayers,
     build_mapping,
     resolve_layers,
     resolve_output_colour,
 )
+from svgf_cli.io.signals import SignalPlan, SumCheck, plan_signals
 from svgf_cli.io.source import decode_source
 
 
@@ -35,7 +44,40 @@ def _json_value(value: Any) -> Any:
     return str(value)
 
 
-def _report(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> dict[str, Any]:
+def _plan_report(plan: SignalPlan | None, check: SumCheck | None) -> dict[str, Any]:
+    if plan is None:
+        return {"signal_set": None, "signal_sets_offered": [], "signal_plan": []}
+    channels = dict(plan.gradient_channels)
+    report: dict[str, Any] = {
+        "signal_set": plan.set,
+        "signal_sets_offered": list(plan.offered),
+        "signal_plan": [
+            {
+                "name": recipe.name,
+                "terms": [{"light": list(t.light), "colour": t.colour} for t in recipe.terms],
+                "albedo": list(recipe.albedo),
+                "minus_emission": recipe.minus_emission,
+                "gradient": {n: list(channels[n]) for n in recipe.gradient},
+            }
+            for recipe in plan.signals
+        ],
+        "emission_roles": list(plan.emission),
+        "light_pass_check": plan.checked,
+    }
+    if check is not None:
+        report["light_pass_check_result"] = {
+            "pixels": check.pixels, "failing": check.failing, "share": check.share,
+            "worst": check.worst, "passed": check.passed,
+        }  # fmt: skip
+    return report
+
+
+def _report(
+    info: ExrInfo,
+    mapping: LayerMapping,
+    resolved: ResolvedLayers,
+    check: SumCheck | None = None,
+) -> dict[str, Any]:
     return {
         "path": str(info.path),
         "width": info.width,
@@ -63,14 +105,20 @@ def _report(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> d
         "preset": mapping.preset,
         "motion_convention": mapping.motion_convention,
         "roles": {role: list(resolved[role] or ()) or None for role in ROLES},
-        "signals": list(resolved.signal_roles),
+        "signals": list(resolved.plan.names) if resolved.plan is not None else [],
+        **_plan_report(resolved.plan, check),
         "missing": dict(resolved.missing),
         "notes": list(resolved.notes),
         "attributes": {k: _json_value(v) for k, v in sorted(info.attributes.items())},
     }
 
 
-def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str:
+def _text(
+    info: ExrInfo,
+    mapping: LayerMapping,
+    resolved: ResolvedLayers,
+    check: SumCheck | None = None,
+) -> str:
     dx, dy, dw, dh = info.display_window
     lines = [
         f"{info.path}",
@@ -90,6 +138,9 @@ def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str
             lines.append(f"    {name:<28} {kind}")
     lines.append(f"  roles ({mapping.preset} preset, motion {mapping.motion_convention}):")
     lines.extend(f"  {line}" for line in resolved.describe().splitlines())
+    if check is not None:
+        verdict = "passed" if check.passed else "FAILED: svgf denoise filters the combined colour"
+        lines.append(f"  light-pass check ({verdict}): {check.describe()}")
     lines.append(f"  {info.luminance_weights.describe()}")
     colour = resolve_output_colour(mapping, info.channels)
     lines.append(
@@ -127,6 +178,14 @@ def _text(info: ExrInfo, mapping: LayerMapping, resolved: ResolvedLayers) -> str
     default=None,
     help="How the motion layer is encoded (default: the preset's).",
 )
+@click.option(
+    "--signals",
+    type=click.Choice(SIGNAL_CHOICES),
+    default="auto",
+    show_default=True,
+    help="Signal set to show (as `svgf denoise --signals`); --check also checks its light "
+    "passes against the colour.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document for scripts.")
 @click.option(
     "--check",
@@ -139,11 +198,13 @@ def command(
     preset_aovs: str,
     aovs: tuple[str, ...],
     motion_convention: str | None,
+    signals: str,
     as_json: bool,
     check: bool,
 ) -> None:
     """Show the parts, channels, compression and role mapping of EXR FILES."""
-    mapping = build_mapping(preset_aovs, aovs, motion_convention=motion_convention)
+    mapping = build_mapping(preset_aovs, aovs, motion_convention=motion_convention,
+                            signals=signals)
     reports: list[dict[str, Any]] = []
     failures: list[InputError] = []
 
@@ -167,14 +228,22 @@ def command(
                 continue
         info = read_info(name)
         resolved = resolve_layers(mapping, info.channels, name, strict=False)
+        resolved.plan = plan_signals(mapping, resolved, info.channels, name, strict=False)
+        resolved.requested_signals = signals
         if check and resolved.missing:
             fail(InputError(f"missing channel(s) for {', '.join(resolved.missing)}", name))
+        sum_check = None
+        if check and not resolved.missing and resolved.plan is None:
+            fail(InputError(f"no signal set possible ({'; '.join(resolved.notes)})", name))
+        elif check and not resolved.missing and resolved.plan.checked:
+            # The light passes against the colour, as `svgf denoise` checks them on read.
+            sum_check = read_frame(name, mapping).sum_check
         if as_json:
-            reports.append(_report(info, mapping, resolved))
+            reports.append(_report(info, mapping, resolved, sum_check))
         else:
             if index:
                 click.echo("")
-            click.echo(_text(info, mapping, resolved))
+            click.echo(_text(info, mapping, resolved, sum_check))
     if as_json:
         click.echo(json.dumps({"files": reports}, indent=2))
     if failures:

@@ -46,6 +46,8 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "antilag_sigma": click.FloatRange(min=0.0),
     "antilag_spatial_samples": click.FloatRange(min=1.0),
     "antilag_tolerance": click.FloatRange(min=0.0),
+    "glossy_history_clamp": click.FloatRange(min=0.0),
+    "glossy_sigma_luminance": click.FloatRange(min=0.0),
 }
 
 FILTER_SECTION = "Filter parameters (each overrides its --preset value)"

@@ -28,11 +28,12 @@ def default_contact_frames(frames: Sequence[int]) -> list[int]:
     return sorted({ordered[0], ordered[len(ordered) // 2], ordered[-1]})
 
 
-def column_order(report: EvaluationReport) -> list[str]:
-    """Input first (noisiest), then svgf, then the baselines in the order given."""
-    names = [m.name for m in report.methods]
+def column_order(report: EvaluationReport, methods: Sequence[str] | None = None) -> list[str]:
+    """Input first (noisiest), then svgf, then the others in report order (compared outputs,
+    then baselines); only ``methods`` when given."""
+    names = [m.name for m in report.methods if methods is None or m.name in methods]
     middle = [n for n in names if n not in (INPUT, SVGF)]
-    return ([INPUT] if INPUT in names else []) + [SVGF] + middle
+    return ([INPUT] if INPUT in names else []) + ([SVGF] if SVGF in names else []) + middle
 
 
 def write_contact_sheet(
@@ -42,20 +43,23 @@ def write_contact_sheet(
     *,
     error_map: bool = True,
     dpi: float | None = None,
+    methods: Sequence[str] | None = None,
+    cell_inches: float = CELL_INCHES,
+    title_size: float = 8.0,
 ) -> None:
     """Write a labelled PNG grid: one row per contact frame (without the FLIP column when
-    ``error_map`` is False)."""
+    ``error_map`` is False; only the columns of ``methods`` when given)."""
     if not contacts:
         raise ValueError("no contact frames to draw")
     plt = pyplot()
-    methods = column_order(report)
-    columns = [*methods, "reference", *(["FLIP error (svgf)"] if error_map else [])]
+    names = column_order(report, methods)
+    columns = [*names, "reference", *(["FLIP error (svgf)"] if error_map else [])]
     height, width = contacts[0].reference.shape[1:]
-    cell_h = CELL_INCHES * height / width
+    cell_h = cell_inches * height / width
     figure, axes = plt.subplots(
         len(contacts),
         len(columns),
-        figsize=(CELL_INCHES * len(columns), (cell_h + 0.45) * len(contacts)),
+        figsize=(cell_inches * len(columns), (cell_h + 0.5) * len(contacts)),
         squeeze=False,
     )
     try:
@@ -66,22 +70,22 @@ def write_contact_sheet(
                 ax.set_yticks([])
                 if name == "reference":
                     ax.imshow(_hwc(contact.reference), interpolation="nearest")
-                    title = f"reference, frame {contact.frame}"
+                    title = f"reference\nframe {contact.frame}"
                 elif name.startswith("FLIP"):
                     if contact.error_map is None:
                         ax.imshow(np.zeros((height, width)), cmap="gray", vmin=0, vmax=1)
                         title = "FLIP error: svgf output has NaN"
                     else:
                         ax.imshow(contact.error_map, cmap="magma", vmin=0.0, vmax=1.0)
-                        title = "FLIP error map (svgf)"
+                        title = "FLIP error map\n(svgf)"
                 else:
                     ax.imshow(_hwc(contact.images[name]), interpolation="nearest")
                     title = _cell_title(report, name, contact.frame)
-                ax.set_title(title, fontsize=8)
+                ax.set_title(title, fontsize=title_size)
                 if col == 0:
                     ax.set_ylabel(f"frame {contact.frame}", fontsize=9)
         figure.tight_layout()
-        save_png(figure, path, dpi=dpi or max(100.0, min(width / CELL_INCHES, 300.0)))
+        save_png(figure, path, dpi=dpi or max(100.0, min(width / cell_inches, 300.0)))
     finally:
         plt.close(figure)
 
@@ -96,4 +100,4 @@ def _cell_title(report: EvaluationReport, name: str, frame: int) -> str:
         return f"{name}: {score.nonfinite_pixels} NaN/Inf px (FLAGGED)"
     relmse = score.values.get("relmse")
     flip = score.values.get("flip")
-    return f"{name}  relMSE {relmse:.3g}  FLIP {flip:.3f}"
+    return f"{name}\nrelMSE {relmse:.3g} FLIP {flip:.3f}"

@@ -42,7 +42,10 @@ class EvaluationRequest:
     params: SVGFParams = field(default_factory=lambda: PRESETS[DEFAULT_PRESET])
     preset: str = DEFAULT_PRESET
     layers: str = "svgf"
+    signals: str = "auto"
     contact_frames: Sequence[int] = ()
+    # More denoised sequences scored from files like ``output``: (method name, pattern).
+    compare: Sequence[tuple[str, str]] = ()
 
 
 @dataclass
@@ -60,7 +63,8 @@ class _Track:
     """One method's running state: its results and its previous display image."""
 
     result: MethodResult
-    method: Method | None = None  # None: read from files (the svgf output)
+    method: Method | None = None  # None: read from files (``pattern``)
+    pattern: SequencePattern | None = None
     previous: np.ndarray | None = None
     previous_frame: int | None = None
 
@@ -96,7 +100,9 @@ def _check_shape(image: np.ndarray, reference: np.ndarray, path: Path, ref_path:
         )
 
 
-def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str, object]:
+def _settings(
+    request: EvaluationRequest, oidn_version: str | None, signals: str | None = None
+) -> dict[str, object]:
     settings: dict[str, object] = {
         "svgf_version": __version__,
         "tone_map": metrics.TONE_MAP_DESCRIPTION,
@@ -112,6 +118,8 @@ def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str,
         "temporal": "consecutive frame numbers only; undefined on a method's first frame",
         "baselines": list(request.baselines),
     }
+    if signals is not None:  # the set the --input frames were read as
+        settings["signals"] = signals
     if any(b in ("accumulate", "atrous", "forward", "bidirectional") for b in request.baselines):
         settings["preset"] = request.preset
         settings["params"] = json.loads(request.params.to_json())
@@ -124,6 +132,17 @@ def _settings(request: EvaluationRequest, oidn_version: str | None) -> dict[str,
             "quality": "high",
         }
     return settings
+
+
+def _check_compare(request: EvaluationRequest, baselines: Sequence[str]) -> None:
+    """Compared sequences need names of their own (not svgf, input or a baseline's)."""
+    taken = {SVGF, INPUT, *baselines}
+    for name, _pattern in request.compare:
+        if not name or any(c.isspace() for c in name):
+            raise UsageError(f"compared method name {name!r} must be a word without spaces")
+        if name in taken:
+            raise UsageError(f"compared method name {name!r} is used twice or is reserved")
+        taken.add(name)
 
 
 def _source(name: str, request: EvaluationRequest) -> str:
@@ -153,7 +172,9 @@ def run_evaluation(
     if baselines and request.input is None:
         raise UsageError("--baseline needs --input: the baselines run on the noisy input frames")
 
+    _check_compare(request, baselines)
     out_pattern = SequencePattern.parse(request.output)
+    compare_patterns = [(n, SequencePattern.parse(p)) for n, p in request.compare]
     ref_pattern = SequencePattern.parse(request.reference)
     in_pattern = SequencePattern.parse(request.input) if request.input else None
     frames = resolve_frames(out_pattern, request.output, request.frames)
@@ -162,6 +183,8 @@ def run_evaluation(
     fed = list(range(frames[0], frames[-1] + 1)) if temporal else frames
     for frame in frames:
         _require(out_pattern.path(frame), "denoised output", frame)
+        for name, pattern in compare_patterns:
+            _require(pattern.path(frame), f"{name} output", frame)
         _require(ref_pattern.path(frame), "reference", frame)
     if in_pattern is not None:
         for frame in fed:
@@ -170,7 +193,9 @@ def run_evaluation(
     if missing_contact:
         raise UsageError(f"--contact-frames {missing_contact[0]} is not an evaluated frame")
 
-    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)))]
+    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)), None, out_pattern)]
+    for name, pattern in compare_patterns:
+        tracks.append(_Track(MethodResult(name, pattern.display), None, pattern))
     oidn_version = None
     for name in baselines:
         assert in_pattern is not None
@@ -185,10 +210,16 @@ def run_evaluation(
         input_method = make_method(INPUT, request.params)
         tracks.append(_Track(MethodResult(INPUT, _source(INPUT, request)), input_method))
 
-    from svgf_cli.io.exr import read_frame, read_rgb
+    from svgf_cli.io.exr import fix_signal_set, read_frame, read_rgb
     from svgf_cli.io.layers import build_mapping
 
-    mapping = build_mapping(request.layers)
+    mapping = build_mapping(request.layers, signals=request.signals)
+    if in_pattern is not None:
+        # One signal set for the whole input sequence, decided on its first frame.
+        mapping, decided = fix_signal_set(in_pattern.path(fed[0]), mapping)
+        if decided.signal_warning:
+            say(f"WARNING: {decided.signal_warning}")
+        del decided
     scored = set(frames)
     contact_wanted = set(request.contact_frames)
     contacts: list[ContactFrame] = []
@@ -217,8 +248,8 @@ def run_evaluation(
         ref_display = metrics.tone_map(reference)
         contact = ContactFrame(frame, ref_display, {}, None) if frame in contact_wanted else None
         for track in tracks:
-            if track.method is None:
-                path = out_pattern.path(frame)
+            if track.pattern is not None:
+                path = track.pattern.path(frame)
                 image, _ = read_rgb(path, mapping)
                 _check_shape(image, reference, path, ref_path)
                 file = str(path)
@@ -262,7 +293,7 @@ def run_evaluation(
             "reference": request.reference,
             "input": request.input,
         },
-        settings=_settings(request, oidn_version),
+        settings=_settings(request, oidn_version, mapping.signals if in_pattern else None),
     )
     return report, contacts
 
@@ -288,12 +319,16 @@ def score_frame(
     temporal = None
     if previous is not None and ref_previous is not None:
         temporal = metrics.temporal_error(display, previous, ref_display, ref_previous)
+    hot_max, hot_share = metrics.hot_pixels(image, reference)
     values = {
         "rmse": metrics.rmse(image, reference),
         "relmse": metrics.relmse(image, reference),
+        "relmse_trimmed": metrics.relmse_trimmed(image, reference),
         "psnr": metrics.psnr(display, ref_display),
         "ssim": metrics.ssim(display, ref_display),
         "flip": flip_mean,
         "temporal": temporal,
+        "hot_max": hot_max,
+        "hot_share": hot_share,
     }
     return FrameScore(frame, values), display, flip_map

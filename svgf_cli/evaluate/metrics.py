@@ -1,10 +1,12 @@
 """Image-quality metrics: plain functions over ``(3, H, W)`` float arrays.
 
-Every function states its formula in its docstring; ``docs/readme/evaluate.md`` repeats them.
+Every function states its formula in its docstring; ``docs/evaluate.md`` repeats them.
 ``x`` is the image under test, ``r`` the reference. HDR metrics (RMSE, relMSE) work on the
 linear radiance as stored in the EXR; the perceptual metrics (PSNR, SSIM, FLIP, temporal
 error) work on the display image ``T(x)`` produced by :func:`tone_map`, so a single firefly
-of radiance 1000 does not dominate them.
+of radiance 1000 does not dominate them. The trimmed relMSE drops the largest 0.1 % of
+per-pixel errors; the hot-pixel ratio compares output luminance with the reference's local
+maximum.
 """
 
 from __future__ import annotations
@@ -19,6 +21,22 @@ from svgf_cli.errors import UsageError
 # relMSE denominator floor: keeps black reference pixels from dividing by zero while
 # leaving pixels brighter than ~0.1 essentially relative.
 RELMSE_EPSILON = 1e-2
+
+# Trimmed relMSE drops this share of the largest per-pixel errors: above the rate of isolated
+# 1-spp fireflies (a few 1e-4 of the pixels), ten times below the area of a real artefact such
+# as a lag trail or a smeared reflection (1 % and more), which therefore still counts.
+RELMSE_TRIM_FRACTION = 1e-3
+
+# Hot pixels: luminance over the reference's local maximum in a square window of this size,
+# plus a floor of this fraction of the reference frame's mean luminance (scale-free, so the
+# verdict does not change with exposure; keeps black reference areas from dividing by 0).
+HOT_WINDOW = 5
+HOT_FLOOR_FRACTION = 1e-2
+HOT_THRESHOLD = 3.0
+
+# Rec.709 / sRGB luminance weights (the hot-pixel ratio divides luminances, so the primaries
+# of the file barely matter; the references carry no chromaticities anyway).
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
 
 # SSIM constants (Wang et al. 2004): Gaussian window, and C1, C2 for a dynamic range L = 1.
 SSIM_WINDOW = 11
@@ -71,6 +89,72 @@ def relmse(x: np.ndarray, r: np.ndarray, epsilon: float = RELMSE_EPSILON) -> flo
     xd, rd = _f64(x), _f64(r)
     d = xd - rd
     return float(np.mean(d * d / (rd * rd + epsilon)))
+
+
+def per_pixel_relmse(
+    x: np.ndarray, r: np.ndarray, epsilon: float = RELMSE_EPSILON
+) -> np.ndarray:
+    """Per-pixel relative squared error, float64 (H, W): ``mean_c (x - r)^2 / (r^2 + epsilon)``."""
+    xd, rd = _f64(x), _f64(r)
+    d = xd - rd
+    return np.mean(d * d / (rd * rd + epsilon), axis=0)
+
+
+def relmse_trimmed(
+    x: np.ndarray,
+    r: np.ndarray,
+    fraction: float = RELMSE_TRIM_FRACTION,
+    epsilon: float = RELMSE_EPSILON,
+) -> float:
+    """relMSE without its largest per-pixel values (fireflies).
+
+    With ``e_p = mean_c (x - r)^2 / (r^2 + epsilon)`` over the ``N`` pixels sorted ascending,
+    drop the ``k = floor(fraction * N)`` largest and average the rest:
+    ``relMSE_trim = (1 / (N - k)) * sum_{i < N - k} e_(i)``. ``fraction`` = 1e-3 by default;
+    below 1000 pixels nothing is dropped and it equals :func:`relmse`.
+    """
+    errors = per_pixel_relmse(x, r, epsilon).ravel()
+    drop = math.floor(fraction * errors.size)
+    if drop:
+        errors = np.partition(errors, errors.size - drop - 1)[: errors.size - drop]
+    return float(np.mean(errors))
+
+
+def luminance(image: np.ndarray) -> np.ndarray:
+    """Rec.709 luminance (H, W) float64 of a (3, H, W) linear RGB image."""
+    wr, wg, wb = LUMINANCE_WEIGHTS
+    rgb = _f64(image)
+    return wr * rgb[0] + wg * rgb[1] + wb * rgb[2]
+
+
+def local_maximum(plane: np.ndarray, size: int = HOT_WINDOW) -> np.ndarray:
+    """Maximum over the ``size`` x ``size`` window centred on each pixel (clipped at the
+    image border: only pixels inside the image count)."""
+    radius = size // 2
+    padded = np.pad(plane, radius, mode="constant", constant_values=-np.inf)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (size, size))
+    return windows.max(axis=(2, 3))
+
+
+def hot_pixel_ratio(x: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Per-pixel ``L(x)_p / (max_{q in 5x5(p)} L(r)_q + f)``, float64 (H, W).
+
+    ``L`` is Rec.709 luminance, the window is clipped at the border, and the floor
+    ``f = 0.01 * mean_p L(r)_p`` (a tiny absolute 1e-12 when the reference is black).
+    A value above 3 is an output pixel far brighter than anything near it in the reference:
+    a firefly the filter made or let through.
+    """
+    lum_r = luminance(r)
+    floor = max(HOT_FLOOR_FRACTION * float(np.mean(lum_r)), 1e-12)
+    return luminance(x) / (local_maximum(lum_r) + floor)
+
+
+def hot_pixels(
+    x: np.ndarray, r: np.ndarray, threshold: float = HOT_THRESHOLD
+) -> tuple[float, float]:
+    """``(max_p ratio_p, share of pixels with ratio_p > threshold)`` of :func:`hot_pixel_ratio`."""
+    ratio = hot_pixel_ratio(x, r)
+    return float(ratio.max()), float(np.count_nonzero(ratio > threshold)) / ratio.size
 
 
 def psnr(x_display: np.ndarray, r_display: np.ndarray) -> float:
@@ -168,15 +252,48 @@ def temporal_error(
     return float(np.mean(np.abs(change - expected)))
 
 
+# Hot pixels (issue 14): an output pixel is hot when its brightest channel exceeds this many
+# times the brightest reference value in its PEAK_WINDOW x PEAK_WINDOW neighbourhood.
+PEAK_WINDOW = 5
+PEAK_FACTOR = 3.0
+# Reference maxima below this count as this (a dim pixel over a black reference is noise,
+# not a firefly).
+PEAK_FLOOR = 1e-2
+
+
+def peak_ratio(x: np.ndarray, r: np.ndarray) -> tuple[float, float]:
+    """Hot pixels: ``q(p) = max_c x_c(p) / max(max_{q in 5x5(p), c} r_c(q), PEAK_FLOOR)``.
+
+    Returns ``(max_p q(p), share of pixels with q(p) > PEAK_FACTOR)`` on linear radiance; the
+    window is clipped at the image border. Issue 14's target is no pixel above 3.
+    """
+    image = _f64(x).max(axis=0)
+    reference = _f64(r).max(axis=0)
+    radius = PEAK_WINDOW // 2
+    padded = np.pad(reference, radius, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (PEAK_WINDOW, PEAK_WINDOW))
+    bound = np.maximum(windows.max(axis=(-2, -1)), PEAK_FLOOR)
+    ratio = image / bound
+    return float(ratio.max()), float(np.mean(ratio > PEAK_FACTOR))
+
+
 @dataclass(frozen=True)
 class MetricInfo:
-    """How a metric is named, read and ranked."""
+    """How a metric is named, read, summarised over frames and ranked.
+
+    ``summary`` is how per-frame values become one number per method: ``"mean"`` (the
+    arithmetic mean) or ``"max"`` (the worst frame). ``overall``: whether the metric's rank
+    enters the overall rank (the trimmed relMSE would count relMSE twice, the hot-pixel
+    metrics are a pass/fail diagnostic, so they are ranked on their own only).
+    """
 
     key: str
     label: str
     higher_is_better: bool
     formula: str
     unit: str = ""
+    summary: str = "mean"
+    overall: bool = True
 
 
 METRICS: tuple[MetricInfo, ...] = (
@@ -187,6 +304,14 @@ METRICS: tuple[MetricInfo, ...] = (
         False,
         f"mean (x-r)^2/(r^2+{RELMSE_EPSILON:g}) on linear radiance",
     ),
+    MetricInfo(
+        "relmse_trimmed",
+        "relMSE (trimmed)",
+        False,
+        f"per pixel e = mean_c (x-r)^2/(r^2+{RELMSE_EPSILON:g}); mean of e without its largest "
+        f"{RELMSE_TRIM_FRACTION:.1%} (floor of the share times the pixel count)",
+        overall=False,
+    ),
     MetricInfo("psnr", "PSNR", True, "10 log10(1/mean (T(x)-T(r))^2) on display images", "dB"),
     MetricInfo("ssim", "SSIM", True, "mean over R,G,B of SSIM (11x11 Gaussian, sigma 1.5)"),
     MetricInfo("flip", "FLIP", False, "mean LDR-FLIP on display images (flip-evaluator)"),
@@ -196,5 +321,22 @@ METRICS: tuple[MetricInfo, ...] = (
         False,
         "mean |(T(x_t)-T(x_t-1)) - (T(r_t)-T(r_t-1))|, from the second frame on",
     ),
+    MetricInfo(
+        "hot_max",
+        "Hot max",
+        False,
+        f"max over pixels of L(x) / (max of L(r) in the {HOT_WINDOW}x{HOT_WINDOW} window + "
+        f"{HOT_FLOOR_FRACTION:g} mean L(r)), Rec.709 luminance; worst frame",
+        summary="max",
+        overall=False,
+    ),
+    MetricInfo(
+        "hot_share",
+        "Hot share",
+        False,
+        f"share of pixels whose hot-pixel ratio exceeds {HOT_THRESHOLD:g}",
+        overall=False,
+    ),
 )
 METRIC_KEYS: tuple[str, ...] = tuple(m.key for m in METRICS)
+METRIC_INFO: dict[str, MetricInfo] = {m.key: m for m in METRICS}

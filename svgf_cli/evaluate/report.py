@@ -8,10 +8,13 @@ Conventions:
   and the method's mean of every metric is None too: a broken frame is never averaged away;
 * the mean of a metric is the arithmetic mean of its per-frame values over the frames where
   it is defined (the temporal error from the second frame on);
-* ranking (per metric): methods with a mean are sorted best first (lower is better except
-  PSNR and SSIM); equal means share a rank (1, 2, 2, 4); methods without a mean are unranked.
-  The overall rank orders methods by their average rank over the metrics every ranked method
-  has; a flagged method is never ranked.
+* the summary of a metric is what the tables show and the ranks use: the mean, or for a
+  metric summarised by its worst frame (the hot-pixel ratio) the maximum;
+* ranking (per metric): methods with a summary are sorted best first (lower is better except
+  PSNR and SSIM); equal values share a rank (1, 2, 2, 4); methods without one are unranked.
+  The overall rank orders methods by their average rank over the overall metrics (RMSE,
+  relMSE, PSNR, SSIM, FLIP, temporal) every ranked method has; a flagged method is never
+  ranked.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from svgf_cli.evaluate.metrics import METRIC_KEYS, METRICS, MetricInfo
+from svgf_cli.evaluate.metrics import METRIC_INFO, METRIC_KEYS, METRICS, MetricInfo
 
 SCHEMA = "svgf-evaluate/1"
 
@@ -72,6 +75,19 @@ class MethodResult:
     def means(self) -> dict[str, Value]:
         return {key: self.mean(key) for key in METRIC_KEYS}
 
+    def summary(self, key: str) -> Value:
+        """The metric over all frames as tables and ranks use it: the mean, or the worst
+        (largest) frame for a metric whose ``summary`` is ``"max"``; None as for the mean."""
+        if METRIC_INFO[key].summary != "max":
+            return self.mean(key)
+        if self.flagged:
+            return None
+        values = [f.values[key] for f in self.frames if f.values.get(key) is not None]
+        return max(values) if values else None
+
+    def summaries(self) -> dict[str, Value]:
+        return {key: self.summary(key) for key in METRIC_KEYS}
+
 
 @dataclass
 class EvaluationReport:
@@ -89,17 +105,21 @@ class EvaluationReport:
         raise KeyError(name)
 
     def ranks(self, key: str) -> dict[str, int | None]:
-        """Competition ranks of the methods' means on one metric (1 = best)."""
+        """Competition ranks of the methods' summaries on one metric (1 = best)."""
         info = _metric(key)
-        return competition_ranks({m.name: m.mean(key) for m in self.methods}, info.higher_is_better)
+        return competition_ranks(
+            {m.name: m.summary(key) for m in self.methods}, info.higher_is_better
+        )
 
     def overall_ranks(self) -> dict[str, int | None]:
-        """Rank by average per-metric rank, over the metrics every unflagged method has."""
-        per_metric = {key: self.ranks(key) for key in METRIC_KEYS}
+        """Rank by average per-metric rank, over the overall metrics every unflagged method
+        has."""
+        keys = [info.key for info in METRICS if info.overall]
+        per_metric = {key: self.ranks(key) for key in keys}
         candidates = [m.name for m in self.methods if not m.flagged]
         usable = [
             key
-            for key in METRIC_KEYS
+            for key in keys
             if candidates and all(per_metric[key][n] is not None for n in candidates)
         ]
         if not usable:
@@ -118,7 +138,7 @@ class EvaluationReport:
     # -- JSON ---------------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data for ``json``: see ``docs/readme/evaluate.md`` for the schema."""
+        """Plain data for ``json``: see ``docs/evaluate.md`` for the schema."""
         overall = self.overall_ranks()
         return {
             "schema": SCHEMA,
@@ -132,6 +152,8 @@ class EvaluationReport:
                     "better": "higher" if m.higher_is_better else "lower",
                     "unit": m.unit,
                     "formula": m.formula,
+                    "summary": m.summary,
+                    "overall": m.overall,
                 }
                 for m in METRICS
             ],
@@ -141,6 +163,7 @@ class EvaluationReport:
                     "source": m.source,
                     "flagged": m.flagged,
                     "mean": {k: _json_value(v) for k, v in m.means().items()},
+                    "summary": {k: _json_value(v) for k, v in m.summaries().items()},
                     "rank": {key: self.ranks(key)[m.name] for key in METRIC_KEYS}
                     | {"overall": overall[m.name]},
                     "frames": [
@@ -178,14 +201,14 @@ class EvaluationReport:
         for m in order:
             cells = [m.name + (" [FLAGGED]" if m.flagged else "")]
             for info in METRICS:
-                value = m.mean(info.key)
+                value = m.summary(info.key)
                 rank = ranks[info.key][m.name]
                 cells.append(_format_value(value, info) + (f" ({rank})" if rank else ""))
             cells.append(str(overall[m.name]) if overall[m.name] is not None else "-")
             rows.append(cells)
         lines = [
-            f"{len(self.frames)} frame(s) {_frames_text(self.frames)}; mean over frames, "
-            "(rank) per metric, 1 = best",
+            f"{len(self.frames)} frame(s) {_frames_text(self.frames)}; mean over frames "
+            "(hot max: worst frame), (rank) per metric, 1 = best",
             *_grid(header, rows),
         ]
         if per_frame:

@@ -148,6 +148,7 @@ class TemporalState:
     depth: np.ndarray
     luminance_weights: tuple[np.float32, np.float32, np.float32]
     gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None
+    glossy: tuple[bool, ...] = ()
 
 
 @dataclass
@@ -349,6 +350,7 @@ class Denoiser:
             temporal = TemporalState(
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
                 run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
+                tuple(signal.glossy for signal in frame.signals),
             )
             shortened = self._before_accumulation(temporal)
             if p.antilag:
@@ -423,6 +425,9 @@ class Denoiser:
         guide_inverse_scale = work["guide_inverse_scale"]
         names = run.names
         pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]
+        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance
+        sigmas = [glossy_sigma if signal.glossy else p.sigma_luminance
+                  for signal in run.frame.signals]
         for iteration in range(iterations):
             out_name = scratch(filtered_name_now, history_name if feeds_back else "")
             if iteration == feedback:
@@ -436,11 +441,14 @@ class Denoiser:
             out_illumination = work[out_name]
             # Signals in pairs: the kernel is register-blocked for two, sharing the geometry.
             for pair in pairs:
-                luminance_stop_guides(
-                    filtered[pair], filtered_variance[pair], mode, pair.start, depth,
-                    F32(p.sigma_luminance), weights, guide_luminance[pair],
-                    guide_inverse_scale[pair],
-                )
+                # A pair of different sigma_l (a glossy and a non-glossy signal) gets its
+                # guides one signal at a time.
+                for part in _same_sigma_parts(pair, sigmas):
+                    luminance_stop_guides(
+                        filtered[part], filtered_variance[part], mode, part.start, depth,
+                        F32(sigmas[part.start]), weights, guide_luminance[part],
+                        guide_inverse_scale[part],
+                    )
                 atrous_iteration(
                     filtered[pair], filtered_variance[pair], guide_luminance[pair],
                     guide_inverse_scale[pair], depth, work["ddx"], work["ddy"], normal,
@@ -658,6 +666,13 @@ class Denoiser:
         if p.history_clamp > 0.0:
             history_clamp(temporal.history_illumination, temporal.history_length,
                           temporal.current, temporal.depth, F32(p.history_clamp))
+        if p.glossy_history_clamp > 0.0:
+            for s, glossy in enumerate(temporal.glossy):
+                if glossy:
+                    one = slice(s, s + 1)
+                    history_clamp(temporal.history_illumination[one],
+                                  temporal.history_length[one], temporal.current[one],
+                                  temporal.depth, F32(p.glossy_history_clamp))
         if not p.antilag:
             return 0
         work = self._work
@@ -765,6 +780,13 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
     counts[kind] = counts.get(kind, 0) + value
     if value:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
+
+
+def _same_sigma_parts(pair: slice, sigmas: list[float]) -> list[slice]:
+    """``pair`` whole when its signals share sigma_l, else one slice per signal."""
+    if pair.stop - pair.start == 2 and sigmas[pair.start] != sigmas[pair.start + 1]:
+        return [slice(pair.start, pair.start + 1), slice(pair.start + 1, pair.stop)]
+    return [pair]
 
 
 def _gradient_samples(

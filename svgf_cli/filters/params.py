@@ -89,6 +89,18 @@ class SVGFParams:
         "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
         " (svgf trace --gradient-samples).",
     )
+    # Glossy signals (Signal.glossy: reflections and refractions move with what they show,
+    # not with the surface, so their reprojected history is unreliable).
+    glossy_history_clamp: float = _p(
+        0.0,
+        "Clamp a glossy signal's reprojected history to the current 3x3 mean +- k*sigma"
+        " (0 = off).",
+    )
+    glossy_sigma_luminance: float = _p(
+        0.0,
+        "sigma_l of glossy signals: reflections carry detail the spatial filter must keep"
+        " (0 = the same as sigma_luminance).",
+    )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(5, "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none.")
     feedback_iteration: int = _p(
@@ -130,8 +142,9 @@ PRESETS: dict[str, SVGFParams] = {
     # Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128, sigma_z 1, 5 iterations,
     # first iteration fed back as history.
     "paper": SVGFParams(),
-    # The recommended set: the paper's filter plus anti-lag (measured in docs/results.md).
-    "default": SVGFParams(antilag=True),
+    # The recommended set: the paper's filter plus anti-lag and the glossy rules (measured
+    # in docs/results.md).
+    "default": SVGFParams(antilag=True, glossy_history_clamp=1.0, glossy_sigma_luminance=1.0),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

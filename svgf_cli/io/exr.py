@@ -11,9 +11,10 @@ a `Frame`), `read_rgb` (plain R,G,B). Writing: `write_exr` (atomic, checked), wi
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from collections.abc import Collection, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,8 @@ from svgf_cli.frame import Frame
 from svgf_cli.io import atomic
 from svgf_cli.io.colour import LuminanceWeights, luminance_weights
 from svgf_cli.io.layers import (
+    RADIANCE_ROLES,
+    REQUIRED_ROLES,
     LayerMapping,
     ResolvedLayers,
     build_mapping,
@@ -34,6 +37,14 @@ from svgf_cli.io.layers import (
     resolve_output_colour,
     to_backward_pixels,
     to_next_pixels,
+)
+from svgf_cli.io.signals import (
+    CHECK_SHARE,
+    SignalPlan,
+    SumCheck,
+    check_sum,
+    compose_signals,
+    plan_signals,
 )
 from svgf_cli.io.source import SourceFile, SourcePart, decode_source, one_line
 
@@ -250,7 +261,6 @@ _STRUCTURAL_PREFIXES = ("oiio:", "openexr:")
 # Depth at or beyond this is background: Cycles writes 1e10 and Arnold huge values there.
 FAR_DEPTH = 1e9
 
-_RADIANCE_ROLES = ("color", "direct", "indirect", "emission")
 
 
 @dataclass(frozen=True)
@@ -318,6 +328,11 @@ class ReadResult:
     luminance_weights: LuminanceWeights = field(
         default_factory=lambda: luminance_weights(None)
     )
+    # The signal set read (its plan), the light-pass check of a set built from lobe passes
+    # (None: not checked), and the warning the check gave (also in ``warnings``).
+    plan: SignalPlan | None = None
+    sum_check: SumCheck | None = None
+    signal_warning: str | None = None
 
 
 # Threads the OpenEXR decoder may use per file (0: decode in the calling thread).
@@ -589,6 +604,10 @@ def _scrub(
 ) -> int:
     """In place: NaN/Inf -> 0 (and negatives -> 0), one counted warning line per problem.
     Returns how many values were changed."""
+    # Fast path for clean data (almost every plane): min and max propagate NaN.
+    low, high = float(data.min()), float(data.max())
+    if math.isfinite(low) and math.isfinite(high) and (low >= 0 or not clamp_negative):
+        return 0
     bad = ~np.isfinite(data)
     count = int(np.count_nonzero(bad))
     if count:
@@ -657,15 +676,19 @@ def read_frame(
     """Read the channels ``mapping`` resolves to and return them as a clean `Frame`.
 
     ``motion_convention`` None uses ``mapping.motion_convention`` (the preset's, or what
-    ``--motion-convention`` set). Cleaning rules: depth <= 0, +-Inf or >= FAR_DEPTH -> 0
-    (background); NaN depth -> 0 with a counted warning; normals non-finite -> 0 then
-    renormalised; NaN/Inf in radiance, albedo, emission, motion -> 0 with a counted
-    warning; negative radiance/albedo -> 0 with a counted warning; mesh id rounded to int32,
-    NaN -> -1, absent -> -1 on background and 0 elsewhere. The frame's luminance weights are
-    the file's (chromaticities; ``LuminanceWeights.for_filter``). The whole file is decoded
-    and kept in ``source`` (unchanged) for the writer; ``passthrough`` False keeps only what
-    a ``--colour-only`` output needs. Raises InputError (one line, naming the file) for
-    anything unreadable, for deep parts and for multi-view files.
+    ``--motion-convention`` set). The signals are the set ``mapping.signals`` names
+    (`io.signals`); a set built from lobe passes is checked against the file's colour
+    (`check_sum`): where it fails, an unfixed mapping falls back to ``combined`` with a
+    warning, a fixed one (`fix_signal_set`) keeps its set and warns. Cleaning rules:
+    depth <= 0, +-Inf or >= FAR_DEPTH -> 0 (background); NaN depth -> 0 with a counted
+    warning; normals non-finite -> 0 then renormalised; NaN/Inf in radiance, albedo,
+    emission, motion -> 0 with a counted warning; negative radiance/albedo -> 0 with a
+    counted warning; mesh id rounded to int32, NaN -> -1, absent -> -1 on background and 0
+    elsewhere. The frame's luminance weights are the file's (chromaticities;
+    ``LuminanceWeights.for_filter``). The whole file is decoded and kept in ``source``
+    (unchanged) for the writer; ``passthrough`` False keeps only what a ``--colour-only``
+    output needs. Raises InputError (one line, naming the file) for anything unreadable,
+    for deep parts and for multi-view files.
     """
     path = Path(path)
     convention = motion_convention or mapping.motion_convention
@@ -678,24 +701,43 @@ def read_frame(
         image.close()
     refuse_multiview(info)
     resolved = resolve_layers(mapping, info.channels, str(path))
+    plan = plan_signals(mapping, resolved, info.channels, str(path))
+    assert plan is not None  # resolve_layers refused a file without any signal
+    # The combined colour is the fallback of a checked set: read it too.
+    fallback = None
+    if plan.checked and not mapping.signals_fixed:
+        fallback = plan_signals(mapping, resolved, info.channels, str(path),
+                                requested="combined")
+    resolved.plan = plan
+    resolved.requested_signals = mapping.signals
     roles = resolved.roles_to_read()
+    if fallback is not None:
+        roles = list(dict.fromkeys([*roles, *fallback.roles()]))
     names = [name for role in roles for name in (resolved[role] or ())]
+    gradient = [p.gradient_mask for p in (plan, fallback) if p and p.gradient_mask]
+    gradient += [name for p in (plan, fallback) if p
+                 for _, pair in p.gradient_channels for name in pair]
     colour_channels = resolve_output_colour(mapping, info.channels)
-    planes = _read_channels(info, names, also_in_window=colour_channels or ())
+    planes = _read_channels(info, list(dict.fromkeys([*names, *gradient])),
+                            also_in_window=colour_channels or ())
 
     # The output replaces the colour channels: the writer never needs their input values.
     colour_is_read = set(colour_channels or ()) & set(names)
     for name in (colour_channels or ()) if not colour_is_read else ():
         planes.source.release(name)
     # Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
-    # the source reference the copy instead of holding the same values twice.
+    # the source reference the copy instead of holding the same values twice. The G-buffer
+    # is gathered now; the signals' roles when the composition asks for them.
     warnings: list[str] = []
     values: dict[str, np.ndarray] = {}
-    for role in roles:
+
+    def fetch(role: str) -> np.ndarray:
+        if role in values:
+            return values[role]
         channel_names = resolved[role]
         assert channel_names is not None
         data = values[role] = planes.gather(channel_names)
-        if role in (*_RADIANCE_ROLES, "albedo"):
+        if role in (*RADIANCE_ROLES, "albedo") or role.endswith("_color"):
             changed = _scrub(role, data, path, warnings, clamp_negative=True)
         elif role == "depth":
             changed = _clean_depth(data[0], path, warnings)
@@ -708,6 +750,37 @@ def read_frame(
             changed = 0
         if not changed:
             planes.share(channel_names, data)
+        return data
+
+    gbuffer = [r for r in (*REQUIRED_ROLES, "motion_next", "id", "alpha")
+               if resolved[r] is not None]
+    for role in gbuffer:
+        fetch(role)
+
+    def release(role: str) -> None:
+        if role not in gbuffer:
+            values.pop(role, None)
+
+    gathered: dict[str, np.ndarray] = {}
+
+    def channel(name: str) -> np.ndarray:
+        if name not in gathered:
+            gathered[name] = planes.gather((name,))[0]
+        return gathered[name]
+
+    signals, emission = compose_signals(plan, fetch, channel, release)
+    sum_check = signal_warning = None
+    if plan.checked:
+        sum_check = check_sum(signals, emission, fetch("color"))
+        if not sum_check.passed:
+            signal_warning = _sum_warning(path, plan, sum_check, fallback is None)
+            warnings.append(signal_warning)
+            if fallback is not None:
+                plan = fallback
+                resolved.plan = plan
+                signals, emission = compose_signals(plan, fetch, channel, release)
+        # A role gathered again for the fallback is cleaned again: report its fixes once.
+        warnings[:] = dict.fromkeys(warnings)
     # The output replaces the colour channels: the writer never needs their input values.
     for name in colour_channels or ():
         planes.source.release(name)
@@ -730,20 +803,17 @@ def read_frame(
 
     alpha = values["alpha"][0] if "alpha" in values else None
 
-    geometry = dict(
+    frame = Frame(
+        signals=signals,
         albedo=values["albedo"],
         normal=values["normal"],
         depth=np.ascontiguousarray(depth),
         motion=motion,
         mesh_id=mesh_id,
-        emission=values.get("emission"),
+        emission=emission,
         # The filter's luminance is the file's own (its chromaticities), never negative.
         luminance_weights=info.luminance_weights.for_filter(),
     )
-    if resolved.split:
-        frame = Frame.direct_indirect(values["direct"], values["indirect"], **geometry)
-    else:
-        frame = Frame.combined(values["color"], **geometry)
     if "motion_next" in values:
         frame.motion_next = to_next_pixels(values["motion_next"], convention)
     frame.validate()
@@ -756,7 +826,34 @@ def read_frame(
         source=planes.source,
         colour_channels=colour_channels,
         luminance_weights=info.luminance_weights,
+        plan=plan,
+        sum_check=sum_check,
+        signal_warning=signal_warning,
     )
+
+
+def _sum_warning(path: Path, plan: SignalPlan, check: SumCheck, kept: bool) -> str:
+    """The one-line warning of a failed light-pass check."""
+    what = (
+        f"the light passes of signal set {plan.set} do not add up to the colour on "
+        f"{check.share:.2%} of pixels (more than {CHECK_SHARE:.1%}; light groups, holdouts, "
+        "a shadow catcher or missing volume passes?)"
+    )
+    if kept:
+        return f"{path}: {what}; keeping {plan.set}, chosen on the first frame"
+    return f"{path}: {what}; filtering the combined colour for the whole run"
+
+
+def fix_signal_set(
+    path: str | os.PathLike[str], mapping: LayerMapping
+) -> tuple[LayerMapping, ReadResult]:
+    """Decide the signal set of a run on ``path`` (its first frame): read it with
+    ``mapping`` (``auto`` picks, a failed light-pass check falls back to ``combined``) and
+    return the mapping fixed to that set, with the read. Every later frame is read as the
+    same set, whatever its own check says: the Denoiser's signals cannot change mid-run."""
+    result = read_frame(path, mapping)
+    assert result.plan is not None
+    return replace(mapping, signals=result.plan.set, signals_fixed=True), result
 
 
 def read_rgb(

@@ -8,16 +8,24 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from svgf_cli.errors import InputError, UsageError
+
+# Light lobes a renderer may split its light into (signal names of the `lobes` set). Each
+# has the roles <lobe>_direct, <lobe>_indirect (its light) and <lobe>_color (its reflectance).
+LOBES = ("diffuse", "glossy", "transmission", "volume")
+LOBE_ROLES = tuple(f"{lobe}_{part}" for lobe in LOBES for part in ("direct", "indirect", "color"))
 
 ROLES = (
     "color",
     "direct",
     "indirect",
     "emission",
+    "environment",
+    *LOBE_ROLES,
     "albedo",
     "normal",
     "depth",
@@ -33,6 +41,8 @@ ROLE_WIDTH = {
     "direct": 3,
     "indirect": 3,
     "emission": 3,
+    "environment": 3,
+    **{role: 3 for role in LOBE_ROLES},
     "albedo": 3,
     "normal": 3,
     "depth": 1,
@@ -45,8 +55,14 @@ ROLE_WIDTH = {
 # Always required; a signal (direct+indirect, or color) is required on top.
 REQUIRED_ROLES = ("albedo", "normal", "depth", "motion")
 OPTIONAL_ROLES = ("emission", "motion_next", "id", "alpha")
+# Radiance-like roles: cleaned as radiance on read (NaN/Inf and negatives to 0).
+RADIANCE_ROLES = ("color", "direct", "indirect", "emission", "environment", *LOBE_ROLES)
 
 MOTION_CONVENTIONS = ("backward-pixels", "forward-pixels", "cycles")
+
+# Signal sets (io.signals builds them): `--signals` takes one of these or `auto`.
+SIGNAL_SETS = ("lobes", "lobes-split", "direct-indirect", "combined")
+SIGNAL_CHOICES = ("auto", *SIGNAL_SETS)
 
 # Channel-name suffixes tried when an override names only a layer (``--aov normal=Normal``).
 _LAYER_SUFFIXES: dict[int, tuple[tuple[str, ...], ...]] = {
@@ -66,6 +82,22 @@ def _xyz(layer: str) -> tuple[str, str, str]:
     return (f"{layer}.X", f"{layer}.Y", f"{layer}.Z")
 
 
+def _lobes(names: dict[str, tuple[str, ...]]) -> dict[str, Candidates]:
+    """Lobe roles from ``{role: (layer, ...)}`` (RGB layers); every other lobe role empty."""
+    return {role: tuple(_rgb(layer) for layer in names.get(role, ())) for role in LOBE_ROLES}
+
+
+# Blender Cycles' light passes (verified on Blender 4.5 renders, docs/cycles.md); `svgf trace
+# --lobes` writes the same names without a view-layer prefix.
+_CYCLES_LOBES = _lobes({
+    "diffuse_direct": ("DiffDir",), "diffuse_indirect": ("DiffInd",), "diffuse_color": ("DiffCol",),
+    "glossy_direct": ("GlossDir",), "glossy_indirect": ("GlossInd",), "glossy_color": ("GlossCol",),
+    "transmission_direct": ("TransDir",), "transmission_indirect": ("TransInd",),
+    "transmission_color": ("TransCol",),
+    "volume_direct": ("VolumeDir",), "volume_indirect": ("VolumeInd",),
+})  # fmt: skip
+
+
 # Channel names per renderer (research note ecosystem-anchors.md, sections 1.6 and 2.1).
 # Each role lists candidate channel tuples in order of preference.
 AOV_PRESETS: dict[str, dict[str, Candidates]] = {
@@ -75,6 +107,8 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "direct": (_rgb("direct"),),
         "indirect": (_rgb("indirect"),),
         "emission": (_rgb("emission"),),
+        "environment": (),
+        **_CYCLES_LOBES,
         "albedo": (_rgb("albedo"),),
         "normal": (_xyz("N"), _rgb("N")),
         "depth": (("Z",),),
@@ -91,6 +125,8 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "direct": (_rgb("direct"),),
         "indirect": (_rgb("indirect"),),
         "emission": (_rgb("Emit"),),
+        "environment": (_rgb("Env"),),
+        **_CYCLES_LOBES,
         "albedo": (_rgb("Denoising Albedo"), _rgb("DiffCol")),
         # Normal is world space, Denoising Normal camera space (verified on Blender 4.5
         # renders): reprojection compares normals across frames, so camera-space normals
@@ -104,12 +140,26 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "alpha": (("Noisy Image.A",), ("Combined.A",)),
     },
     # Arnold: RGBA beauty (with or without "Preserve Layer Name"), built-in direct/indirect
-    # and emission AOVs, N (VECTOR), Z (FLOAT), motionvector (RGB), ID.
+    # and emission AOVs, N (VECTOR), Z (FLOAT), motionvector (RGB), ID. Lobe AOVs are Arnold's
+    # built-in light path expressions (Arnold User Guide, "Light Path Expression AOVs"):
+    # radiance, not divided by their *_albedo (unverified: no Arnold render was seen).
     "arnold": {
         "color": (("R", "G", "B"), _rgb("RGBA")),
         "direct": (_rgb("direct"),),
         "indirect": (_rgb("indirect"),),
         "emission": (_rgb("emission"),),
+        "environment": (_rgb("background"),),
+        **_lobes({
+            "diffuse_direct": ("diffuse_direct",), "diffuse_indirect": ("diffuse_indirect",),
+            "diffuse_color": ("diffuse_albedo",),
+            "glossy_direct": ("specular_direct",), "glossy_indirect": ("specular_indirect",),
+            "glossy_color": ("specular_albedo",),
+            "transmission_direct": ("transmission_direct",),
+            "transmission_indirect": ("transmission_indirect",),
+            "transmission_color": ("transmission_albedo",),
+            "volume_direct": ("volume_direct",), "volume_indirect": ("volume_indirect",),
+            "volume_color": ("volume_albedo",),
+        }),  # fmt: skip
         "albedo": (_rgb("denoise_albedo"), _rgb("diffuse_albedo"), _rgb("albedo")),
         "normal": (_xyz("N"), _rgb("N")),
         "depth": (("Z",), ("Z.Z",), ("Z.R",)),
@@ -120,12 +170,24 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
         "alpha": (("A",), ("RGBA.A",)),
     },
     # Houdini Karma written by husk: beauty C as RGBA, N, albedo, depth as Pz or depth,
-    # motionvector. Names partly from memory: check with `svgf inspect`.
+    # motionvector. Names partly from memory: check with `svgf inspect`. Lobe AOVs are the
+    # Karma Render Settings' extra render vars (radiance; unverified); Karma has no per-lobe
+    # albedo by default, so `diffuse_albedo`/`specular_albedo` are custom LPE names (C<RD>A,
+    # C<RG>A) and the G-buffer `albedo` stands in for the diffuse colour.
     "karma": {
         "color": (("R", "G", "B"), _rgb("C")),
         "direct": (_rgb("direct"),),
         "indirect": (_rgb("indirect"),),
         "emission": (_rgb("emission"), _rgb("directemission")),
+        "environment": (),
+        **_lobes({
+            "diffuse_direct": ("directdiffuse",), "diffuse_indirect": ("indirectdiffuse",),
+            "diffuse_color": ("diffuse_albedo", "albedo"),
+            "glossy_direct": ("directglossyreflection",),
+            "glossy_indirect": ("indirectglossyreflection",),
+            "glossy_color": ("specular_albedo",),
+            "volume_direct": ("directvolume",), "volume_indirect": ("indirectvolume",),
+        }),  # fmt: skip
         "albedo": (_rgb("albedo"),),
         "normal": (_xyz("N"), _rgb("N")),
         "depth": (("Pz",), ("depth",), ("depth.Z",), ("Z",)),
@@ -143,6 +205,15 @@ AOV_PRESETS: dict[str, dict[str, Candidates]] = {
 OUTPUT_COLOUR: dict[str, Candidates] = {
     "cycles": (_rgb("Combined"), _rgb("Noisy Image")),
 }
+
+# Whether a preset's lobe light passes are stored divided by their colour pass (Cycles: the
+# light passes times the colour passes rebuild Combined, docs/cycles.md) or as radiance
+# (Arnold's and Karma's light path expression AOVs).
+LOBE_LIGHT_DIVIDED = {"svgf": True, "cycles": True, "arnold": False, "karma": False}
+
+# Whether a preset's `direct` layer holds the emission seen at the primary hit (`svgf trace`
+# writes it so); Arnold's built-in `direct` is C[DSV]L, without the camera-visible emission.
+EMISSION_IN_DIRECT = {"svgf": True, "cycles": True, "arnold": False, "karma": True}
 
 # The motion convention each preset implies unless --motion-convention says otherwise.
 # Arnold and Karma write shutter-interval motion-blur vectors (towards the next frame);
@@ -163,6 +234,11 @@ class LayerMapping:
     preset: str = "svgf"
     motion_convention: str = "backward-pixels"
     overridden: tuple[str, ...] = ()
+    # The signal set asked for (`--signals`: auto or one of io.signals.SIGNAL_SETS), and
+    # whether it is fixed: a run decides on its first frame, then reads every frame with
+    # that set (a frame failing the light-pass check then only warns).
+    signals: str = "auto"
+    signals_fixed: bool = False
 
     def describe(self) -> str:
         """Multi-line ``role: A,B,C | D,E,F`` listing, for logs and `svgf inspect`."""
@@ -171,7 +247,7 @@ class LayerMapping:
             options = self.candidates.get(role, ())
             shown = " | ".join(",".join(c) for c in options) if options else "(none)"
             mark = " (--aov)" if role in self.overridden else ""
-            lines.append(f"{role:>9}: {shown}{mark}")
+            lines.append(f"{role:>21}: {shown}{mark}")
         return "\n".join(lines)
 
 
@@ -224,12 +300,17 @@ def build_mapping(
     preset: str = "svgf",
     overrides: Mapping[str, str] | Iterable[str] | None = None,
     motion_convention: str | None = None,
+    signals: str = "auto",
 ) -> LayerMapping:
     """The layer mapping of ``preset`` with ``--aov`` overrides applied.
 
     ``overrides`` is either ``{role: "CH1,CH2"}`` or an iterable of ``"role=CH1,CH2"`` texts
     (the raw repeated ``--aov`` option). ``motion_convention`` None keeps the preset's.
+    ``signals`` is the signal set asked for (``--signals``).
     """
+    if signals not in SIGNAL_CHOICES:
+        choices = ", ".join(SIGNAL_CHOICES)
+        raise UsageError(f"unknown signal set {signals!r} (choose from {choices})")
     if preset not in AOV_PRESETS:
         raise UsageError(f"unknown AOV preset {preset!r} (choose from {', '.join(AOV_PRESETS)})")
     candidates = dict(AOV_PRESETS[preset])
@@ -250,50 +331,65 @@ def build_mapping(
         preset=preset,
         motion_convention=convention,
         overridden=tuple(dict.fromkeys(role for role, _ in parsed)),
+        signals=signals,
     )
 
 
 @dataclass
 class ResolvedLayers:
-    """Role -> the file's channel names for it (None when absent), and what is missing."""
+    """Role -> the file's channel names for it (None when absent), and what is missing.
+
+    ``plan`` is the signal set the file is read as (an ``io.signals.SignalPlan``, set by
+    whoever planned it); without one the legacy choice applies (direct+indirect, else color).
+    """
 
     channels: dict[str, tuple[str, ...] | None]
     missing: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    plan: Any = None
+    requested_signals: str = "auto"
 
     def __getitem__(self, role: str) -> tuple[str, ...] | None:
         return self.channels.get(role)
 
     @property
     def split(self) -> bool:
-        """True when direct and indirect are both present (filtered as two signals)."""
+        """True when direct and indirect are both present."""
         return self["direct"] is not None and self["indirect"] is not None
 
     @property
     def signal_roles(self) -> tuple[str, ...]:
+        """The roles holding the filtered signals' light."""
+        if self.plan is not None:
+            return tuple(self.plan.light_roles())
         if self.split:
             return ("direct", "indirect")
         return ("color",) if self["color"] is not None else ()
 
     def roles_to_read(self) -> list[str]:
         """Roles whose channels a reader needs: the signals, the G-buffer, optional extras."""
-        wanted = [*self.signal_roles, *REQUIRED_ROLES, *OPTIONAL_ROLES]
-        return [role for role in wanted if self[role] is not None]
+        signal_roles = self.plan.roles() if self.plan is not None else self.signal_roles
+        wanted = [*signal_roles, *REQUIRED_ROLES, *OPTIONAL_ROLES]
+        return [role for role in dict.fromkeys(wanted) if self[role] is not None]
 
     def describe(self) -> str:
+        used = set(self.plan.roles()) if self.plan is not None else set(self.signal_roles)
         lines = []
         for role in ROLES:
             names = self[role]
+            quiet = role in LOBE_ROLES or role == "environment"  # shown only when present
             if names is not None:
-                unused = role in ("color", "direct", "indirect") and role not in self.signal_roles
-                used = "  (present, not used)" if unused else ""
-                lines.append(f"{role:>9}: {', '.join(names)}{used}")
+                signal_like = role in RADIANCE_ROLES and role != "emission"
+                unused = "  (present, not used)" if signal_like and role not in used else ""
+                lines.append(f"{role:>21}: {', '.join(names)}{unused}")
             elif role in self.missing:
-                lines.append(f"{role:>9}: MISSING (looked for {self.missing[role]})")
-            else:
-                lines.append(f"{role:>9}: -")
-        signals = " + ".join(self.signal_roles) or "none"
-        lines.append(f"  signals: {signals}")
+                lines.append(f"{role:>21}: MISSING (looked for {self.missing[role]})")
+            elif not quiet:
+                lines.append(f"{role:>21}: -")
+        if self.plan is not None:
+            lines.extend(self.plan.describe(self, self.requested_signals))
+        else:
+            lines.append(f"  signals: {' + '.join(self.signal_roles) or 'none'}")
         lines.extend(f"  note: {note}" for note in self.notes)
         return "\n".join(lines)
 
@@ -329,6 +425,13 @@ def _suffix_index(channel_names: Iterable[str]) -> dict[str, list[str]]:
         for start in range(1, len(parts)):
             index.setdefault(".".join(parts[start:]), []).append(name)
     return index
+
+
+def match_channels(wanted: tuple[str, ...], channel_names: Sequence[str]) -> tuple[str, ...] | None:
+    """``wanted`` as the file names it (exactly, or under one unambiguous view-layer
+    prefix, as roles are matched), or None."""
+    found, _ = _match_tuple(wanted, set(channel_names), _suffix_index(channel_names))
+    return found
 
 
 def _format_have(channel_names: Sequence[str], limit: int = 40) -> str:

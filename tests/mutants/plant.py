@@ -55,6 +55,7 @@ FILTER_TESTS = (
     "tests/test_filters_values.py",
     "tests/test_filters_scale.py",
     "tests/test_filters_antilag.py",
+    "tests/test_filters_glossy.py",
 )
 IO_TESTS = (
     "tests/test_io_presets.py",
@@ -232,6 +233,20 @@ MUTANTS: tuple[Mutant, ...] = (
         "svgf_cli/filters/antilag.py",
         (("gradient_bias = change * mean_h if significant else _ZERO",
           "gradient_bias = change * mean_h"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "glossy-no-clamp", "filters", "glossy signals' history not clamped",
+        "svgf_cli/filters/denoiser.py",
+        (("        if p.glossy_history_clamp > 0.0:\n            for s, glossy in",
+          "        if False:\n            for s, glossy in"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
+        "svgf_cli/filters/denoiser.py",
+        (("        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance",
+          "        glossy_sigma = p.sigma_luminance"),),
         FILTER_TESTS,
     ),
     Mutant(
