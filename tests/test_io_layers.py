@@ -94,7 +94,7 @@ def test_prefix_matching_is_whole_components_and_unambiguous() -> None:
         resolve_layers(build_mapping(), [*base, "Xmotion.X", "Xmotion.Y"], "f.exr")
     # Two view layers both holding motion: ambiguous, reported rather than guessed.
     two = [*base, "A.motion.X", "A.motion.Y", "B.motion.X", "B.motion.Y"]
-    with pytest.raises(InputError, match="ambiguous"):
+    with pytest.raises(InputError, match=r"ambiguous \(A\.motion\.X, B\.motion\.X\)"):
         resolve_layers(build_mapping(), two, "f.exr")
     # A bare "R" never matches "albedo.R".
     no_beauty = [n for n in SVGF_CHANNELS if n not in ("R", "G", "B")]

@@ -141,7 +141,23 @@ class Equivalent:
 
 # Survivors that no test can kill: the mutant computes the same thing. Keyed by text, not
 # by line number, so the list survives edits elsewhere in the file.
-EQUIVALENT: tuple[Equivalent, ...] = ()
+EQUIVALENT: tuple[Equivalent, ...] = (
+    Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer",
+               'depth = values["depth"][0]',
+               "[0] -> [-1]: the depth role is one plane (1, H, W), first and last are the same"),
+    Equivalent("svgf_cli/io/exr.py", "ExrPart", "core/ReplaceFalseWithTrue",
+               "tiled: bool = False",
+               "a default never used: the one ExrPart(...) call passes tiled="),
+    Equivalent("svgf_cli/io/atomic.py", "stale_temporaries", "core/ReplaceFalseWithTrue",
+               "age = now - entry.stat(follow_symlinks=False).st_mtime",
+               "stat vs lstat: svgf's temporaries are regular files, where both agree"),
+    Equivalent("svgf_cli/filters/atrous.py", "_atrous_row", "core/NumberReplacer",
+               "if count <= 0:",
+               "<= 0 -> <= -1: counts are >= 0 (sorted bounds) and _segment loops range(count)"),
+    Equivalent("svgf_cli/filters/denoiser.py", "process", "core/NumberReplacer",
+               "history_length.fill(0.0)",
+               "0 -> -1: accumulation reuses history only where h_prev > 0; both give h = 1"),
+)
 
 
 def modules_of(package: str) -> list[str]:
