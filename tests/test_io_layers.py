@@ -164,3 +164,13 @@ def test_motion_conventions() -> None:
         to_backward_pixels(xy, "nope")
     with pytest.raises(ValueError):
         to_backward_pixels(xy[0], "cycles")
+
+
+def test_resolved_description_marks_only_the_colour_the_split_signals_replace() -> None:
+    # What `svgf inspect` shows: the user must see which colour layer the filter ignores.
+    names = [*SVGF_CHANNELS, "direct.R", "direct.G", "direct.B",
+             "indirect.R", "indirect.G", "indirect.B"]
+    lines = resolve_layers(build_mapping(), names).describe().splitlines()
+    unused = [line.split(":")[0].strip() for line in lines if "(present, not used)" in line]
+    assert unused == ["color"]
+    assert "    depth: Z" in lines and "  signals: direct + indirect" in lines

@@ -380,3 +380,16 @@ def test_codecs_without_an_option_name_are_kept(
     check_all(folder, out, changed={"": RGB})
     (_, header_out, _), = read_parts(out / "o.0001.exr")
     assert header_out["compression"] == getattr(OpenEXR, codec)
+
+
+def test_codecs_without_a_short_name_keep_distinct_names() -> None:
+    # HTJ2K and ZSTD (OpenEXR 3.4) are kept as read; their names appear in notes and must not
+    # collapse into one another.
+    import OpenEXR
+
+    from svgf_cli.io.output import codec_name
+
+    htj2k = codec_name({"compression": OpenEXR.HTJ2K256_COMPRESSION})
+    zstd = codec_name({"compression": OpenEXR.ZSTD_COMPRESSION})
+    assert "htj2k256" in htj2k and "zstd" in zstd
+    assert codec_name({"compression": OpenEXR.DWAB_COMPRESSION}) == "dwab"

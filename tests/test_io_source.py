@@ -7,9 +7,11 @@ import os
 
 import numpy as np
 import OpenEXR
+import pytest
 
+from svgf_cli.errors import InputError
 from svgf_cli.io.output import synthetic_source, write_output
-from svgf_cli.io.source import capture_c_stderr
+from svgf_cli.io.source import capture_c_stderr, decode_source
 
 
 def test_c_stderr_keeps_library_errors_and_passes_every_other_line_through(capfd) -> None:
@@ -38,3 +40,20 @@ def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> No
         assert np.array_equal(channels["A"].pixels, alpha)
         assert (channels["A"].xSampling, channels["A"].ySampling) == (1, 1)
         assert written.header()["owner"] == "lighting"
+
+
+def test_a_truncated_two_part_file_reports_the_first_library_error(tmp_path) -> None:
+    # Cut inside part "a": the core library prints the precise cause for it, then a vaguer
+    # line ("Corrupt chunk offset") for part "b"; the message must carry the precise one.
+    rng = np.random.default_rng(15)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    parts = [OpenEXR.Part(dict(header), {c: rng.random((64, 64), np.float32) for c in "RGB"},
+                          name) for name in ("a", "b")]
+    whole = tmp_path / "whole.exr"
+    OpenEXR.File(parts).write(str(whole))
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[: int(len(data) * 0.3)])
+    with pytest.raises(InputError, match=r"cannot read pixels: .*found corrupt leader") as error:
+        decode_source(cut)
+    assert "Corrupt chunk offset" not in str(error.value)
