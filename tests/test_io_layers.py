@@ -174,3 +174,4 @@ def test_resolved_description_marks_only_the_colour_the_split_signals_replace() 
     unused = [line.split(":")[0].strip() for line in lines if "(present, not used)" in line]
     assert unused == ["color"]
     assert "    depth: Z" in lines and "  signals: direct + indirect" in lines
+    assert not [line for line in lines if "note:" in line]  # nothing absent is "ambiguous"

@@ -488,44 +488,43 @@ def equivalent_reason(module: str, mutation) -> str | None:
 
 
 def collect(package: str) -> dict:
+    """Per module: how many mutants of each outcome; the survivors and equivalents."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome
 
-    tally = {"total": 0, "skipped": 0, "pending": 0, "killed": 0, "timeout": 0,
-             "incompetent": 0, "survived": 0, "equivalent": 0}
+    tallies: dict[str, dict[str, int]] = {}
     survivors, equivalents = [], []
     for module in modules_of(package):
         db_path = session_path(package, module)
         if not db_path.exists():
             continue
+        tally = tallies[module] = dict.fromkeys(
+            ("operator set", "inert", "pending", "killed", "timeout", "survived",
+             "equivalent"), 0)
         with use_db(str(db_path), WorkDB.Mode.open) as db:
             results = dict(db.results)
             for item in db.work_items:
-                tally["total"] += 1
                 result = results.get(item.job_id)
                 mutation = item.mutations[0]
                 if result is None:
                     tally["pending"] += 1
                 elif result.worker_outcome in (WorkerOutcome.SKIPPED, WorkerOutcome.NO_TEST):
-                    tally["skipped"] += 1
-                elif result.worker_outcome == WorkerOutcome.EXCEPTION:
-                    tally["incompetent"] += 1
+                    inert = (result.output or "").startswith("excluded: ")
+                    tally["inert" if inert else "operator set"] += 1
                 elif result.test_outcome == TestOutcome.SURVIVED:
                     why = equivalent_reason(module, mutation)
                     entry = (module, item.job_id, mutation, result.diff, why)
-                    if why:
-                        tally["equivalent"] += 1
-                        equivalents.append(entry)
-                    else:
-                        tally["survived"] += 1
-                        survivors.append(entry)
+                    tally["equivalent" if why else "survived"] += 1
+                    (equivalents if why else survivors).append(entry)
                 elif result.output == "timeout":
                     tally["timeout"] += 1
-                elif result.test_outcome == TestOutcome.INCOMPETENT:
-                    tally["incompetent"] += 1
-                else:
+                else:  # a failing test, or a mutant that cannot even be imported/compiled
                     tally["killed"] += 1
-    return {"tally": tally, "survivors": survivors, "equivalents": equivalents}
+    return {"tallies": tallies, "survivors": survivors, "equivalents": equivalents}
+
+
+def _group(module: str) -> str:
+    return module if module.endswith("runner.py") else module.rsplit("/", 1)[0] + "/"
 
 
 def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -538,20 +537,27 @@ def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def report(packages: list[str], diffs: bool) -> None:
-    print("| package | mutants | skipped (inert) | run | killed | timeout | survived | "
-          "equivalent | score | 95% interval |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    """Score per package (killed / (killed + survived); timeouts count as killed, equivalent
+    mutants and exclusions are left out), with a 95% Wilson interval for a partial run."""
+    print("| package | mutants | excluded (inert) | tested | killed | timeout | survived | "
+          "equivalent | pending | score | 95% interval |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     collected = {p: collect(p) for p in packages}
-    for package, data in collected.items():
-        t = data["tally"]
-        killed = t["killed"] + t["timeout"] + t["incompetent"]
+    groups: dict[str, dict[str, int]] = {}
+    for data in collected.values():
+        for module, tally in data["tallies"].items():
+            group = groups.setdefault(_group(module), dict.fromkeys(tally, 0))
+            for key, value in tally.items():
+                group[key] += value
+    for name, t in groups.items():
+        killed = t["killed"] + t["timeout"]
         scored = killed + t["survived"]
-        run_count = scored + t["equivalent"]
+        mutants = sum(t.values()) - t["operator set"]
         low, high = _wilson(killed, scored)
         score = f"{killed}/{scored} = {100 * killed / scored:.1f}%" if scored else "-"
-        print(f"| {package} | {t['total']} | {t['skipped']} | {run_count} | {t['killed']} | "
-              f"{t['timeout']} | {t['survived']} | {t['equivalent']} | {score} | "
-              f"{100 * low:.1f}-{100 * high:.1f}% |")
+        print(f"| `{name}` | {mutants} | {t['inert']} | {scored + t['equivalent']} | "
+              f"{t['killed']} | {t['timeout']} | {t['survived']} | {t['equivalent']} | "
+              f"{t['pending']} | {score} | {100 * low:.1f}-{100 * high:.1f}% |")
     for package, data in collected.items():
         for title, entries in (("survivors", data["survivors"]),
                                ("equivalent", data["equivalents"])):
