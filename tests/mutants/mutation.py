@@ -558,6 +558,16 @@ def report(packages: list[str], diffs: bool) -> None:
         print(f"| `{name}` | {mutants} | {t['inert']} | {scored + t['equivalent']} | "
               f"{t['killed']} | {t['timeout']} | {t['survived']} | {t['equivalent']} | "
               f"{t['pending']} | {score} | {100 * low:.1f}-{100 * high:.1f}% |")
+    for package in packages:
+        log = WORK / package / "run.log"
+        rows = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
+        for outcome in ("killed", "survived"):
+            chosen = [r for r in rows if r["outcome"] == outcome]
+            if chosen:
+                wall = sum(r["wall_s"] for r in chosen) / len(chosen)
+                cpu = sum(r["cpu_s"] for r in chosen) / len(chosen)
+                print(f"{package}: {len(chosen)} {outcome} mutants, mean {wall:.0f} s wall, "
+                      f"{cpu:.0f} s CPU (user+sys) each")
     for package, data in collected.items():
         for title, entries in (("survivors", data["survivors"]),
                                ("equivalent", data["equivalents"])):
