@@ -36,10 +36,14 @@ def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> No
     write_output(out, source, part_index=0, attributes={},
                  channels={"R": colour, "G": colour, "B": colour})
     with OpenEXR.File(str(out), separate_channels=True) as written:
-        channels = written.channels()
-        assert np.array_equal(channels["A"].pixels, alpha)
-        assert (channels["A"].xSampling, channels["A"].ySampling) == (1, 1)
-        assert written.header()["owner"] == "lighting"
+        channels = {n: c.pixels.copy() for n, c in written.channels().items()}
+        sampling = (written.channels()["A"].xSampling, written.channels()["A"].ySampling)
+        header = dict(written.header())
+    assert np.array_equal(channels["A"], alpha) and sampling == (1, 1)
+    assert all(np.array_equal(channels[c], colour) for c in "RGB")
+    assert header["owner"] == "lighting"
+    for window in ("dataWindow", "displayWindow"):
+        assert [list(corner) for corner in header[window]] == [[0, 0], [3, 2]]
 
 
 def test_a_truncated_two_part_file_reports_the_first_library_error(tmp_path) -> None:

@@ -5,8 +5,9 @@ mutated like any other code (mutmut 3 skips every decorated function, hence ever
 ``@njit`` kernel; see docs/development.md). This driver keeps what makes that affordable:
 
 * one cosmic-ray session (SQLite) per module, made by ``cosmic-ray init`` and narrowed by
-  its ``cr-filter-operators`` filter (the operator set in ``CONFIG``) and by ``skip_inert``
-  below (type hints, debug logging, ``__repr__``, numba compile options): those mutants are SKIPPED;
+  its ``cr-filter-operators`` filter (the operator set in ``EXCLUDED_OPERATORS``) and by
+  ``skip_inert`` below (type hints, debug logging, ``__repr__``, numba compile options, the
+  bare ``*`` of keyword-only parameters): those mutants are SKIPPED;
 * a copy of the tree per package under ``.mutation/<package>/tree`` (the worktree is never
   mutated, and the io run and the filters run can go on side by side);
 * a warm numba cache: after a baseline run the kernel caches are saved; before each mutant
@@ -79,6 +80,7 @@ FILTER_TESTS = (
 )
 _READ_TESTS = (
     "tests/test_io_source.py",
+    "tests/test_io_header.py",
     "tests/test_io_exr.py",
     "tests/test_io_layers.py",
     "tests/test_io_presets.py",
@@ -157,6 +159,24 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/layers.py", "_expand_layer", "core/NumberReplacer",
                'if len(names) == width and (width > 1 or "." in names[0]):',
                "names[0] -> names[-1]: read only when len(names) == width == 1"),
+    Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer", "changed = 0",
+               "0 -> -1 for the id plane: its float plane is copied instead of shared, the "
+               "values are the same (sharing only saves memory)"),
+    Equivalent("svgf_cli/io/layers.py", "_suffix_index", "core/NumberReplacer",
+               "for start in range(1, len(parts)):",
+               "1 -> 0 adds each whole name as its own suffix: the empty prefix it yields "
+               "matches only exact names, which _match_tuple returns before"),
+    Equivalent("svgf_cli/io/source.py", "decode_source", "core/NumberReplacer",
+               "path: str | os.PathLike[str], threads: int = 0, expected_parts: int | None = "
+               "None", "default decode threads 0 -> 1: same pixels; both callers pass threads="),
+    Equivalent("svgf_cli/runner.py", "build_output", "core/NumberReplacer",
+               "keep_only = {_layer_alpha(names[0])} & set(part.channels)",
+               "names[0] -> names[1]: the colour's three channels are one layer (one prefix "
+               "in layers._match_tuple, or R,G,B), so their alpha name is the same"),
+    Equivalent("svgf_cli/runner.py", "close", "core/NumberReplacer",
+               "self._pending[1].result()",
+               "[1] -> [0]: the task has no result(), the AttributeError is suppressed like a "
+               "write error, and executor.shutdown(wait=True) still waits for the write"),
     Equivalent("svgf_cli/filters/variance.py", "spatial_variance", "core/AddNot",
                "while x < width and not needed[x]:",
                "skip loop off: runs start earlier, but the run kernel skips pixels with "
@@ -301,13 +321,25 @@ def inert_spans(source: str) -> list[tuple[tuple[int, int], tuple[int, int], str
     return spans
 
 
+def _keyword_only_marker(lines: list[str], mutation) -> bool:
+    """cosmic-ray reads the bare ``*`` of a signature (keyword-only parameters follow) as a
+    multiplication; ``/`` there only makes the earlier parameters positional-only, an API
+    change a caller sees at once, never a change of what the code computes."""
+    if not mutation.operator_name.startswith("core/ReplaceBinaryOperator_Mul_"):
+        return False
+    row, col = mutation.start_pos
+    text = lines[row - 1] if 0 < row <= len(lines) else ""
+    return text[col:col + 1] == "*" and text[col + 1:].lstrip()[:1] in (",", ")")
+
+
 def skip_inert(db_path: Path, module_file: Path) -> int:
     """Mark the mutants inside `inert_spans` SKIPPED in the session (a cosmic-ray filter);
     also those already run, so that a rule added later applies to earlier results."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import WorkerOutcome, WorkResult
 
-    spans = inert_spans(module_file.read_text())
+    source = module_file.read_text()
+    spans, lines = inert_spans(source), source.splitlines()
     skipped, released = 0, []
     with use_db(str(db_path), WorkDB.Mode.open) as db:
         results = dict(db.results)
@@ -315,6 +347,8 @@ def skip_inert(db_path: Path, module_file: Path) -> int:
             mutation = item.mutations[0]
             start, end = tuple(mutation.start_pos), tuple(mutation.end_pos)
             why = next((w for s, e, w in spans if s <= start and end <= e), None)
+            if why is None and _keyword_only_marker(lines, mutation):
+                why = "keyword-only marker"
             earlier = results.get(item.job_id)
             if why:
                 db.set_result(item.job_id, WorkResult(
