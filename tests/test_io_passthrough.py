@@ -393,3 +393,13 @@ def test_codecs_without_a_short_name_keep_distinct_names() -> None:
     zstd = codec_name({"compression": OpenEXR.ZSTD_COMPRESSION})
     assert "htj2k256" in htj2k and "zstd" in zstd
     assert codec_name({"compression": OpenEXR.DWAB_COMPRESSION}) == "dwab"
+
+
+def test_half_output_clamps_only_the_values_beyond_its_range() -> None:
+    from svgf_cli.io.output import HALF_MAX, prepare_colour
+
+    colour = np.array([[[1e6, -1e6, 0.25, -0.5, np.inf, 65504.0]]], np.float32)
+    prepared = prepare_colour(colour, half=True)
+    assert prepared.planes.dtype == np.float16
+    assert prepared.planes.ravel().tolist() == [HALF_MAX, -HALF_MAX, 0.25, -0.5, 0.0, 65504.0]
+    assert (prepared.nonfinite, prepared.clamped) == (1, 2)

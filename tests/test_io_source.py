@@ -56,6 +56,10 @@ def test_a_truncated_two_part_file_reports_the_first_library_error(tmp_path) -> 
     whole = tmp_path / "whole.exr"
     OpenEXR.File(parts).write(str(whole))
     data = whole.read_bytes()
+    decoded = decode_source(whole)  # the part count read from the file itself
+    assert [part.name for part in decoded.parts] == ["a", "b"]
+    assert np.array_equal(decoded.parts[1].channels["G"].pixels,
+                          parts[1].channels["G"].pixels)
     cut = tmp_path / "cut.exr"
     cut.write_bytes(data[: int(len(data) * 0.3)])
     with pytest.raises(InputError, match=r"cannot read pixels: .*found corrupt leader") as error:

@@ -177,6 +177,10 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "self._pending[1].result()",
                "[1] -> [0]: the task has no result(), the AttributeError is suppressed like a "
                "write error, and executor.shutdown(wait=True) still waits for the write"),
+    Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
+               "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
+               "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
+               "recomputing a mask of 0 gives 0 again"),
     Equivalent("svgf_cli/filters/variance.py", "spatial_variance", "core/AddNot",
                "while x < width and not needed[x]:",
                "skip loop off: runs start earlier, but the run kernel skips pixels with "
