@@ -11,7 +11,7 @@ PYTHON_BLENDER ?= python3.11
 BLENDER_VENV   := .venv-blender
 BLENDER_STAMP  := $(BLENDER_VENV)/.installed
 
-.PHONY: venv demo test lint bench results clean cycles-fixtures lag-fixtures
+.PHONY: venv demo test lint bench results clean cycles-fixtures lag-fixtures mutation mutation-report
 
 venv: $(STAMP)
 
@@ -30,6 +30,22 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+
+# Mutation testing of filters/, io/ and the runner with cosmic-ray (docs/development.md):
+# hours on 2 cores; resumable (run again to go on), e.g.
+# make mutation MUTATION_ARGS="--package io --minutes 60"
+MUTATION_STAMP := $(VENV)/.mutation-installed
+MUTATION_ARGS  ?=
+
+$(MUTATION_STAMP): $(STAMP)
+	$(PY) -m pip install -q -e '.[dev,mutation]'
+	touch $(MUTATION_STAMP)
+
+mutation: $(MUTATION_STAMP)
+	nice -n 10 $(PY) tests/mutants/mutation.py run $(MUTATION_ARGS)
+
+mutation-report: $(MUTATION_STAMP)
+	$(PY) tests/mutants/mutation.py report --diff
 
 bench: $(STAMP)
 	$(PY) bench/run.py

@@ -55,7 +55,7 @@ def _case(seed: int, height: int = 20, width: int = 28, num_signals: int = 2,
 
 
 def _run(case, radius=2, sigma=3.0, spatial_samples=32.0, tolerance=0.02, weights=REC709,
-         gradients=None):
+         gradients=None, moments_alpha=0.2):
     current, moments, length, depth = case
     length = length.copy()
     num_signals, _, height, width = current.shape
@@ -63,7 +63,7 @@ def _run(case, radius=2, sigma=3.0, spatial_samples=32.0, tolerance=0.02, weight
     scratch = np.empty(scratch_shape(num_signals, height, width), F32)
     lam = np.empty((num_signals, *cells), F32)
     count = antilag(current, moments, length, depth, weights, radius, sigma,
-                    spatial_samples, tolerance, 0.2, scratch, lam, gradients)
+                    spatial_samples, tolerance, moments_alpha, scratch, lam, gradients)
     return lam, length, count
 
 
@@ -76,6 +76,19 @@ def test_matches_float64_reference(step, shift, radius, weights):
     case = _case(3, height=21, width=27, step=step, edge_shift=shift)  # odd: partial cells
     lam, length, count = _run(case, radius=radius, weights=weights)
     ref_lam, ref_length = _reference(*case, weights, radius, 3.0, 32.0, 0.02)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+    assert count == int(np.count_nonzero(ref_length < case[2] - 1e-3))
+
+
+@pytest.mark.parametrize("step", [0.7, 0.8, 0.9])
+def test_matches_float64_reference_when_the_stationary_noise_share_binds(step):
+    # With moments_alpha 0.5 the history's stationary noise share a/(2-a) = 1/3 exceeds
+    # 1/h = 1/8: the staleness threshold uses it. Moderate light changes put cells on both
+    # sides of that threshold.
+    case = _case(5, height=21, width=27, step=step)
+    lam, length, count = _run(case, moments_alpha=0.5)
+    ref_lam, ref_length = _reference(*case, REC709, 2, 3.0, 32.0, 0.02, moments_alpha=0.5)
     np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
     np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
     assert count == int(np.count_nonzero(ref_length < case[2] - 1e-3))

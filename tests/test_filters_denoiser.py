@@ -308,3 +308,30 @@ def test_feedback_iteration_output_becomes_the_history() -> None:
     unfiltered = history(params.replace(feedback_iteration=-1))
     assert not np.array_equal(unfiltered, first_only)
     np.testing.assert_array_equal(unfiltered, history(params.replace(atrous_iterations=0)))
+
+
+# Each parameter at the edge of its range (accepted) and just past it (refused with its own
+# message): a library caller gets no Denoiser that would divide by zero or never converge.
+_EDGES = {
+    "atrous_iterations": (0, -1, ">= 0"), "alpha": (1.0, 0.0, "alpha and moments_alpha"),
+    "moments_alpha": (1.0, 1.5, "alpha and moments_alpha"), "history_cap": (1, 0, "history_cap"),
+    "sigma_normal": (1e-3, 0.0, "sigma_normal"), "sigma_luminance": (1e-3, 0.0, "sigma_normal"),
+    "sigma_depth": (1e-3, 0.0, "sigma_normal"),
+    "spatial_variance_sigma_luminance": (1e-3, 0.0, "spatial variance"),
+    "spatial_variance_radius": (0, -1, "spatial variance"),
+    "albedo_epsilon": (1e-9, 0.0, "albedo_epsilon"), "taa_alpha": (1.0, 0.0, "taa_alpha"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_EDGES))
+def test_parameters_outside_their_range_are_refused(name: str) -> None:
+    accepted, refused, message = _EDGES[name]
+    Denoiser(resolve_params("paper", **{name: accepted}))
+    with pytest.raises(ValueError, match=message):
+        Denoiser(resolve_params("paper", **{name: refused}))
+
+
+def test_atrous_iterations_stop_at_twelve() -> None:
+    Denoiser(resolve_params("paper", atrous_iterations=12))
+    with pytest.raises(ValueError, match="<= 12"):
+        Denoiser(resolve_params("paper", atrous_iterations=13))

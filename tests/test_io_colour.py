@@ -10,6 +10,8 @@ from svgf_cli.io.colour import REC709_CHROMATICITIES, luminance_weights, rgb_to_
 ACESCG = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
 REC2020 = (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290)
 AP0 = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
+P3_D65 = (0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290)  # SMPTE EG 432-1
+XYZ = (1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1 / 3, 1 / 3)
 
 
 @pytest.mark.parametrize(
@@ -19,6 +21,7 @@ AP0 = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
         (ACESCG, (0.2722, 0.6741, 0.0537)),  # ACES TB-2014-004 (AP1)
         (REC2020, (0.2627, 0.6780, 0.0593)),  # ITU-R BT.2020
         (AP0, (0.3440, 0.7282, -0.0721)),  # ACES2065-1: a negative blue weight, kept
+        (P3_D65, (0.2290, 0.6917, 0.0793)),  # Display P3 / P3-D65
     ],
 )
 def test_published_luminance_rows(chromaticities, expected) -> None:
@@ -65,3 +68,20 @@ def test_filter_weights_are_the_file_weights_unless_one_is_negative() -> None:
     ap0 = luminance_weights(AP0)
     assert ap0.for_filter() == ap0.non_negative()
     assert "the filter uses R 0.3208, G 0.6792, B 0.0000" in ap0.describe()
+
+
+@pytest.mark.parametrize(
+    ("chromaticities", "name"),
+    [(REC709_CHROMATICITIES, "Rec.709/sRGB"), (ACESCG, "ACEScg (AP1)"),
+     (AP0, "ACES2065-1 (AP0)"), (REC2020, "Rec.2020"), (P3_D65, "DCI-P3 D65"),
+     (XYZ, "CIE XYZ")],
+)
+def test_source_names_standard_primaries(chromaticities, name) -> None:
+    # The name is what `svgf inspect` and the log show: it must be the file's real space.
+    assert luminance_weights(chromaticities).source == f"from chromaticities {name}"
+
+
+def test_source_lists_unknown_primaries_as_numbers() -> None:
+    custom = (0.66, 0.32, 0.29, 0.61, 0.155, 0.065, 0.3127, 0.329)
+    source = luminance_weights(custom).source
+    assert source == "from chromaticities (0.66, 0.32, 0.29, 0.61, 0.155, 0.065, 0.3127, 0.329)"

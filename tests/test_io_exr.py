@@ -358,3 +358,13 @@ def test_half_colour_and_uint_id_channels_decode_exactly(tmp_path: Path) -> None
     assert np.array_equal(frame.depth, channels["Z"])  # float data stays exact
     assert frame.mesh_id[0, 0] == np.iinfo(np.int32).max
     assert np.array_equal(frame.mesh_id.ravel()[1:], ids.ravel()[1:].astype(np.int32))
+
+
+def test_lossy_refusal_lists_at_most_six_data_channels() -> None:
+    six = ["Z", "N.X", "N.Y", "N.Z", "motion.X", "motion.Y"]
+    with pytest.raises(UsageError) as refused:
+        check_compression("dwaa", ["R", *six])
+    assert "motion.Y; use zip" in str(refused.value) and "..." not in str(refused.value)
+    with pytest.raises(UsageError) as refused:
+        check_compression("dwaa", ["R", *six, "id"])
+    assert "motion.Y ...; use zip" in str(refused.value) and "id" not in str(refused.value)

@@ -94,7 +94,7 @@ def test_prefix_matching_is_whole_components_and_unambiguous() -> None:
         resolve_layers(build_mapping(), [*base, "Xmotion.X", "Xmotion.Y"], "f.exr")
     # Two view layers both holding motion: ambiguous, reported rather than guessed.
     two = [*base, "A.motion.X", "A.motion.Y", "B.motion.X", "B.motion.Y"]
-    with pytest.raises(InputError, match="ambiguous"):
+    with pytest.raises(InputError, match=r"ambiguous \(A\.motion\.X, B\.motion\.X\)"):
         resolve_layers(build_mapping(), two, "f.exr")
     # A bare "R" never matches "albedo.R".
     no_beauty = [n for n in SVGF_CHANNELS if n not in ("R", "G", "B")]
@@ -164,3 +164,14 @@ def test_motion_conventions() -> None:
         to_backward_pixels(xy, "nope")
     with pytest.raises(ValueError):
         to_backward_pixels(xy[0], "cycles")
+
+
+def test_resolved_description_marks_only_the_colour_the_split_signals_replace() -> None:
+    # What `svgf inspect` shows: the user must see which colour layer the filter ignores.
+    names = [*SVGF_CHANNELS, "direct.R", "direct.G", "direct.B",
+             "indirect.R", "indirect.G", "indirect.B"]
+    lines = resolve_layers(build_mapping(), names).describe().splitlines()
+    unused = [line.split(":")[0].strip() for line in lines if "(present, not used)" in line]
+    assert unused == ["color"]
+    assert "    depth: Z" in lines and "  signals: direct + indirect" in lines
+    assert not [line for line in lines if "note:" in line]  # nothing absent is "ambiguous"

@@ -380,3 +380,47 @@ def test_codecs_without_an_option_name_are_kept(
     check_all(folder, out, changed={"": RGB})
     (_, header_out, _), = read_parts(out / "o.0001.exr")
     assert header_out["compression"] == getattr(OpenEXR, codec)
+
+
+def test_codecs_without_a_short_name_keep_distinct_names() -> None:
+    # HTJ2K and ZSTD (OpenEXR 3.4) are kept as read; their names appear in notes and must not
+    # collapse into one another.
+    import OpenEXR
+
+    from svgf_cli.io.output import codec_name
+
+    htj2k = codec_name({"compression": OpenEXR.HTJ2K256_COMPRESSION})
+    zstd = codec_name({"compression": OpenEXR.ZSTD_COMPRESSION})
+    assert "htj2k256" in htj2k and "zstd" in zstd
+    assert codec_name({"compression": OpenEXR.DWAB_COMPRESSION}) == "dwab"
+
+
+def test_half_output_clamps_only_the_values_beyond_its_range() -> None:
+    from svgf_cli.io.output import HALF_MAX, prepare_colour
+
+    colour = np.array([[[1e6, -1e6, 0.25, -0.5, np.inf, 65504.0]]], np.float32)
+    prepared = prepare_colour(colour, half=True)
+    assert prepared.planes.dtype == np.float16
+    assert prepared.planes.ravel().tolist() == [HALF_MAX, -HALF_MAX, 0.25, -0.5, 0.0, 65504.0]
+    assert (prepared.nonfinite, prepared.clamped) == (1, 2)
+
+
+def test_colour_only_keeps_the_colour_alpha_when_split_signals_are_filtered(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # direct + indirect are the filtered signals; the beauty R,G,B,A is the layer the
+    # denoised colour replaces, so --colour-only writes it with its own alpha.
+    def parts(frame: int) -> list[PartSpec]:
+        data = gbuffer(frame)
+        for c in "RGB":
+            data[f"direct.{c}"] = 0.7 * data[c]
+            data[f"indirect.{c}"] = 0.3 * data[c]
+        data["A"] = np.linspace(0.2, 0.8, W * H, dtype=np.float32).reshape(H, W)
+        return [PartSpec(data)]
+
+    folder = sequence(tmp_path, parts)
+    out = denoise(folder, capsys, "--colour-only")
+    (_, _, pixels), = read_parts(out / "o.0002.exr")
+    assert set(pixels) == {"R", "G", "B", "A"}
+    (_, _, source), = read_parts(folder / "in.0002.exr")
+    assert bits_equal(pixels["A"], source["A"])

@@ -11,7 +11,7 @@ import io
 from pathlib import Path
 
 import numpy as np
-from exr_fixtures import PartSpec, gbuffer, write_parts
+from exr_fixtures import PartSpec, gbuffer, read_parts, write_parts
 
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame
@@ -53,6 +53,9 @@ def test_denoiser_counts_and_output_policy_become_warnings(tmp_path: Path) -> No
     task = FrameTask(1, path, tmp_path / "o.0001.exr")
     config = RunConfig(params=SVGFParams(), preset="paper", mapping=build_mapping())
     run_sequence([task], config, progress, make_denoiser=CountingDenoiser)
+    # A library caller's default output is the drop-in one: every input channel is kept.
+    (_, _, written), = read_parts(tmp_path / "o.0001.exr")
+    assert set(channels) <= set(written)
     lines = err.getvalue().splitlines()
     assert (f"WARNING: {path}: 3 input value(s) beyond +-1e15 replaced by 0"
             " (radiance.direct 3)" in lines)

@@ -1,0 +1,67 @@
+"""The in-memory layout of an EXR file (io/source.py) and the C-level stderr capture that keeps
+OpenEXR's own error lines out of the log."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from svgf_cli.errors import InputError
+from svgf_cli.io.output import synthetic_source, write_output
+from svgf_cli.io.source import capture_c_stderr, decode_source
+
+
+def test_c_stderr_keeps_library_errors_and_passes_every_other_line_through(capfd) -> None:
+    with capture_c_stderr() as captured:
+        os.write(2, b"another thread's warning\n")
+        os.write(2, b"EXR Error (EXR_ERR_CORRUPT_CHUNK): bad chunk\n")
+        os.write(2, b"last line\n")
+    assert captured == ["EXR Error (EXR_ERR_CORRUPT_CHUNK): bad chunk"]
+    assert capfd.readouterr().err == "another thread's warning\nlast line\n"
+
+
+def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> None:
+    alpha = np.linspace(0.0, 1.0, 12, dtype=np.float32).reshape(3, 4)
+    source = synthetic_source(tmp_path / "in.exr", (3, 4),
+                              {"owner": "lighting", "frameNumber": 7, "notes": ["a", "b"]},
+                              alpha=alpha)
+    header = source.parts[0].header
+    assert header["owner"] == "lighting" and header["frameNumber"] == 7
+    assert "notes" not in header  # not an EXR attribute type: never written
+    colour = np.full((3, 4), 0.5, np.float32)
+    out = tmp_path / "out.exr"
+    write_output(out, source, part_index=0, attributes={},
+                 channels={"R": colour, "G": colour, "B": colour})
+    with OpenEXR.File(str(out), separate_channels=True) as written:
+        channels = {n: c.pixels.copy() for n, c in written.channels().items()}
+        sampling = (written.channels()["A"].xSampling, written.channels()["A"].ySampling)
+        header = dict(written.header())
+    assert np.array_equal(channels["A"], alpha) and sampling == (1, 1)
+    assert all(np.array_equal(channels[c], colour) for c in "RGB")
+    assert header["owner"] == "lighting"
+    for window in ("dataWindow", "displayWindow"):
+        assert [list(corner) for corner in header[window]] == [[0, 0], [3, 2]]
+
+
+def test_a_truncated_two_part_file_reports_the_first_library_error(tmp_path) -> None:
+    # Cut inside part "a": the core library prints the precise cause for it, then a vaguer
+    # line ("Corrupt chunk offset") for part "b"; the message must carry the precise one.
+    rng = np.random.default_rng(15)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    parts = [OpenEXR.Part(dict(header), {c: rng.random((64, 64), np.float32) for c in "RGB"},
+                          name) for name in ("a", "b")]
+    whole = tmp_path / "whole.exr"
+    OpenEXR.File(parts).write(str(whole))
+    data = whole.read_bytes()
+    decoded = decode_source(whole)  # the part count read from the file itself
+    assert [part.name for part in decoded.parts] == ["a", "b"]
+    assert np.array_equal(decoded.parts[1].channels["G"].pixels,
+                          parts[1].channels["G"].pixels)
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[: int(len(data) * 0.3)])
+    with pytest.raises(InputError, match=r"cannot read pixels: .*found corrupt leader") as error:
+        decode_source(cut)
+    assert "Corrupt chunk offset" not in str(error.value)
