@@ -173,5 +173,6 @@ def test_resolved_description_marks_only_the_colour_the_split_signals_replace() 
     lines = resolve_layers(build_mapping(), names).describe().splitlines()
     unused = [line.split(":")[0].strip() for line in lines if "(present, not used)" in line]
     assert unused == ["color"]
-    assert "    depth: Z" in lines and "  signals: direct + indirect" in lines
+    stripped = [line.strip() for line in lines]
+    assert "depth: Z" in stripped and "signals: direct + indirect" in stripped
     assert not [line for line in lines if "note:" in line]  # nothing absent is "ambiguous"
