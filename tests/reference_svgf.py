@@ -403,15 +403,20 @@ def firefly_clamp(illumination: np.ndarray, depth: np.ndarray, k: float,
     return out
 
 
-def history_clamp(history: np.ndarray, history_length: np.ndarray, current: np.ndarray,
-                  depth: np.ndarray, k: float) -> np.ndarray:
+def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
+                  current: np.ndarray, depth: np.ndarray, k: float,
+                  weights: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Clamp each history channel to the current 3x3 (in-image surface pixels, centre
-    included) ``mean +- k sigma``; a signal's pixels without history (its ``h <= 0``) and
-    background are left alone."""
+    included) ``mean +- k sigma``; where anything changed, scale the moments with the
+    history luminance ``l -> l'``: ``m1 l'/l``, ``m2 (l'/l)^2`` (``l'``, ``l'^2`` where
+    ``l <= 0``). A signal's pixels without history (its ``h <= 0``) and background are left
+    alone. Returns the clamped history and moments."""
     hist = np.array(history, dtype=F64)
+    mom = np.array(moments, dtype=F64)
     cur = np.asarray(current, dtype=F64)
     z = np.asarray(depth, dtype=F64)
     h = np.asarray(history_length, dtype=F64)
+    w = np.asarray(weights, dtype=F64)
     num_signals, _, height, width = hist.shape
     for y in range(height):
         for x in range(width):
@@ -422,12 +427,21 @@ def history_clamp(history: np.ndarray, history_length: np.ndarray, current: np.n
             for s in range(num_signals):
                 if h[s, y, x] <= 0.0:
                     continue
+                before = float(w @ hist[s, :, y, x])
                 for c in range(3):
                     values = np.array([cur[s, c, yy, xx] for yy, xx in window])
                     mean, sigma = values.mean(), values.std()
                     hist[s, c, y, x] = min(max(hist[s, c, y, x], mean - k * sigma),
                                            mean + k * sigma)
-    return hist
+                after = float(w @ hist[s, :, y, x])
+                if np.array_equal(hist[s, :, y, x], np.asarray(history, dtype=F64)[s, :, y, x]):
+                    continue
+                if before > 0.0:
+                    mom[s, 0, y, x] *= after / before
+                    mom[s, 1, y, x] *= (after / before) ** 2
+                else:
+                    mom[s, :, y, x] = after, after * after
+    return hist, mom
 
 
 # --------------------------------------------------------------------------- 2 reprojection
@@ -981,18 +995,16 @@ class ReferenceDenoiser:
         blend factor there. Returns anti-lag's count (None when it is off)."""
         p = self.params
         reprojected = temporal.history
-        if p.history_clamp > 0.0:
-            reprojected.illumination = history_clamp(
-                reprojected.illumination, reprojected.history_length, temporal.current,
-                temporal.depth, p.history_clamp)
-        if p.glossy_history_clamp > 0.0:
-            # Glossy signals: their own clamp to the current neighbourhood (one at a time).
-            for s, glossy in enumerate(temporal.glossy):
-                if glossy:
-                    one = slice(s, s + 1)
-                    reprojected.illumination[one] = history_clamp(
-                        reprojected.illumination[one], reprojected.history_length[one],
-                        temporal.current[one], temporal.depth, p.glossy_history_clamp)
+        # The history clamp, one signal at a time: glossy signals at their own k.
+        glossy = temporal.glossy or (False,) * reprojected.illumination.shape[0]
+        for s, is_glossy in enumerate(glossy):
+            k = (p.glossy_history_clamp or p.history_clamp) if is_glossy else p.history_clamp
+            if k > 0.0:
+                one = slice(s, s + 1)
+                reprojected.illumination[one], reprojected.moments[one] = history_clamp(
+                    reprojected.illumination[one], reprojected.moments[one],
+                    reprojected.history_length[one], temporal.current[one], temporal.depth, k,
+                    temporal.weights)
         if not p.antilag:
             return None
         _, length, shortened = antilag(
@@ -1234,7 +1246,8 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
         else:
             motion = np.full((2, *frame.depth.shape), NO_MOTION)
         reversed_frame = Frame(
-            signals=[Signal(s.name, s.radiance, s.albedo) for s in frame.signals],
+            signals=[Signal(s.name, s.radiance, s.albedo, glossy=s.glossy)
+                     for s in frame.signals],
             normal=frame.normal, depth=frame.depth,
             motion=np.ascontiguousarray(motion, dtype=np.float32), mesh_id=frame.mesh_id,
             albedo=frame.albedo, emission=frame.emission,

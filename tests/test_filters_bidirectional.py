@@ -150,6 +150,10 @@ def test_forward_step_keeps_the_causal_history() -> None:
 CASES = {
     "default, motion to the next frame": (resolve_params("default"), {"motion_next": True}),
     "default, derived motion": (resolve_params("default"), {}),
+    # Glossy signals keep their rules (history clamp, sigma_l) in the reverse pass too.
+    "default, three signals with glossy, light step": (
+        resolve_params("default"), {"layout": "three", "light_step": (2, 0.4),
+                                    "motion_next": True}),
     "falcor, three signals, light step": (
         resolve_params("falcor", firefly_clamp=2.0, history_clamp=1.5),
         {"layout": "three", "luminance_weights": ACESCG_LUMINANCE, "light_step": (3, 0.4),

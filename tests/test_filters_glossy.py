@@ -37,11 +37,21 @@ def _frame(t: int, glossy: bool) -> Frame:
     )
 
 
-def _trail(glossy: bool, params=PRESETS["default"]) -> float:
+def _read_only(frame: Frame) -> Frame:
+    """The frame as a memory-mapped or shared reader may hand it over: no plane writable."""
+    for signal in frame.signals:
+        signal.radiance.flags.writeable = False
+        signal.albedo.flags.writeable = False
+    frame.depth.flags.writeable = False
+    return frame
+
+
+def _trail(glossy: bool, params=PRESETS["default"], read_only: bool = False) -> float:
     """Mean glossy output where the highlight was but no longer is, after 8 frames."""
     denoiser = Denoiser(params, debug_layers=True)
     for t in range(8):
-        out = denoiser.process(_frame(t, glossy))
+        frame = _frame(t, glossy)
+        out = denoiser.process(_read_only(frame) if read_only else frame)
     glossy_out = out.layers["glossy.G"]
     behind = glossy_out[9:13, 8:24]  # highlight columns of frames 1-5, empty at frame 7
     return float(behind.mean())
@@ -63,3 +73,8 @@ def test_paper_preset_has_no_glossy_rules():
     """The paper preset (as published) treats a glossy signal like any other."""
     paper = PRESETS["paper"]
     assert _trail(glossy=True, params=paper) == _trail(glossy=False, params=paper)
+
+
+def test_read_only_frames_keep_their_glossy_signals():
+    """The Denoiser copies read-only planes; the copy must keep what each signal is."""
+    assert _trail(glossy=True, read_only=True) == _trail(glossy=True)

@@ -324,13 +324,25 @@ def test_history_clamp_pulls_stale_history_into_neighbourhood_range() -> None:
     k = 1.0
     window = current[0, :, 1:4, 1:4].reshape(3, -1)
     centre_high = window.mean(axis=1) + k * window.std(axis=1)
-    history_clamp(history, length, current, depth, F32(k))
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    moments = np.zeros((1, 2, h, w), dtype=F32)
+    moments[:, 0], moments[:, 1] = 10.0, 100.0 + 25.0  # luminance 10, variance 25
+    history_clamp(history, moments, length, current, depth, F32(k), weights)
     np.testing.assert_allclose(history[0, :, 2, 2], current[0, :, 2, 2], rtol=1e-6)
     np.testing.assert_allclose(history[0, :, 1, 2], np.minimum(10.0, _window_high(current, 1, 2,
                                                                                    k)), rtol=1e-5)
     assert np.all(history[0, :, 2, 3] < 10.0)
     assert np.all(centre_high > current[0, :, 2, 2] - 1e-6)
     assert np.all(history[..., 5, 5] == 10.0)
+    # The moments follow the luminance the clamp removed (relative variance kept), so the
+    # clamped outlier no longer brings its variance along; untouched where nothing moved.
+    lum = np.array(weights, dtype=np.float64) @ history[0].reshape(3, -1).astype(np.float64)
+    moved = np.ones((h, w), dtype=bool)
+    moved[2, 2] = moved[5, 5] = False  # plausible history, no history
+    ratio = np.where(moved, lum.reshape(h, w) / 10.0, 1.0)
+    np.testing.assert_allclose(moments[0, 0], 10.0 * ratio, rtol=1e-5)
+    np.testing.assert_allclose(moments[0, 1], 125.0 * ratio**2, rtol=1e-5)
+    assert moments[0, 0, 2, 2] == 10.0 and moments[0, 0, 5, 5] == 10.0
 
 
 def _window_high(current: np.ndarray, y: int, x: int, k: float) -> np.ndarray:

@@ -307,11 +307,21 @@ def test_history_clamp_matches_reference() -> None:
     history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
     # Per signal: a signal's pixels without history are left alone, the other's clamped.
     length = rng.choice([0.0, 1.0, 2.5, 8.0], size=(2, *depth.shape)).astype(F32)
-    got = history.copy()
-    history_clamp(got, length, current, depth, F32(1.0))
-    want = ref.history_clamp(history, length, current, depth, 1.0)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    lum = np.einsum("c,scyx->syx", np.array(weights, dtype=np.float64), history)
+    moments = np.stack([lum, lum * lum * 1.5], axis=1).astype(F32)
+    moments[0, :, 3, 3] = 0.0  # a black history somewhere (if clamped: moments from l')
+    got, got_moments = history.copy(), moments.copy()
+    history_clamp(got, got_moments, length, current, depth, F32(1.0), weights)
+    want, want_moments = ref.history_clamp(history, moments, length, current, depth, 1.0,
+                                           weights)
     _close(got, want, 2e-5, "history clamp")
+    _close(got_moments, want_moments, 5e-5, "history clamp moments")
     assert np.sum(want != history) > 50  # it clamps, ...
+    # ... and the moments follow the clamped luminance exactly where the colour moved.
+    moved = np.any(want != history, axis=1)
+    assert np.all(want_moments[:, 0][~moved] == moments[:, 0][~moved])
+    assert np.all(np.abs(want_moments[:, 0][moved] - moments[:, 0][moved]) > 0)
     for s in range(2):
         untouched = (length[s] <= 0) | (depth <= 0)
         assert untouched.any() and np.all(want[s][:, untouched] == history[s][:, untouched])

@@ -5,7 +5,8 @@
   The centre is left out of the statistics, otherwise a firefly would widen its own bound.
 * :func:`history_clamp` (against ghosting): the reprojected history colour is clamped per
   channel to the current frame's 3x3 mean +- ``k`` sigma, so stale history that no longer
-  matches the neighbourhood (moving shadows, lights switching) is pulled back.
+  matches the neighbourhood (moving shadows, lights switching) is pulled back; its luminance
+  moments are scaled with it.
 
 Neighbour statistics use only in-image, non-background pixels.
 """
@@ -83,15 +84,22 @@ def firefly_clamp(
 )
 def history_clamp(
     history: np.ndarray,
+    history_moments: np.ndarray,
     history_length: np.ndarray,
     current: np.ndarray,
     depth: np.ndarray,
     k: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
 ) -> None:
-    """In place: clamp each history channel to the current 3x3 mean +- k*sigma.
+    """In place: clamp each history channel to the current 3x3 mean +- k*sigma, and let the
+    luminance moments follow: with the history luminance ``l -> l'``, ``m1 *= l'/l`` and
+    ``m2 *= (l'/l)^2`` (``m1 = l'``, ``m2 = l'^2`` where ``l <= 0``).
 
-    ``history`` and ``current`` are (S, 3, H, W), ``history_length`` (S, H, W); a signal's
-    pixels without history are left alone.
+    Without the moments a clamped outlier would keep its variance, and with it a wide
+    luminance stop that spreads the outlier's energy in the a-trous (hot pixels around
+    reflections). ``history`` and ``current`` are (S, 3, H, W), ``history_moments``
+    (S, 2, H, W), ``history_length`` (S, H, W); a signal's pixels without history are left
+    alone.
     """
     num_signals = history.shape[0]
     height, width = depth.shape
@@ -102,6 +110,9 @@ def history_clamp(
             for s in range(num_signals):
                 if history_length[s, y, x] <= _ZERO:
                     continue
+                before = luminance(history[s, 0, y, x], history[s, 1, y, x],
+                                   history[s, 2, y, x], luminance_weights)
+                changed = False
                 for c in range(3):
                     count = 0
                     total = _ZERO
@@ -118,4 +129,19 @@ def history_clamp(
                     sigma = np.sqrt(max(total_sq / F32(count) - mean * mean, _ZERO))
                     lo = mean - k * sigma
                     hi = mean + k * sigma
-                    history[s, c, y, x] = min(max(history[s, c, y, x], lo), hi)
+                    value = history[s, c, y, x]
+                    clamped = min(max(value, lo), hi)
+                    if clamped != value:
+                        history[s, c, y, x] = clamped
+                        changed = True
+                if not changed:
+                    continue
+                after = luminance(history[s, 0, y, x], history[s, 1, y, x],
+                                  history[s, 2, y, x], luminance_weights)
+                if before > _ZERO:
+                    ratio = after / before
+                    history_moments[s, 0, y, x] *= ratio
+                    history_moments[s, 1, y, x] *= ratio * ratio
+                else:
+                    history_moments[s, 0, y, x] = after
+                    history_moments[s, 1, y, x] = after * after

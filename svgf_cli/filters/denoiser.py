@@ -663,16 +663,14 @@ class Denoiser:
         """Adjust the reprojected history before it is blended: the optional history clamp,
         then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
         p = self.params
-        if p.history_clamp > 0.0:
-            history_clamp(temporal.history_illumination, temporal.history_length,
-                          temporal.current, temporal.depth, F32(p.history_clamp))
-        if p.glossy_history_clamp > 0.0:
-            for s, glossy in enumerate(temporal.glossy):
-                if glossy:
-                    one = slice(s, s + 1)
-                    history_clamp(temporal.history_illumination[one],
-                                  temporal.history_length[one], temporal.current[one],
-                                  temporal.depth, F32(p.glossy_history_clamp))
+        glossy_k = p.glossy_history_clamp or p.history_clamp
+        for s, glossy in enumerate(temporal.glossy or (False,) * len(temporal.names)):
+            k = glossy_k if glossy else p.history_clamp
+            if k > 0.0:
+                one = slice(s, s + 1)
+                history_clamp(temporal.history_illumination[one], temporal.history_moments[one],
+                              temporal.history_length[one], temporal.current[one],
+                              temporal.depth, F32(k), temporal.luminance_weights)
         if not p.antilag:
             return 0
         work = self._work
@@ -828,8 +826,10 @@ def _writable(frame: Frame) -> Frame:
             planes[f.name] = plane.copy()
     if any(not s.radiance.flags.writeable or not s.albedo.flags.writeable
            for s in frame.signals):
-        planes["signals"] = [Signal(s.name, own(s.radiance), own(s.albedo))
-                             for s in frame.signals]
+        planes["signals"] = [
+            dataclasses.replace(s, radiance=own(s.radiance), albedo=own(s.albedo))
+            for s in frame.signals
+        ]
     return dataclasses.replace(frame, **planes) if planes else frame
 
 

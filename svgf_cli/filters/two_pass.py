@@ -24,7 +24,7 @@ from svgf_cli.filters.bidirectional import SideHistory, pack_history, unpack_his
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.invert_motion import NO_MOTION, invert_motion
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.frame import DenoisedFrame, Frame, Signal
+from svgf_cli.frame import DenoisedFrame, Frame
 
 F32 = np.float32
 
@@ -72,7 +72,8 @@ class ReversePass:
             frame,
             motion=self.motion_to_next(frame),
             motion_next=None,
-            signals=[Signal(s.name, s.radiance, s.albedo) for s in frame.signals],
+            # Gradient samples describe the change from the previous frame: not this pass's.
+            signals=[dataclasses.replace(s, gradient=None) for s in frame.signals],
         )
         self._later = (_finite(frame.motion, NO_MOTION), _finite(frame.depth, F32(0.0)))
         return self.denoiser.reverse_step(reverse, forward)
