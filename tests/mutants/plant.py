@@ -56,6 +56,7 @@ FILTER_TESTS = (
     "tests/test_filters_scale.py",
     "tests/test_filters_antilag.py",
     "tests/test_filters_glossy.py",
+    "tests/test_filters_bidirectional.py",
 )
 IO_TESTS = (
     "tests/test_io_presets.py",
@@ -238,8 +239,23 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "glossy-no-clamp", "filters", "glossy signals' history not clamped",
         "svgf_cli/filters/denoiser.py",
-        (("        if p.glossy_history_clamp > 0.0:\n            for s, glossy in",
-          "        if False:\n            for s, glossy in"),),
+        (("            k = glossy_k if glossy else p.history_clamp",
+          "            k = p.history_clamp"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "clamp-keeps-moments", "filters", "history clamp leaves the moments of a clamped outlier",
+        "svgf_cli/filters/clamp.py",
+        (("                if not changed:\n                    continue",
+          "                if True:\n                    continue"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "reverse-pass-drops-glossy", "filters", "the reverse pass forgets which signals are glossy",
+        "svgf_cli/filters/two_pass.py",
+        (("signals=[dataclasses.replace(s, gradient=None) for s in frame.signals],",
+          "signals=[dataclasses.replace(s, gradient=None, glossy=False) "
+          "for s in frame.signals],"),),
         FILTER_TESTS,
     ),
     Mutant(
