@@ -240,7 +240,7 @@ def test_chromaticities_pass_through_and_set_luminance_weights(
     assert np.allclose(header_out["chromaticities"], ACESCG)
 
     def direct(weights: tuple[float, float, float] | None) -> np.ndarray:
-        denoiser = Denoiser(resolve_params("paper"))
+        denoiser = Denoiser(resolve_params())  # the preset the CLI ran
         for frame in FRAMES:
             read = read_frame(folder / f"in.{frame:04d}.exr", build_mapping()).frame
             if weights is not None:

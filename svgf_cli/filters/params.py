@@ -94,7 +94,7 @@ class SVGFParams:
     glossy_history_clamp: float = _p(
         0.0,
         "Clamp a glossy signal's reprojected history to the current 3x3 mean +- k*sigma"
-        " (0 = off).",
+        " (0 = as history_clamp).",
     )
     glossy_sigma_luminance: float = _p(
         0.0,
@@ -124,8 +124,8 @@ class SVGFParams:
     )
     history_clamp: float = _p(
         0.0,
-        "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame"
-        " (0 = off).",
+        "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame,"
+        " its luminance moments scaled with it (0 = off; glossy signals: glossy_history_clamp).",
     )
     taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
     taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
@@ -142,9 +142,10 @@ PRESETS: dict[str, SVGFParams] = {
     # Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128, sigma_z 1, 5 iterations,
     # first iteration fed back as history.
     "paper": SVGFParams(),
-    # The recommended set: the paper's filter plus anti-lag and the glossy rules (measured
-    # in docs/results.md).
-    "default": SVGFParams(antilag=True, glossy_history_clamp=1.0, glossy_sigma_luminance=1.0),
+    # The recommended set: the paper's filter plus anti-lag, a loose history clamp against
+    # outliers (k = 3) and the glossy rules (measured in docs/results.md).
+    "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
+                          glossy_sigma_luminance=1.0),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,
