@@ -79,6 +79,20 @@ def firefly_clamp(
                     out[s, 2, y, x] = b * scale
 
 
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _three_tap(column: np.ndarray, out: np.ndarray) -> None:
+    """``out[x] = column[x - 1] + column[x] + column[x + 1]`` within the row."""
+    width = column.shape[0]
+    if width == 1:
+        out[0] = column[0]
+        return
+    out[0] = column[0] + column[1]
+    for x in range(1, width - 1):
+        out[x] = column[x - 1] + column[x] + column[x + 1]
+    out[width - 1] = column[width - 2] + column[width - 1]
+
+
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
@@ -99,49 +113,63 @@ def history_clamp(
     luminance stop that spreads the outlier's energy in the a-trous (hot pixels around
     reflections). ``history`` and ``current`` are (S, 3, H, W), ``history_moments``
     (S, 2, H, W), ``history_length`` (S, H, W); a signal's pixels without history are left
-    alone.
+    alone. The 3x3 sums are separable (column sums over three rows, then three taps), so
+    every inner loop runs over a row.
     """
     num_signals = history.shape[0]
     height, width = depth.shape
+    wr, wg, wb = luminance_weights
     for y in prange(height):
-        for x in range(width):
-            if depth[y, x] <= _ZERO:
-                continue
-            for s in range(num_signals):
-                if history_length[s, y, x] <= _ZERO:
-                    continue
-                before = luminance(history[s, 0, y, x], history[s, 1, y, x],
-                                   history[s, 2, y, x], luminance_weights)
-                changed = False
-                for c in range(3):
-                    count = 0
-                    total = _ZERO
-                    total_sq = _ZERO
-                    for yy in range(max(y - 1, 0), min(y + 2, height)):
-                        for xx in range(max(x - 1, 0), min(x + 2, width)):
-                            if depth[yy, xx] <= _ZERO:
-                                continue
-                            v = current[s, c, yy, xx]
-                            count += 1
-                            total += v
-                            total_sq += v * v
-                    mean = total / F32(count)
-                    sigma = np.sqrt(max(total_sq / F32(count) - mean * mean, _ZERO))
-                    lo = mean - k * sigma
-                    hi = mean + k * sigma
-                    value = history[s, c, y, x]
-                    clamped = min(max(value, lo), hi)
-                    if clamped != value:
-                        history[s, c, y, x] = clamped
-                        changed = True
-                if not changed:
-                    continue
-                after = luminance(history[s, 0, y, x], history[s, 1, y, x],
-                                  history[s, 2, y, x], luminance_weights)
-                if before > _ZERO:
-                    ratio = after / before
-                    history_moments[s, 0, y, x] *= ratio
-                    history_moments[s, 1, y, x] *= ratio * ratio
-                else:
-                    history_moments[s, 0, y, x] = after
-                    history_moments[s, 1, y, x] = after * after
+        y0, y1 = max(y - 1, 0), min(y + 2, height)
+        column = np.zeros(width, dtype=F32)
+        column_sq = np.empty(width, dtype=F32)
+        count = np.empty(width, dtype=F32)
+        total = np.empty(width, dtype=F32)
+        total_sq = np.empty(width, dtype=F32)
+        before = np.empty(width, dtype=F32)
+        moved = np.empty(width, dtype=np.uint8)
+        for yy in range(y0, y1):
+            z = depth[yy]
+            for x in range(width):
+                column[x] += _ONE if z[x] > _ZERO else _ZERO
+        _three_tap(column, count)
+        z = depth[y]
+        for s in range(num_signals):
+            h = history_length[s, y]
+            hr, hg, hb = history[s, 0, y], history[s, 1, y], history[s, 2, y]
+            for x in range(width):
+                before[x] = wr * hr[x] + wg * hg[x] + wb * hb[x]
+                moved[x] = 0
+            for c in range(3):
+                column[:] = _ZERO
+                column_sq[:] = _ZERO
+                for yy in range(y0, y1):
+                    v = current[s, c, yy]
+                    zz = depth[yy]
+                    for x in range(width):
+                        kept = v[x] if zz[x] > _ZERO else _ZERO
+                        column[x] += kept
+                        column_sq[x] += kept * kept
+                _three_tap(column, total)
+                _three_tap(column_sq, total_sq)
+                out = history[s, c, y]
+                for x in range(width):
+                    n = max(count[x], _ONE)
+                    mean = total[x] / n
+                    sigma = np.sqrt(max(total_sq[x] / n - mean * mean, _ZERO))
+                    value = out[x]
+                    clamped = min(max(value, mean - k * sigma), mean + k * sigma)
+                    use = z[x] > _ZERO and h[x] > _ZERO and clamped != value
+                    out[x] = clamped if use else value
+                    moved[x] |= use
+            m1, m2 = history_moments[s, 0, y], history_moments[s, 1, y]
+            for x in range(width):
+                if moved[x]:
+                    after = wr * hr[x] + wg * hg[x] + wb * hb[x]
+                    if before[x] > _ZERO:
+                        ratio = after / before[x]
+                        m1[x] *= ratio
+                        m2[x] *= ratio * ratio
+                    else:
+                        m1[x] = after
+                        m2[x] = after * after

@@ -246,8 +246,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "clamp-keeps-moments", "filters", "history clamp leaves the moments of a clamped outlier",
         "svgf_cli/filters/clamp.py",
-        (("                if not changed:\n                    continue",
-          "                if True:\n                    continue"),),
+        (("                if moved[x]:\n                    after =",
+          "                if False:\n                    after ="),),
         FILTER_TESTS,
     ),
     Mutant(
