@@ -104,7 +104,7 @@ def test_inspect_shows_the_sets_and_checks_the_light_passes(
     assert code == 0
     auto = json.loads(out)["files"][0]
     assert auto["signal_set"] == "lobes-split"
-    assert auto["signals"] == ["diffuse_direct", "diffuse_indirect", "glossy", "transmission"]
+    assert auto["signals"] == ["diffuse_direct", "diffuse_indirect", "specular"]
     code, out, _ = run_cli(["inspect", str(frame), "--preset-aovs", "cycles", "--check",
                             "--signals", "direct-indirect", "--json"], capsys)
     assert code == 0

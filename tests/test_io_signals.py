@@ -57,12 +57,14 @@ def test_cycles_sets_build_their_signals_exactly_from_the_light_passes(frame: Pa
     lobe = {name: (rgb(layers, f"{short}Dir") + rgb(layers, f"{short}Ind")) * rgb(layers,
             f"{short}Col") for name, short in (("diffuse", "Diff"), ("glossy", "Gloss"),
                                                 ("transmission", "Trans"))}  # fmt: skip
+    # Glossy and transmission light are one signal ("specular"), in the renderer's order.
+    specular = lobe["glossy"] + lobe["transmission"]
     expected = {
-        "lobes": lobe,
+        "lobes": {"diffuse": lobe["diffuse"], "specular": specular},
         "lobes-split": {
             "diffuse_direct": rgb(layers, "DiffDir") * rgb(layers, "DiffCol"),
             "diffuse_indirect": rgb(layers, "DiffInd") * rgb(layers, "DiffCol"),
-            "glossy": lobe["glossy"], "transmission": lobe["transmission"],
+            "specular": specular,
         },
         "direct-indirect": {
             part: sum(rgb(layers, f"{s}{tag}") * rgb(layers, f"{s}Col")
@@ -90,7 +92,10 @@ def test_cycles_sets_build_their_signals_exactly_from_the_light_passes(frame: Pa
             assert np.all(np.abs(total - combined) <= 3e-3 * np.abs(combined) + 1e-6)
     lobes = read_frame(frame, build_mapping("cycles", signals="lobes")).frame
     np.testing.assert_array_equal(lobes.signal("diffuse").albedo, rgb(layers, "DiffCol"))
-    np.testing.assert_array_equal(lobes.signal("glossy").albedo, rgb(layers, "GlossCol"))
+    # The sum of both colours, not capped: a metal's colour above 1 stays radiance.
+    np.testing.assert_array_equal(lobes.signal("specular").albedo,
+                                  rgb(layers, "GlossCol") + rgb(layers, "TransCol"))
+    assert lobes.signal("specular").glossy and not lobes.signal("diffuse").glossy
     np.testing.assert_array_equal(lobes.albedo, rgb(layers, "Denoising Albedo"))
 
 
@@ -111,11 +116,13 @@ def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> Non
     assert cycles.plan.offered == ("lobes-split", "direct-indirect", "lobes", "combined")
     # The glossy lobe is a signal of its own, marked glossy (the filter's glossy rules).
     glossy = {s.name: s.glossy for s in cycles.frame.signals}
-    assert glossy == {"diffuse_direct": False, "diffuse_indirect": False, "glossy": True,
-                      "transmission": True}
+    assert glossy == {"diffuse_direct": False, "diffuse_indirect": False, "specular": True}
     # The tracer's lobe passes where it wrote them, else its own direct and indirect layers.
     traced = read_frame(GLOSSY / "in.0002.exr", build_mapping("svgf"))
     assert traced.plan.set == "lobes-split" and traced.plan.checked
+    # Without transmission passes the glossy lobe keeps its own name (and gradient samples).
+    assert traced.frame.names == ("diffuse_direct", "diffuse_indirect", "glossy")
+    assert traced.frame.signal("glossy").glossy
     plain = read_frame(LIGHT_STEP / "in.0002.exr", build_mapping("svgf"))
     assert plain.plan.set == "direct-indirect" and plain.plan.checked is False
     assert plain.plan.offered == ("direct-indirect", "combined")
@@ -152,7 +159,7 @@ def test_a_later_frame_failing_the_check_keeps_the_set_and_warns(tmp_path: Path)
                          scale={"DiffInd": 0.5})
     result = read_frame(broken, fixed)
     assert result.plan.set == "lobes"
-    assert result.frame.names == ("diffuse", "glossy", "transmission")
+    assert result.frame.names == ("diffuse", "specular")
     assert result.signal_warning is not None and "keeping lobes" in result.signal_warning
 
 
@@ -177,7 +184,7 @@ def test_volume_light_is_its_own_lobe_and_missing_volume_passes_fall_back(
 ) -> None:
     with_passes, fog = _with_volume(ROLL / "in.0003.exr", tmp_path / "v.exr", passes=True)
     result = read_frame(with_passes, build_mapping("cycles", signals="lobes"))
-    assert result.frame.names == ("diffuse", "glossy", "transmission", "volume")
+    assert result.frame.names == ("diffuse", "specular", "volume")
     volume = result.frame.signal("volume")
     np.testing.assert_array_equal(volume.radiance[1], 2 * fog + 0.5 * fog)
     np.testing.assert_array_equal(volume.albedo, np.ones_like(volume.albedo))  # no colour

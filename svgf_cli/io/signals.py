@@ -92,9 +92,10 @@ class Term:
 @dataclass(frozen=True)
 class SignalRecipe:
     """How one signal is built: radiance = sum of ``terms`` (minus the emission when it is
-    part of them); demodulated by ``albedo`` (one role as is, several summed and capped at 1
-    as a reflectance, none: white, i.e. filtered as radiance); ``gradient`` names the
-    gradient samples summed into its `TemporalGradient` (empty: none)."""
+    part of them); demodulated by ``albedo`` (one role as is, several summed, capped at 1
+    as a reflectance when ``albedo_cap``; none: white, i.e. filtered as radiance);
+    ``gradient`` names the gradient samples summed into its `TemporalGradient` (empty:
+    none)."""
 
     name: str
     terms: tuple[Term, ...]
@@ -102,11 +103,16 @@ class SignalRecipe:
     minus_emission: bool = False
     gradient: tuple[str, ...] = ()
     glossy: bool = False
+    albedo_cap: bool = True
 
 
 # Lobes whose light follows reflections or refractions rather than the surface
 # (``Signal.glossy``: the filter clamps their history to the current neighbourhood).
 GLOSSY_LOBES = frozenset({"glossy", "transmission"})
+# Both present: one signal, "specular". They take the same rules, most pixels hold at most
+# one of them (transmission is black wherever there is no glass), and every signal costs a
+# full temporal and spatial filter (at 1080p about 0.1 s; docs/signals.md).
+SPECULAR = "specular"
 
 
 @dataclass(frozen=True)
@@ -202,7 +208,8 @@ def _albedo_text(recipe: SignalRecipe, resolved: ResolvedLayers) -> str:
     names = [_layer(resolved[r]) for r in recipe.albedo]
     if len(names) == 1:
         return names[0]
-    return f"min({' + '.join(names)}, 1)"
+    total = " + ".join(names)
+    return f"min({total}, 1)" if recipe.albedo_cap else total
 
 
 # ------------------------------------------------------------------------------ planning
@@ -319,12 +326,29 @@ def _recipes(
         return SignalRecipe(signal or lobe, (Term(light, times(lobe)),), (own,) if own else (),
                             glossy=lobe in GLOSSY_LOBES)
 
+    def per_lobe(lobe_names: Sequence[str]) -> list[SignalRecipe]:
+        """One signal per lobe, the glossy lobes merged into one when both are present."""
+        specular = [lobe for lobe in lobe_names if lobe in GLOSSY_LOBES]
+        signals: list[SignalRecipe] = []
+        for lobe in lobe_names:
+            if len(specular) < 2 or lobe not in GLOSSY_LOBES:
+                signals.append(lobe_signal(lobe))
+            elif lobe == specular[0]:
+                # Demodulated by the sum of the colours, uncapped: where one lobe is black
+                # the signal is exactly the other lobe's (a metal's colour above 1 stays
+                # radiance, as in its own signal).
+                parts = [lobe_signal(one) for one in specular]
+                signals.append(SignalRecipe(
+                    SPECULAR, tuple(t for p in parts for t in p.terms),
+                    tuple(a for p in parts for a in p.albedo), glossy=True, albedo_cap=False))
+        return signals
+
     if name == "lobes":
-        return tuple(lobe_signal(lobe) for lobe in lobes.present), True
+        return tuple(per_lobe(lobes.present)), True
     if name == "lobes-split":
         signals = [lobe_signal("diffuse", ("direct",), "diffuse_direct"),
                    lobe_signal("diffuse", ("indirect",), "diffuse_indirect")]
-        signals += [lobe_signal(lobe) for lobe in lobes.present if lobe != "diffuse"]
+        signals += per_lobe([lobe for lobe in lobes.present if lobe != "diffuse"])
         return tuple(signals), True
     if name == "direct-indirect":
         if resolved.split:
@@ -494,7 +518,8 @@ def compose_signals(
             albedo = role(recipe.albedo[0])
         else:
             albedo = _sum([role(r) for r in recipe.albedo])
-            np.minimum(albedo, np.float32(1.0), out=albedo)
+            if recipe.albedo_cap:
+                np.minimum(albedo, np.float32(1.0), out=albedo)
         signals.append(Signal(recipe.name, np.ascontiguousarray(radiance), albedo,
                               _gradient(plan, recipe, channel), glossy=recipe.glossy))
     return signals, emission
