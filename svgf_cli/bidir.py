@@ -43,7 +43,6 @@ from svgf_cli.runner import (
     _block_signals,
     _default_reader,
     _interrupted,
-    build_output,
     frame_reader,
     frame_writer,
 )
@@ -195,11 +194,8 @@ def _reverse_pass(
             if task.output is None:
                 warmup.frame_done(task.frame)
             else:
-                output = build_output(result, denoised, config, task)
-                for message in output.warnings:
-                    progress.warning(f"{task.input}: {message}")
-                writes.submit(task, output, frame_started)
-                output = denoised = result = None
+                writes.submit_denoised(task, result, denoised, config, frame_started)
+                denoised = result = None
             frame_started = time.perf_counter()
             if stop:
                 writes.finish()

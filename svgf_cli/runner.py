@@ -658,6 +658,15 @@ class WriteBehind:
         )
         self._pending: tuple[FrameTask, Future[tuple[float, list[str]]], float] | None = None
 
+    def submit_denoised(self, task: FrameTask, result: Any, denoised: Any, config: RunConfig,
+                        started: float) -> None:
+        """Build the output file's content of a denoised frame, report its warnings and
+        :meth:`submit` it."""
+        output = build_output(result, denoised, config, task)
+        for message in output.warnings:
+            self._progress.warning(f"{task.input}: {message}")
+        self.submit(task, output, started)
+
     def _timed_write(self, task: FrameTask, output: OutputFrame) -> tuple[float, list[str]]:
         started = time.perf_counter()
         notes = self._write(task, output)
@@ -753,12 +762,9 @@ def run_sequence(
             else:
                 # The writer thread reads these planes while the next frame is filtered: safe
                 # because DenoisedFrame arrays are fresh per frame, not the denoiser's buffers.
-                output = build_output(result, denoised, config, task)
-                for message in output.warnings:
-                    progress.warning(f"{task.input}: {message}")
-                writes.submit(task, output, frame_started)
+                writes.submit_denoised(task, result, denoised, config, frame_started)
                 # Only the writer holds this frame now: memory is freed when it is done.
-                output = denoised = result = None
+                denoised = result = None
             frame_started = time.perf_counter()
             progress.detail(
                 f"frame {task.frame}: read {read_seconds:.3f} s, compute {compute_seconds:.3f} s"
