@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
+from tracescenes import read_exr
 
 from svgf_cli.cli import main
 from svgf_trace import render
@@ -36,15 +36,6 @@ def run(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, 
         main(["trace", *args])
     captured = capsys.readouterr()
     return int(info.value.code or 0), captured.out, captured.err
-
-
-def read_exr(path: Path) -> tuple[dict[str, np.ndarray], oiio.ImageSpec]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    spec = image.spec()
-    pixels = image.read_image(0, 0, 0, spec.nchannels, "float")
-    image.close()
-    return {name: pixels[:, :, k] for k, name in enumerate(spec.channelnames)}, spec
 
 
 def small(out: str, *extra: str, resolution: str = "24x14") -> list[str]:

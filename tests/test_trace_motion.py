@@ -6,8 +6,8 @@ import math
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
+from tracescenes import read_exr
 
 from svgf_cli.cli import main
 from svgf_trace.animation import load_animation
@@ -15,15 +15,6 @@ from svgf_trace.scene import load_obj
 
 TESTDATA = Path(__file__).resolve().parent.parent / "testdata"
 WIDTH, HEIGHT = 64, 36
-
-
-def read_exr(path: Path) -> tuple[dict[str, np.ndarray], oiio.ImageSpec]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    spec = image.spec()
-    pixels = image.read_image(0, 0, 0, spec.nchannels, "float")
-    image.close()
-    return {name: pixels[:, :, k] for k, name in enumerate(spec.channelnames)}, spec
 
 
 def project(camera_key_position, look_at, up, fov_y, points):  # noqa: ANN001, ANN201
