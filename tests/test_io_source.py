@@ -23,6 +23,20 @@ def test_c_stderr_keeps_library_errors_and_passes_every_other_line_through(capfd
     assert capfd.readouterr().err == "another thread's warning\nlast line\n"
 
 
+def test_c_stderr_capture_steps_aside_without_a_stderr(monkeypatch, capfd) -> None:
+    # A farm daemon may run with no usable file descriptor 2 (os.dup fails): decoding must
+    # go on, with nothing captured and nothing written elsewhere.
+    def no_stderr(fd: int) -> int:
+        raise OSError(9, "Bad file descriptor")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(os, "dup", no_stderr)
+        with capture_c_stderr() as captured:
+            os.write(2, b"EXR Error (EXR_ERR_CORRUPT_CHUNK): bad chunk\n")
+    assert captured == []
+    assert capfd.readouterr() == ("", "EXR Error (EXR_ERR_CORRUPT_CHUNK): bad chunk\n")
+
+
 def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> None:
     alpha = np.linspace(0.0, 1.0, 12, dtype=np.float32).reshape(3, 4)
     source = synthetic_source(tmp_path / "in.exr", (3, 4),
@@ -38,8 +52,11 @@ def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> No
     with OpenEXR.File(str(out), separate_channels=True) as written:
         channels = {n: c.pixels.copy() for n, c in written.channels().items()}
         sampling = (written.channels()["A"].xSampling, written.channels()["A"].ySampling)
+        # Written as renderers write an alpha: not flagged perceptually linear (a hint that
+        # makes lossy codecs treat the channel as a colour difference).
+        p_linear = written.channels()["A"].pLinear
         header = dict(written.header())
-    assert np.array_equal(channels["A"], alpha) and sampling == (1, 1)
+    assert np.array_equal(channels["A"], alpha) and sampling == (1, 1) and not p_linear
     assert all(np.array_equal(channels[c], colour) for c in "RGB")
     assert header["owner"] == "lighting"
     for window in ("dataWindow", "displayWindow"):

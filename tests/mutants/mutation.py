@@ -177,6 +177,21 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "self._pending[1].result()",
                "[1] -> [0]: the task has no result(), the AttributeError is suppressed like a "
                "write error, and executor.shutdown(wait=True) still waits for the write"),
+    Equivalent("svgf_cli/io/exr.py", "_keep_colour_part_only", "core/NumberReplacer",
+               'anchor = colour[0] if colour else (resolved[resolved.signal_roles[0]] or ("",))[0]',
+               "another channel or signal as anchor: a layer's channels share its alpha and "
+               "part; with no colour layer the writer keeps only a bare A, never a layer's"),
+    Equivalent("svgf_cli/io/exr.py", "_keep_colour_part_only", "core/NumberReplacer",
+               "part = source.part_holding(anchor) or source.parts[0]",
+               "fallback never taken: the anchor is a channel of the file (the colour's or "
+               "the first signal's), so part_holding finds its part"),
+    Equivalent("svgf_cli/io/patterns.py", "format_frame_spec", "core/ReplaceFalseWithTrue",
+               "return FrameSet.framesToFrameRange(ordered, sort=False, compress=False)",
+               "the frames are already sorted and unique (sorted(set(...))): sort and "
+               "compress have nothing to do"),
+    Equivalent("svgf_cli/io/output.py", "PreparedColour", "core/NumberReplacer",
+               "nonfinite: int = 0  # NaN/Inf set to 0",
+               "a default never used: both PreparedColour(...) calls pass nonfinite"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
@@ -397,15 +412,77 @@ def ensure_session(package: str, module: str) -> Path:
         skip_inert(db, ROOT / module)  # the rules may have grown since the session was made
         return db
     db.parent.mkdir(parents=True, exist_ok=True)
+    earlier = _tested_by_diff(db) if db.exists() else {}
     db.unlink(missing_ok=True)
     config.write_text(text)
     bin_dir = Path(sys.executable).parent
     subprocess.run([bin_dir / "cosmic-ray", "init", config, db], cwd=ROOT, check=True)
     subprocess.run([bin_dir / "cr-filter-operators", db, config], cwd=ROOT, check=True)
     skipped = skip_inert(db, ROOT / module)
-    print(f"{module}: session made ({skipped} inert mutants skipped)", file=sys.stderr)
+    carried = _carry_results(db, ROOT / module, earlier)
+    print(f"{module}: session made ({skipped} inert mutants skipped, {carried} results "
+          f"carried over from the previous session)", file=sys.stderr)
     stamp.write_text(key)
     return db
+
+
+def _diff_key(operator: str, function: str | None, diff: str) -> tuple[str, str, str]:
+    """A mutant by what it does to the text: its operator, its function and its diff without
+    line numbers (the changed line and three lines of context either side)."""
+    body = [line for line in diff.splitlines()
+            if not line.startswith(("--- ", "+++ ", "@@"))]
+    return (operator, function or "", "\n".join(body))
+
+
+def _tested_by_diff(db_path: Path) -> dict[tuple[str, str, str], list]:
+    """The tested mutants of a session about to be made again, by ``_diff_key``."""
+    from cosmic_ray.work_db import WorkDB, use_db
+    from cosmic_ray.work_item import WorkerOutcome
+
+    found: dict[tuple[str, str, str], list] = {}
+    with use_db(str(db_path), WorkDB.Mode.open) as db:
+        results = dict(db.results)
+        for item in db.work_items:
+            result = results.get(item.job_id)
+            if result is None or result.worker_outcome != WorkerOutcome.NORMAL or not result.diff:
+                continue
+            mutation = item.mutations[0]
+            key = _diff_key(mutation.operator_name, mutation.definition_name, result.diff)
+            found.setdefault(key, []).append(result)
+    return found
+
+
+def _carry_results(db_path: Path, module_file: Path, earlier: dict) -> int:
+    """Give a new session's mutants the results of the same mutants in the previous session
+    of an edited module: same operator, same function, same diff (a mutant whose line or
+    context changed is tested again). Carried survivors are retested by ``--survivors``."""
+    if not earlier:
+        return 0
+    import cosmic_ray.plugins
+    from cosmic_ray.mutating import _make_diff, mutate_code
+    from cosmic_ray.work_db import WorkDB, use_db
+
+    source = module_file.read_text()
+    wanted = {(operator, function) for operator, function, _ in earlier}
+    carried = 0
+    with use_db(str(db_path), WorkDB.Mode.open) as db:
+        results = dict(db.results)
+        for item in list(db.work_items):
+            mutation = item.mutations[0]
+            if item.job_id in results or \
+                    (mutation.operator_name, mutation.definition_name or "") not in wanted:
+                continue
+            operator = cosmic_ray.plugins.get_operator(mutation.operator_name)(
+                **(getattr(mutation, "operator_args", None) or {}))
+            mutated = mutate_code(source, operator, mutation.occurrence)
+            if mutated is None:
+                continue
+            diff = "\n".join(_make_diff(source, mutated, mutation.module_path))
+            same = earlier.get(_diff_key(mutation.operator_name, mutation.definition_name, diff))
+            if same:
+                db.set_result(item.job_id, same.pop(0))
+                carried += 1
+    return carried
 
 
 def prepare_tree(package: str) -> Path:
