@@ -10,6 +10,7 @@ import io
 import os
 import signal
 import threading
+import time
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -190,6 +191,13 @@ def test_resolution_change_names_both_sizes(tmp_path: Path) -> None:
     assert not (tmp_path / "out" / "out.0003.exr").exists()
 
 
+def test_wall_time_is_the_run_s_own_duration(tmp_path: Path) -> None:
+    # The summary and the farm's reports print it: a duration, within the call's.
+    before = time.perf_counter()
+    stats = run(tasks_for(tmp_path, range(1, 4)))
+    assert 0.0 < stats.wall_seconds <= time.perf_counter() - before
+
+
 def test_history_round_trip_continues_exactly(tmp_path: Path) -> None:
     full = run(tasks_for(tmp_path, range(1, 9)))
     assert full.frames_written == 8
@@ -197,9 +205,12 @@ def test_history_round_trip_continues_exactly(tmp_path: Path) -> None:
     for p in (tmp_path / "out").iterdir():
         p.unlink()
     history = tmp_path / "h.npz"
-    run(tasks_for(tmp_path, range(1, 5)), save_history_to=history)
+    first_half = tasks_for(tmp_path, range(1, 5))
+    run(first_half, save_history_to=history)
     saved = load_history(history)
     assert saved.last_frame == 4 and (saved.width, saved.height) == (W, H)
+    with np.load(history) as payload:  # which input the history follows, for people
+        assert str(payload["svgf_input"]) == str(first_half[-1].input)
     run(tasks_for(tmp_path, range(5, 9)), history=saved)
     resumed = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
     assert resumed == reference

@@ -44,8 +44,10 @@ def test_absent_and_broken_attributes_fall_back_to_rec709() -> None:
     rec709 = (0.2126, 0.7152, 0.0722)
     absent = luminance_weights(None)
     assert np.allclose(absent.weights, rec709, atol=1e-4) and "no chromaticities" in absent.source
+    # The last: a white point so near y = 0 that the solve loses every digit (a row of
+    # +-1e29 that does not sum to 1): refused, not used as weights.
     for broken in ((0, 0, 0, 0, 0, 0, 0.3, 0.3), (0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3, 0.0),
-                   (np.nan,) * 8, (0.1, 0.2)):
+                   (np.nan,) * 8, (0.1, 0.2), (0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3127, 1e-30)):
         fallback = luminance_weights(broken)
         assert np.allclose(fallback.weights, rec709, atol=1e-4)
         assert "unusable" in fallback.source

@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
 import OpenImageIO as oiio
 import pytest
 
@@ -368,3 +369,18 @@ def test_lossy_refusal_lists_at_most_six_data_channels() -> None:
     with pytest.raises(UsageError) as refused:
         check_compression("dwaa", ["R", *six, "id"])
     assert "motion.Y ...; use zip" in str(refused.value) and "id" not in str(refused.value)
+
+
+def test_io_threads_grow_the_openexr_pool_to_what_was_asked() -> None:
+    # `--threads N` decodes with N threads: the library's global pool must hold them.
+    pool, asked = OpenEXR.global_thread_count(), exr.io_threads()
+    settings = [oiio.get_int_attribute(name) for name in ("threads", "exr_threads")]
+    try:
+        exr.set_io_threads(pool + 2)
+        assert exr.io_threads() == pool + 2
+        assert OpenEXR.global_thread_count() == pool + 2
+    finally:
+        OpenEXR.set_global_thread_count(pool)
+        exr.set_io_threads(asked)
+        for name, value in zip(("threads", "exr_threads"), settings, strict=True):
+            oiio.attribute(name, value)

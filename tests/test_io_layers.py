@@ -8,6 +8,9 @@ import pytest
 from svgf_cli.errors import InputError, UsageError
 from svgf_cli.io.layers import (
     AOV_PRESETS,
+    EMISSION_IN_DIRECT,
+    LOBE_LIGHT_DIVIDED,
+    PRESET_MOTION_CONVENTION,
     ROLES,
     build_mapping,
     parse_aov_override,
@@ -28,6 +31,9 @@ def test_every_preset_covers_every_role() -> None:
     # (What describe() prints per role is tested in test_io_presets.py.)
     for preset, table in AOV_PRESETS.items():
         assert set(table) == set(ROLES), preset
+    # ...and has its conventions: a preset missing here would silently get the defaults.
+    for conventions in (EMISSION_IN_DIRECT, LOBE_LIGHT_DIVIDED, PRESET_MOTION_CONVENTION):
+        assert set(conventions) == set(AOV_PRESETS)
 
 
 def test_resolution_is_by_name_not_order() -> None:
@@ -60,6 +66,12 @@ def test_lone_direct_falls_back_to_color_with_a_note() -> None:
     resolved = resolve_layers(build_mapping(), [*SVGF_CHANNELS, "direct.R", "direct.G", "direct.B"])
     assert resolved.signal_roles == ("color",)
     assert any("without its partner" in note for note in resolved.notes)
+
+
+def test_a_file_with_only_the_colour_has_no_partner_note() -> None:
+    # The note is for a lone direct or indirect pass; a plain beauty file gets none.
+    resolved = resolve_layers(build_mapping(), SVGF_CHANNELS)
+    assert resolved.signal_roles == ("color",) and resolved.notes == []
 
 
 def test_cycles_view_layer_prefix() -> None:
@@ -123,6 +135,11 @@ def test_overrides() -> None:
     assert ("Nw.X", "Nw.Y", "Nw.Z") in mapping.candidates["normal"]
     assert mapping.overridden == ("motion", "normal")
     assert build_mapping("svgf", {"depth": "Pz"}).candidates["depth"][0] == ("Pz",)
+    # The albedo is an RGB role: three channels, or a layer name expanded to them.
+    assert parse_aov_override("albedo=DiffCol.R,DiffCol.G,DiffCol.B")[1] == (
+        "DiffCol.R", "DiffCol.G", "DiffCol.B")
+    assert build_mapping("svgf", ["albedo=DiffCol"]).candidates["albedo"][0] == (
+        "DiffCol.R", "DiffCol.G", "DiffCol.B")
     names = [n for n in SVGF_CHANNELS if not n.startswith(("N.", "motion"))]
     names += ["Nw.R", "Nw.G", "Nw.B", "Vector.X", "Vector.Y"]
     resolved = resolve_layers(mapping, names, "f.exr")

@@ -286,6 +286,29 @@ def test_arnold_lobe_aovs_are_radiance_and_its_direct_excludes_emission(tmp_path
                                np.stack([planes[c] for c in "RGB"]), rtol=1e-6)
 
 
+def test_arnold_lobes_need_no_albedo_aovs(tmp_path: Path) -> None:
+    # Radiance-style lobe AOVs are not divided by a colour: without the albedo AOVs the lobe
+    # set is still offered, each lobe filtered undemodulated (albedo 1).
+    planes = _arnold_frame(tmp_path / "a.exr")
+    kept = {n: p for n, p in planes.items() if not n.startswith(("diffuse_albedo",
+                                                                   "specular_albedo"))}
+    write_exr(tmp_path / "b.exr", kept)
+    lobes = read_frame(tmp_path / "b.exr", build_mapping("arnold", signals="lobes"))
+    assert lobes.plan.set == "lobes" and lobes.frame.names == ("diffuse", "glossy")
+    assert all(np.all(lobes.frame.signal(n).albedo == 1.0) for n in ("diffuse", "glossy"))
+
+
+def test_a_single_colour_pass_is_used_as_stored(tmp_path: Path) -> None:
+    # Only a sum of colour passes is capped at 1; one pass (here Arnold's specular albedo,
+    # above 1 on one pixel) demodulates its lobe with the values the renderer wrote.
+    planes = _arnold_frame(tmp_path / "a.exr")
+    planes["specular_albedo.G"][2, 3] = 1.5
+    write_exr(tmp_path / "b.exr", planes)
+    lobes = read_frame(tmp_path / "b.exr", build_mapping("arnold", signals="lobes"))
+    albedo = np.stack([planes[f"specular_albedo.{c}"] for c in "RGB"])
+    np.testing.assert_array_equal(lobes.frame.signal("glossy").albedo, albedo)
+
+
 # ------------------------------------------------------------------ gradient samples
 
 

@@ -63,6 +63,22 @@ def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> No
         assert [list(corner) for corner in header[window]] == [[0, 0], [3, 2]]
 
 
+def test_software_names_svgf_once(tmp_path) -> None:
+    # Absent: just the tag; the renderer's: appended; already there (an svgf output
+    # denoised again): left as it is.
+    colour = np.full((2, 2), 0.5, np.float32)
+    found = []
+    for before in (None, "Blender 4.5.3", "Blender 4.5.3; svgf 0.1.0"):
+        source = synthetic_source(tmp_path / "in.exr", (2, 2),
+                                  {"Software": before} if before else None)
+        out = tmp_path / "out.exr"
+        write_output(out, source, part_index=0, attributes={}, software="svgf 0.1.0",
+                     channels={"R": colour, "G": colour, "B": colour})
+        with OpenEXR.File(str(out)) as written:
+            found.append(written.header()["Software"])
+    assert found == ["svgf 0.1.0", "Blender 4.5.3; svgf 0.1.0", "Blender 4.5.3; svgf 0.1.0"]
+
+
 def test_a_truncated_two_part_file_reports_the_first_library_error(tmp_path) -> None:
     # Cut inside part "a": the core library prints the precise cause for it, then a vaguer
     # line ("Corrupt chunk offset") for part "b"; the message must carry the precise one.

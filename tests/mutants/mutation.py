@@ -116,6 +116,9 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
     "svgf_cli/io/layers.py": _READ_TESTS,
     "svgf_cli/io/exr.py": _READ_TESTS + ("tests/test_farm_resume.py",),
     "svgf_cli/io/source.py": _READ_TESTS,
+    "svgf_cli/io/signals.py": ("tests/test_io_signals.py", "tests/test_cli_signals.py",
+                               *_READ_TESTS),
+    "svgf_cli/io/spill.py": ("tests/test_bidir_runs.py",),
     "svgf_cli/io/output.py": _READ_TESTS,
     "svgf_cli/io/atomic.py": _WRITE_TESTS,
     "svgf_cli/runner.py": ("tests/test_runner_tasks.py", "tests/test_runner_output.py",
@@ -126,7 +129,8 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
                            "tests/robustness/test_fault_files.py",
                            "tests/robustness/test_fault_values.py",
                            "tests/robustness/test_fault_structure.py",
-                           "tests/robustness/test_fault_processes.py"),
+                           "tests/robustness/test_fault_processes.py",
+                           "tests/test_bidir_runs.py"),
 }
 PACKAGES = {"io": ("svgf_cli/io", "svgf_cli/runner.py"), "filters": ("svgf_cli/filters",)}
 TIMEOUT_S = {"io": 180.0, "filters": 300.0}
@@ -135,7 +139,7 @@ TIMEOUT_S = {"io": 180.0, "filters": 300.0}
 @dataclass(frozen=True)
 class Equivalent:
     module: str
-    function: str
+    function: str | None  # None: module level
     operator: str
     line: str  # the original source line, stripped
     why: str
@@ -192,6 +196,31 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/output.py", "PreparedColour", "core/NumberReplacer",
                "nonfinite: int = 0  # NaN/Inf set to 0",
                "a default never used: both PreparedColour(...) calls pass nonfinite"),
+    Equivalent("svgf_cli/io/output.py", "write", "core/ExceptionReplacer", "except OSError:",
+               "never taken: the OpenEXR bindings report every write failure as RuntimeError "
+               "(missing folder, full disk, RLIMIT_FSIZE: test_fault_disk.py)"),
+    Equivalent("svgf_cli/io/spill.py", "read", "core/NumberReplacer", "part = exr.parts[0]",
+               "[0] -> [-1]: a scratch file is written by Spill.write with one part"),
+    Equivalent("svgf_cli/runner.py", "_default_reader", "core/ReplaceTrueWithFalse",
+               "def _default_reader(path: Path, mapping: Any, *, passthrough: bool = True) -> Any:",
+               "a default never used: frame_reader, its one caller, passes passthrough="),
+    Equivalent("svgf_cli/io/exr.py", "_scrub", "core/ReplaceComparisonOperator_GtE_Gt",
+               "if math.isfinite(low) and math.isfinite(high) and (low >= 0 or not "
+               "clamp_negative):",
+               "fast path >= 0 -> > 0: a plane whose minimum is 0 takes the full scan, which "
+               "finds nothing to fix: same values, same count, more time"),
+    Equivalent("svgf_cli/io/signals.py", None, "core/ReplaceTrueWithFalse",
+               "@dataclass(frozen=True)",
+               "frozen off: only assignment and hashing differ, and a class that were "
+               "assigned to or hashed would fail loudly (killed); the survivor is neither"),
+    Equivalent("svgf_cli/io/signals.py", "_recipes", "core/ReplaceTrueWithFalse",
+               "inside = EMISSION_IN_DIRECT.get(mapping.preset, True)",
+               "a default never used: every AOV preset has an entry (test_io_layers.py) and "
+               "build_mapping refuses other names"),
+    Equivalent("svgf_cli/io/source.py", "subsampled", "core/ReplaceOrWithAnd",
+               'f"{part.name or part.index}:{name}"',
+               "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
+               "channels itself)"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
