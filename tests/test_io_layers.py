@@ -13,6 +13,7 @@ from svgf_cli.io.layers import (
     PRESET_MOTION_CONVENTION,
     ROLES,
     build_mapping,
+    describe_output_colour,
     parse_aov_override,
     resolve_layers,
     to_backward_pixels,
@@ -72,6 +73,23 @@ def test_a_file_with_only_the_colour_has_no_partner_note() -> None:
     # The note is for a lone direct or indirect pass; a plain beauty file gets none.
     resolved = resolve_layers(build_mapping(), SVGF_CHANNELS)
     assert resolved.signal_roles == ("color",) and resolved.notes == []
+
+
+def test_description_shows_absent_roles_but_not_absent_lobes() -> None:
+    # `svgf inspect`: every basic role gets a line ("-" when absent); the many lobe roles
+    # appear only when the file has them.
+    lines = [line.strip() for line in
+             resolve_layers(build_mapping(), SVGF_CHANNELS).describe().splitlines()]
+    assert "emission: -" in lines and "id: -" in lines
+    assert not any(line.startswith(("diffuse_direct", "glossy_color", "environment"))
+                   for line in lines)
+
+
+def test_output_colour_description_lists_what_evaluate_looks_for() -> None:
+    # The words of `svgf evaluate`'s error for a file without a colour layer.
+    assert describe_output_colour(build_mapping("cycles")) == (
+        "Combined.R,Combined.G,Combined.B or Noisy Image.R,Noisy Image.G,Noisy Image.B")
+    assert describe_output_colour(build_mapping("svgf", ["color=none"])) == "(none)"
 
 
 def test_cycles_view_layer_prefix() -> None:

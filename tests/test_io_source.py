@@ -4,6 +4,7 @@ OpenEXR's own error lines out of the log."""
 from __future__ import annotations
 
 import os
+import threading
 
 import numpy as np
 import OpenEXR
@@ -11,7 +12,7 @@ import pytest
 
 from svgf_cli.errors import InputError
 from svgf_cli.io.output import synthetic_source, write_output
-from svgf_cli.io.source import capture_c_stderr, decode_source
+from svgf_cli.io.source import capture_c_stderr, capture_library_output, decode_source
 
 
 def test_c_stderr_keeps_library_errors_and_passes_every_other_line_through(capfd) -> None:
@@ -35,6 +36,19 @@ def test_c_stderr_capture_steps_aside_without_a_stderr(monkeypatch, capfd) -> No
             os.write(2, b"EXR Error (EXR_ERR_CORRUPT_CHUNK): bad chunk\n")
     assert captured == []
     assert capfd.readouterr() == ("", "EXR Error (EXR_ERR_CORRUPT_CHUNK): bad chunk\n")
+
+
+def test_library_output_is_captured_for_this_thread_only(capsys) -> None:
+    # The bindings print a part's decode failure: the reading thread keeps it as the reason;
+    # what another thread prints meanwhile (a progress line) still reaches stdout.
+    other = threading.Thread(target=print, args=("another thread's line",))
+    failure = "Warning: Exception raised reading pixel data for part 1 - bad chunk"
+    with capture_library_output() as printed:
+        print(failure)
+        other.start()
+        other.join()
+    assert "".join(printed) == failure + "\n"
+    assert capsys.readouterr().out == "another thread's line\n"
 
 
 def test_synthetic_source_writes_scalar_attributes_and_the_alpha(tmp_path) -> None:
@@ -98,3 +112,36 @@ def test_a_truncated_two_part_file_reports_the_first_library_error(tmp_path) -> 
     with pytest.raises(InputError, match=r"cannot read pixels: .*found corrupt leader") as error:
         decode_source(cut)
     assert "Corrupt chunk offset" not in str(error.value)
+
+
+class _SkippingDecoder:
+    """Stands in for OpenEXR.File the way the bindings fail on a bad part: they skip it,
+    and may print why (instead of raising)."""
+
+    said = ""
+
+    def __init__(self, path: str, **_: object) -> None:
+        if self.said:
+            print(self.said)
+        self.parts: list[object] = []
+
+    def __enter__(self) -> _SkippingDecoder:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        return None
+
+
+@pytest.mark.parametrize(
+    ("said", "reason"),
+    [("Warning: Exception raised reading pixel data for part 1 - bad chunk", "bad chunk"),
+     ("", "a part could not be decoded")],
+)
+def test_a_skipped_part_is_reported_in_the_bindings_words(
+    tmp_path, monkeypatch, said: str, reason: str
+) -> None:
+    monkeypatch.setattr(_SkippingDecoder, "said", said)
+    monkeypatch.setattr(OpenEXR, "File", _SkippingDecoder)
+    with pytest.raises(InputError) as raised:
+        decode_source(tmp_path / "in.exr", expected_parts=2)
+    assert str(raised.value) == f"{tmp_path / 'in.exr'}: cannot read pixels: {reason}"

@@ -221,6 +221,10 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                'f"{part.name or part.index}:{name}"',
                "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
                "channels itself)"),
+    Equivalent("svgf_cli/io/exr.py", "_renormalise", "core/ReplaceComparisonOperator_Gt_GtE",
+               "off = (length > 0) & (np.abs(length - 1.0) > 1e-5)",
+               "> -> >= at the 1e-5 tolerance: a normal exactly 1e-5 off unit length is "
+               "renormalised or kept, both within the tolerance (accepted, not observable)"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
