@@ -145,3 +145,23 @@ def test_a_skipped_part_is_reported_in_the_bindings_words(
     with pytest.raises(InputError) as raised:
         decode_source(tmp_path / "in.exr", expected_parts=2)
     assert str(raised.value) == f"{tmp_path / 'in.exr'}: cannot read pixels: {reason}"
+
+
+def test_a_file_the_bindings_cannot_open_is_an_input_error(tmp_path) -> None:
+    path = tmp_path / "in.exr"
+    path.write_bytes(b"v/1\x01" + bytes(64))  # the magic number, then nothing valid
+    with pytest.raises(InputError) as raised:
+        decode_source(path, expected_parts=1)
+    message = str(raised.value)
+    assert message.startswith(f"{path}: cannot read pixels: ") and "\n" not in message
+
+
+def test_released_channels_drop_their_pixels_and_keep_their_place() -> None:
+    # The colour the writer replaces is released right after the read: its memory is freed,
+    # its name and part stay for the writer.
+    alpha = np.ones((2, 3), np.float32)
+    source = synthetic_source("in.exr", (2, 3), alpha=alpha)
+    source.release("A")
+    source.release("not there")  # nothing to free: no error
+    channel = source.parts[0].channels["A"]
+    assert channel.pixels is None and channel.type_name == "float"

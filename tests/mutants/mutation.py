@@ -225,6 +225,16 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "off = (length > 0) & (np.abs(length - 1.0) > 1e-5)",
                "> -> >= at the 1e-5 tolerance: a normal exactly 1e-5 off unit length is "
                "renormalised or kept, both within the tolerance (accepted, not observable)"),
+    Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer",
+               'alpha = values["alpha"][0] if "alpha" in values else None',
+               "[0] -> [-1]: the alpha role is one plane (1, H, W), first and last are the same"),
+    Equivalent("svgf_cli/io/patterns.py", "expand_inputs", "core/NumberReplacer",
+               "pattern = SequencePattern.parse(inputs[0])",
+               "[0] -> [-1]: read only when len(inputs) == 1"),
+    Equivalent("svgf_cli/io/patterns.py", "parse", "core/NumberReplacer",
+               'return cls(text, directory, name, "", 0, is_sequence=False)',
+               "a plain file's padding is never read: path() and display() return its name "
+               "before they look at it"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
