@@ -17,6 +17,7 @@ from svgf_cli.io.layers import (
     parse_aov_override,
     resolve_layers,
     to_backward_pixels,
+    to_next_pixels,
 )
 
 SVGF_CHANNELS = [
@@ -153,6 +154,7 @@ def test_overrides() -> None:
     assert ("Nw.X", "Nw.Y", "Nw.Z") in mapping.candidates["normal"]
     assert mapping.overridden == ("motion", "normal")
     assert build_mapping("svgf", {"depth": "Pz"}).candidates["depth"][0] == ("Pz",)
+    assert parse_aov_override("motion_next=Vector.Z,Vector.W")[1] == ("Vector.Z", "Vector.W")
     # The albedo is an RGB role: three channels, or a layer name expanded to them.
     assert parse_aov_override("albedo=DiffCol.R,DiffCol.G,DiffCol.B")[1] == (
         "DiffCol.R", "DiffCol.G", "DiffCol.B")
@@ -211,3 +213,12 @@ def test_resolved_description_marks_only_the_colour_the_split_signals_replace() 
     stripped = [line.strip() for line in lines]
     assert "depth: Z" in stripped and "signals: direct + indirect" in stripped
     assert not [line for line in lines if "note:" in line]  # nothing absent is "ambiguous"
+
+
+def test_cycles_next_motion_flips_only_x() -> None:
+    # Cycles' Vector.Z/W is current - next with y up: forward pixels flip x only (y up and
+    # "current - next" cancel for y).
+    xy = np.stack([np.full((2, 3), 1.5, np.float32), np.full((2, 3), -0.25, np.float32)])
+    forward = to_next_pixels(xy, "cycles")
+    np.testing.assert_array_equal(forward[0], -xy[0])
+    np.testing.assert_array_equal(forward[1], xy[1])

@@ -105,6 +105,19 @@ def test_cycles_direct_indirect_is_demodulated_by_the_capped_sum_of_the_colour_p
     assert rgb(layers, "Denoising Albedo").max() > 1.05 >= expected.max()
 
 
+def test_the_sum_of_colour_passes_is_capped_at_one(tmp_path: Path) -> None:
+    # Diffuse colour x4 and its light passes /4 (exact in float): the same light, colour
+    # passes summing above 1, which the demodulating albedo caps at 1.
+    copy = cycles_copy(METAL / "in.0006.exr", tmp_path / "in.0006.exr",
+                       scale={"DiffCol": 4.0, "DiffDir": 0.25, "DiffInd": 0.25})
+    layers = channels(copy)
+    colours = rgb(layers, "DiffCol") + rgb(layers, "GlossCol") + rgb(layers, "TransCol")
+    assert colours.max() > 1.5
+    frame = read_frame(copy, build_mapping("cycles", signals="direct-indirect")).frame
+    for signal in frame.signals:
+        np.testing.assert_array_equal(signal.albedo, np.minimum(colours, 1.0))
+
+
 def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:
     cycles = read_frame(ROLL / "in.0001.exr", build_mapping("cycles"))
     assert cycles.plan.set == "lobes-split" and cycles.plan.checked  # from the lobes

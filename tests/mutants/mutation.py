@@ -235,6 +235,16 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                'return cls(text, directory, name, "", 0, is_sequence=False)',
                "a plain file's padding is never read: path() and display() return its name "
                "before they look at it"),
+    Equivalent("svgf_cli/io/patterns.py", "expand_inputs", "core/NumberReplacer",
+               "raise InputError(reason, inputs[0])",
+               "[0] -> [-1]: read only when len(inputs) == 1"),
+    Equivalent("svgf_cli/io/signals.py", "compose_signals", "core/NumberReplacer",
+               "albedo = role(recipe.albedo[0])",
+               "[0] -> [-1]: read only when len(recipe.albedo) == 1"),
+    Equivalent("svgf_cli/io/source.py", "subsampled", "core/ReplaceComparisonOperator_NotEq_Eq",
+               "if channel.x_sampling != 1 or channel.y_sampling != 1",
+               "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
+               "channels itself)"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
