@@ -13,7 +13,7 @@ import pytest
 from svgf_cli.errors import InputError
 from svgf_cli.io.exr import fix_signal_set, read_frame, write_exr
 from svgf_cli.io.layers import build_mapping, resolve_layers
-from svgf_cli.io.signals import CHECK_SHARE, check_sum, plan_signals
+from svgf_cli.io.signals import CHECK_SHARE, _gradient_channels, check_sum, plan_signals
 
 TESTDATA = Path(__file__).resolve().parent.parent / "testdata"
 METAL = TESTDATA / "cycles" / "metal"
@@ -353,3 +353,15 @@ def test_traced_gradient_samples_are_attached_to_the_signals_they_measure() -> N
     assert split.signal("diffuse_direct").gradient is None
     assert split.signal("diffuse_indirect").gradient is None
     assert split.signal("glossy").gradient is not None
+
+
+def test_gradient_samples_are_found_under_a_layer_prefix() -> None:
+    # A compositor may put the tracer's layers under a view-layer prefix: the samples are
+    # those next to the mask, whole sample names only, each with both of its halves.
+    names = ["ViewLayer.gradient.mask", "ViewLayer.gradient.diffuse.prev",
+             "ViewLayer.gradient.diffuse.curr", "ViewLayer.gradient.glossy.prev",
+             "ViewLayer.gradient.a.b.prev", "ViewLayer.gradient.a.b.curr"]
+    mask, samples = _gradient_channels(names)
+    assert mask == "ViewLayer.gradient.mask"
+    assert samples == {"diffuse": ("ViewLayer.gradient.diffuse.prev",
+                                   "ViewLayer.gradient.diffuse.curr")}
