@@ -245,6 +245,10 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "if channel.x_sampling != 1 or channel.y_sampling != 1",
                "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
                "channels itself)"),
+    Equivalent("svgf_cli/io/signals.py", "__init__", "core/AddNot",
+               "for role in (*term.light, *((term.colour,) if term.colour else ())):",
+               "use counts only decide when a role plane is let go: an uncounted colour is let "
+               "go early and gathered again from the file's planes: same values, more work"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
