@@ -198,6 +198,21 @@ def test_wall_time_is_the_run_s_own_duration(tmp_path: Path) -> None:
     assert 0.0 < stats.wall_seconds <= time.perf_counter() - before
 
 
+def test_each_written_frame_reports_its_own_duration(tmp_path: Path) -> None:
+    # The progress line's seconds per frame and the farm's ETA come from these.
+    reported: list[float] = []
+
+    class Recording(Progress):
+        def frame_done(self, frame: int, seconds: float) -> None:
+            reported.append(seconds)
+            super().frame_done(frame, seconds)
+
+    progress = Recording("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())
+    before = time.perf_counter()
+    run(tasks_for(tmp_path, range(1, 4)), progress=progress)
+    assert len(reported) == 3 and all(0.0 < s <= time.perf_counter() - before for s in reported)
+
+
 def test_history_round_trip_continues_exactly(tmp_path: Path) -> None:
     full = run(tasks_for(tmp_path, range(1, 9)))
     assert full.frames_written == 8

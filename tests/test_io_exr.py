@@ -384,3 +384,14 @@ def test_io_threads_grow_the_openexr_pool_to_what_was_asked() -> None:
         exr.set_io_threads(asked)
         for name, value in zip(("threads", "exr_threads"), settings, strict=True):
             oiio.attribute(name, value)
+
+
+def test_the_colour_input_is_not_held_after_the_read(tmp_path: Path) -> None:
+    # The writer replaces the colour: its input pixels are let go as soon as the frame is
+    # read (a 1080p float colour layer is 25 MB per frame in flight).
+    path = tmp_path / "in.exr"
+    write_exr(path, gbuffer())
+    result = read_frame(path, build_mapping())
+    for name in result.colour_channels:
+        assert result.source.part_holding(name).channels[name].pixels is None
+    assert result.source.part_holding("albedo.R").channels["albedo.R"].pixels is not None

@@ -145,6 +145,23 @@ def test_a_live_process_of_another_user_keeps_its_temporary(
     assert stale_temporaries([tmp_path / "o.0001.exr"]) == []
 
 
+def test_temporaries_are_ours_without_a_proc_filesystem(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # macOS and BSD farms have no /proc: the temporary's name must still parse as ours, or
+    # an interrupted run's temporaries would never be cleaned up.
+    real_stat = os.stat
+
+    def stat(path, *args, **kwargs):
+        if str(path) == "/proc/self/ns/pid":
+            raise FileNotFoundError(2, "No such file or directory", str(path))
+        return real_stat(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "stat", stat)
+    parsed = parse_temporary(temporary_path(tmp_path / "o.0001.exr").name)
+    assert parsed is not None and parsed.target == "o.0001.exr" and parsed.pid == os.getpid()
+
+
 def test_history_file_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / "h.npz"
     state = {"colour": np.arange(24, dtype=np.float32).reshape(2, 3, 4)}

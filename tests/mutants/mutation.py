@@ -249,6 +249,10 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "for role in (*term.light, *((term.colour,) if term.colour else ())):",
                "use counts only decide when a role plane is let go: an uncounted colour is let "
                "go early and gathered again from the file's planes: same values, more work"),
+    Equivalent("svgf_cli/runner.py", "close", "core/AddNot",
+               "if self._pending is not None:",
+               "either way executor.shutdown(wait=True) waits for the write and its result "
+               "is discarded (suppressed); close() is the last call on the object"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
