@@ -118,6 +118,17 @@ def test_the_sum_of_colour_passes_is_capped_at_one(tmp_path: Path) -> None:
         np.testing.assert_array_equal(signal.albedo, np.minimum(colours, 1.0))
 
 
+def test_a_pass_used_twice_is_cleaned_and_reported_once(tmp_path: Path) -> None:
+    # The diffuse colour multiplies the diffuse light and demodulates it: read once, so its
+    # NaN is one warning, not one per use.
+    layers = {n: p.astype(np.float32) for n, p in channels(METAL / "in.0006.exr").items()}
+    layers["ViewLayer.DiffCol.R"][0, 0] = np.nan
+    write_exr(tmp_path / "in.exr", layers)
+    result = read_frame(tmp_path / "in.exr", build_mapping("cycles", signals="lobes"))
+    assert [w for w in result.warnings if "diffuse_color" in w] == [
+        f"{tmp_path / 'in.exr'}: 1 NaN/Inf values in diffuse_color scrubbed to 0"]
+
+
 def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:
     cycles = read_frame(ROLL / "in.0001.exr", build_mapping("cycles"))
     assert cycles.plan.set == "lobes-split" and cycles.plan.checked  # from the lobes

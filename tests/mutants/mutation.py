@@ -248,7 +248,12 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/signals.py", "__init__", "core/AddNot",
                "for role in (*term.light, *((term.colour,) if term.colour else ())):",
                "use counts only decide when a role plane is let go: an uncounted colour is let "
-               "go early and gathered again from the file's planes: same values, more work"),
+               "go early and gathered again: same values, its warnings deduplicated "
+               "(test_a_pass_used_twice_is_cleaned_and_reported_once), more work"),
+    Equivalent("svgf_cli/io/signals.py", "__init__", "core/ReplaceBinaryOperator_Add_Sub",
+               "uses[role] = uses.get(role, 0) + 1",
+               "+1 -> -1: the count never reaches 0, the plane is kept to the end of the "
+               "frame instead of let go: same values, more memory"),
     Equivalent("svgf_cli/runner.py", "close", "core/AddNot",
                "if self._pending is not None:",
                "either way executor.shutdown(wait=True) waits for the write and its result "
