@@ -252,8 +252,8 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "(test_a_pass_used_twice_is_cleaned_and_reported_once), more work"),
     Equivalent("svgf_cli/io/signals.py", "__init__", "core/ReplaceBinaryOperator_Add_Sub",
                "uses[role] = uses.get(role, 0) + 1",
-               "+1 -> -1: the count never reaches 0, the plane is kept to the end of the "
-               "frame instead of let go: same values, more memory"),
+               "+1 -> -1: a role plane is let go later (or early and gathered again, as "
+               "above): same values, other memory"),
     Equivalent("svgf_cli/runner.py", "close", "core/AddNot",
                "if self._pending is not None:",
                "either way executor.shutdown(wait=True) waits for the write and its result "
