@@ -196,6 +196,7 @@ def test_wall_time_is_the_run_s_own_duration(tmp_path: Path) -> None:
     before = time.perf_counter()
     stats = run(tasks_for(tmp_path, range(1, 4)))
     assert 0.0 < stats.wall_seconds <= time.perf_counter() - before
+    assert 0.0 < stats.compute_seconds <= stats.wall_seconds  # filtering is part of the run
 
 
 def test_each_written_frame_reports_its_own_duration(tmp_path: Path) -> None:

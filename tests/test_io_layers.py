@@ -146,6 +146,15 @@ def test_missing_channel_error_names_file_and_lists_channels() -> None:
     assert err.value.exit_code == 3
 
 
+def test_missing_channel_error_shortens_a_long_channel_list() -> None:
+    # A deep compositing file can hold hundreds of channels: the one-line error lists 40.
+    names = [n for n in SVGF_CHANNELS if not n.startswith("N.")]
+    names += [f"extra{i}.R" for i in range(45)]
+    with pytest.raises(InputError) as err:
+        resolve_layers(build_mapping(), names, "f.exr")
+    assert str(err.value).endswith(f", ... ({len(names) - 40} more)")
+
+
 def test_overrides() -> None:
     assert parse_aov_override("motion=Vector.X,Vector.Y") == ("motion", ("Vector.X", "Vector.Y"))
     assert parse_aov_override(" Emission = none ") == ("emission", ())

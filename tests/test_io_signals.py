@@ -129,6 +129,21 @@ def test_a_pass_used_twice_is_cleaned_and_reported_once(tmp_path: Path) -> None:
         f"{tmp_path / 'in.exr'}: 1 NaN/Inf values in diffuse_color scrubbed to 0"]
 
 
+def test_traced_direct_indirect_without_its_layers_is_built_from_the_lobes(
+    tmp_path: Path
+) -> None:
+    # A tracer file whose direct/indirect layers were dropped: the pair is rebuilt from the
+    # lobe light passes times their colour passes (all of which must be read).
+    layers = {n: p.astype(np.float32) for n, p in channels(GLOSSY / "in.0004.exr").items()
+              if not n.startswith(("direct.", "indirect."))}
+    write_exr(tmp_path / "in.exr", layers)
+    frame = read_frame(tmp_path / "in.exr", build_mapping("svgf", signals="direct-indirect"))
+    for part, tag in (("direct", "Dir"), ("indirect", "Ind")):
+        expected = sum(rgb(layers, f"{s}{tag}", "") * rgb(layers, f"{s}Col", "")
+                       for s in ("Diff", "Gloss"))
+        np.testing.assert_allclose(frame.frame.signal(part).radiance, expected, rtol=1e-6)
+
+
 def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:
     cycles = read_frame(ROLL / "in.0001.exr", build_mapping("cycles"))
     assert cycles.plan.set == "lobes-split" and cycles.plan.checked  # from the lobes
