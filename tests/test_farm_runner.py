@@ -173,6 +173,39 @@ def test_signal_finishes_the_frame_in_flight(tmp_path: Path, signum: int, code: 
     assert {s: signal.getsignal(s) for s in before} == before  # handlers given back
 
 
+def test_a_failed_run_returns_only_after_the_read_in_flight(tmp_path: Path) -> None:
+    # When a frame fails, the next frame's read (prefetched) may be under way: the run must
+    # not return while it still touches the input (a farm moves or deletes it next).
+    finished: list[int] = []
+
+    class SlowReader(FakeReader):
+        def __call__(self, path: Path, mapping: Any) -> Any:
+            result = super().__call__(path, mapping)
+            if int(path.stem.split(".")[-1]) == 3:
+                time.sleep(0.3)
+                finished.append(3)
+            return result
+
+    reader = SlowReader()
+
+    def factory(params: SVGFParams, debug: bool) -> FakeDenoiser:
+        d = FakeDenoiser(params, debug)
+
+        def fail_on_frame_2(n: int) -> None:
+            if n == 1:
+                deadline = time.monotonic() + 5.0
+                while 3 not in reader.started and time.monotonic() < deadline:
+                    time.sleep(0.005)
+                raise RuntimeError("filter failed")
+
+        d.on_process = fail_on_frame_2
+        return d
+
+    with pytest.raises(RuntimeError, match="filter failed"):
+        run(tasks_for(tmp_path, range(1, 6)), reader, factory=factory)
+    assert finished == [3]
+
+
 def test_bad_frame_stops_with_earlier_frames_written(tmp_path: Path) -> None:
     tasks = tasks_for(tmp_path, range(1, 7))
     tasks[3] = FrameTask(4, tmp_path / "bad.0004.exr", tmp_path / "out" / "out.0004.exr")
