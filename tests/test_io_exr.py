@@ -395,3 +395,15 @@ def test_the_colour_input_is_not_held_after_the_read(tmp_path: Path) -> None:
     for name in result.colour_channels:
         assert result.source.part_holding(name).channels[name].pixels is None
     assert result.source.part_holding("albedo.R").channels["albedo.R"].pixels is not None
+
+
+def test_a_minus_infinity_in_motion_is_scrubbed(tmp_path: Path) -> None:
+    # Only the lowest value is off (no NaN, nothing above): still found and set to 0.
+    channels = gbuffer()
+    channels["motion.X"] = np.asarray(channels["motion.X"], np.float32).copy()
+    channels["motion.X"][1, 2] = -np.inf
+    path = tmp_path / "in.exr"
+    write_exr(path, channels)
+    result = read_frame(path, build_mapping())
+    assert np.isfinite(result.frame.motion).all()
+    assert result.warnings == [f"{path}: 1 NaN/Inf values in motion scrubbed to 0"]
