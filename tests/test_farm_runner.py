@@ -229,7 +229,11 @@ def test_wall_time_is_the_run_s_own_duration(tmp_path: Path) -> None:
     before = time.perf_counter()
     stats = run(tasks_for(tmp_path, range(1, 4)))
     assert 0.0 < stats.wall_seconds <= time.perf_counter() - before
-    assert 0.0 < stats.compute_seconds <= stats.wall_seconds  # filtering is part of the run
+    # Reading, filtering and writing are each part of the run (each on one thread).
+    for part in (stats.read_seconds, stats.compute_seconds, stats.write_seconds,
+                 stats.wait_read_seconds):
+        assert 0.0 <= part <= stats.wall_seconds
+    assert stats.compute_seconds > 0.0
 
 
 def test_each_written_frame_reports_its_own_duration(tmp_path: Path) -> None:

@@ -155,6 +155,16 @@ def test_missing_channel_error_shortens_a_long_channel_list() -> None:
     assert str(err.value).endswith(f", ... ({len(names) - 40} more)")
 
 
+def test_an_override_with_nuke_style_names_matches_under_a_view_layer() -> None:
+    # Nuke names RGB channels rgba.red/green/blue (names of different lengths).
+    names = [n for n in SVGF_CHANNELS if n not in ("R", "G", "B")]
+    names += ["ViewLayer.rgba.red", "ViewLayer.rgba.green", "ViewLayer.rgba.blue"]
+    mapping = build_mapping("svgf", ["color=rgba.red,rgba.green,rgba.blue"])
+    resolved = resolve_layers(mapping, names, "f.exr")
+    assert resolved["color"] == ("ViewLayer.rgba.red", "ViewLayer.rgba.green",
+                                 "ViewLayer.rgba.blue")
+
+
 def test_overrides() -> None:
     assert parse_aov_override("motion=Vector.X,Vector.Y") == ("motion", ("Vector.X", "Vector.Y"))
     assert parse_aov_override(" Emission = none ") == ("emission", ())

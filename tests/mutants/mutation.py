@@ -258,6 +258,10 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "if self._pending is not None:",
                "either way executor.shutdown(wait=True) waits for the write and its result "
                "is discarded (suppressed); close() is the last call on the object"),
+    Equivalent("svgf_cli/io/signals.py", "_recipes", "core/ReplaceTrueWithFalse",
+               "divided = LOBE_LIGHT_DIVIDED.get(mapping.preset, True)",
+               "a default never used: every AOV preset has an entry (test_io_layers.py) and "
+               "build_mapping refuses other names"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
