@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -407,3 +409,14 @@ def test_a_minus_infinity_in_motion_is_scrubbed(tmp_path: Path) -> None:
     result = read_frame(path, build_mapping())
     assert np.isfinite(result.frame.motion).all()
     assert result.warnings == [f"{path}: 1 NaN/Inf values in motion scrubbed to 0"]
+
+
+def test_decoding_is_single_threaded_until_threads_are_set() -> None:
+    # A library user who never calls set_io_threads decodes in the calling thread (0), and
+    # the OpenEXR pool is left as the library made it. A fresh interpreter: tests set it.
+    code = ("import OpenEXR; before = OpenEXR.global_thread_count(); "
+            "from svgf_cli.io import exr; "
+            "print(exr.io_threads(), OpenEXR.global_thread_count() == before)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.split() == ["0", "True"]

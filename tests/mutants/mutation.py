@@ -245,6 +245,14 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "if channel.x_sampling != 1 or channel.y_sampling != 1",
                "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
                "channels itself)"),
+    Equivalent("svgf_cli/io/source.py", "subsampled", "core/NumberReplacer",
+               "if channel.x_sampling != 1 or channel.y_sampling != 1",
+               "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
+               "channels itself)"),
+    Equivalent("svgf_cli/io/colour.py", "for_filter", "core/ReplaceComparisonOperator_GtE_Gt",
+               "if min(self.weights) >= 0.0:",
+               ">= 0 -> > 0: only a weight of exactly 0 (CIE XYZ's (0, 1, 0)) takes "
+               "non_negative(), which gives back non-negative weights summing to 1 unchanged"),
     Equivalent("svgf_cli/io/signals.py", "__init__", "core/AddNot",
                "for role in (*term.light, *((term.colour,) if term.colour else ())):",
                "use counts only decide when a role plane is let go: an uncounted colour is let "
