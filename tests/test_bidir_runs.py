@@ -228,3 +228,11 @@ def test_svgf_plan_sees_bidirectional_among_the_denoise_arguments(
     code, stdout, _ = run_cli(plan, capsys)
     assert [c["read"] for c in json.loads(stdout)] == [[1, 4], [3, 8], [7, 10]]
     assert exit_code(plan[:7] + ["--last-frame", "9", "--", "i.####.exr", "-o", "o"]) == 2
+
+
+def test_scratch_folder_makes_its_missing_parents_and_removes_itself(tmp_path: Path) -> None:
+    # `--scratch-dir /local/scratch/job42` need not exist yet on a fresh farm node.
+    parent = tmp_path / "scratch" / "job42"
+    with ScratchFolder(parent) as folder:
+        assert folder.path.is_dir() and folder.path.parent == parent
+    assert parent.is_dir() and list(parent.iterdir()) == []

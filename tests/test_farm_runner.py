@@ -10,6 +10,7 @@ import io
 import os
 import signal
 import threading
+import time
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -172,6 +173,39 @@ def test_signal_finishes_the_frame_in_flight(tmp_path: Path, signum: int, code: 
     assert {s: signal.getsignal(s) for s in before} == before  # handlers given back
 
 
+def test_a_failed_run_returns_only_after_the_read_in_flight(tmp_path: Path) -> None:
+    # When a frame fails, the next frame's read (prefetched) may be under way: the run must
+    # not return while it still touches the input (a farm moves or deletes it next).
+    finished: list[int] = []
+
+    class SlowReader(FakeReader):
+        def __call__(self, path: Path, mapping: Any) -> Any:
+            result = super().__call__(path, mapping)
+            if int(path.stem.split(".")[-1]) == 3:
+                time.sleep(0.3)
+                finished.append(3)
+            return result
+
+    reader = SlowReader()
+
+    def factory(params: SVGFParams, debug: bool) -> FakeDenoiser:
+        d = FakeDenoiser(params, debug)
+
+        def fail_on_frame_2(n: int) -> None:
+            if n == 1:
+                deadline = time.monotonic() + 5.0
+                while 3 not in reader.started and time.monotonic() < deadline:
+                    time.sleep(0.005)
+                raise RuntimeError("filter failed")
+
+        d.on_process = fail_on_frame_2
+        return d
+
+    with pytest.raises(RuntimeError, match="filter failed"):
+        run(tasks_for(tmp_path, range(1, 6)), reader, factory=factory)
+    assert finished == [3]
+
+
 def test_bad_frame_stops_with_earlier_frames_written(tmp_path: Path) -> None:
     tasks = tasks_for(tmp_path, range(1, 7))
     tasks[3] = FrameTask(4, tmp_path / "bad.0004.exr", tmp_path / "out" / "out.0004.exr")
@@ -190,6 +224,33 @@ def test_resolution_change_names_both_sizes(tmp_path: Path) -> None:
     assert not (tmp_path / "out" / "out.0003.exr").exists()
 
 
+def test_wall_time_is_the_run_s_own_duration(tmp_path: Path) -> None:
+    # The summary and the farm's reports print it: a duration, within the call's.
+    before = time.perf_counter()
+    stats = run(tasks_for(tmp_path, range(1, 4)))
+    assert 0.0 < stats.wall_seconds <= time.perf_counter() - before
+    # Reading, filtering and writing are each part of the run (each on one thread).
+    for part in (stats.read_seconds, stats.compute_seconds, stats.write_seconds,
+                 stats.wait_read_seconds):
+        assert 0.0 <= part <= stats.wall_seconds
+    assert stats.compute_seconds > 0.0
+
+
+def test_each_written_frame_reports_its_own_duration(tmp_path: Path) -> None:
+    # The progress line's seconds per frame and the farm's ETA come from these.
+    reported: list[float] = []
+
+    class Recording(Progress):
+        def frame_done(self, frame: int, seconds: float) -> None:
+            reported.append(seconds)
+            super().frame_done(frame, seconds)
+
+    progress = Recording("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())
+    before = time.perf_counter()
+    run(tasks_for(tmp_path, range(1, 4)), progress=progress)
+    assert len(reported) == 3 and all(0.0 < s <= time.perf_counter() - before for s in reported)
+
+
 def test_history_round_trip_continues_exactly(tmp_path: Path) -> None:
     full = run(tasks_for(tmp_path, range(1, 9)))
     assert full.frames_written == 8
@@ -197,9 +258,12 @@ def test_history_round_trip_continues_exactly(tmp_path: Path) -> None:
     for p in (tmp_path / "out").iterdir():
         p.unlink()
     history = tmp_path / "h.npz"
-    run(tasks_for(tmp_path, range(1, 5)), save_history_to=history)
+    first_half = tasks_for(tmp_path, range(1, 5))
+    run(first_half, save_history_to=history)
     saved = load_history(history)
     assert saved.last_frame == 4 and (saved.width, saved.height) == (W, H)
+    with np.load(history) as payload:  # which input the history follows, for people
+        assert str(payload["svgf_input"]) == str(first_half[-1].input)
     run(tasks_for(tmp_path, range(5, 9)), history=saved)
     resumed = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
     assert resumed == reference

@@ -12,6 +12,7 @@ REC2020 = (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290)
 AP0 = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
 P3_D65 = (0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290)  # SMPTE EG 432-1
 XYZ = (1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1 / 3, 1 / 3)
+PROPHOTO = (0.7347, 0.2653, 0.1596, 0.8404, 0.0366, 0.0001, 0.3457, 0.3585)  # ROMM RGB, D50
 
 
 @pytest.mark.parametrize(
@@ -22,6 +23,7 @@ XYZ = (1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1 / 3, 1 / 3)
         (REC2020, (0.2627, 0.6780, 0.0593)),  # ITU-R BT.2020
         (AP0, (0.3440, 0.7282, -0.0721)),  # ACES2065-1: a negative blue weight, kept
         (P3_D65, (0.2290, 0.6917, 0.0793)),  # Display P3 / P3-D65
+        (PROPHOTO, (0.2880, 0.7119, 0.0001)),  # ISO 22028-2 (ROMM RGB)
     ],
 )
 def test_published_luminance_rows(chromaticities, expected) -> None:
@@ -44,8 +46,10 @@ def test_absent_and_broken_attributes_fall_back_to_rec709() -> None:
     rec709 = (0.2126, 0.7152, 0.0722)
     absent = luminance_weights(None)
     assert np.allclose(absent.weights, rec709, atol=1e-4) and "no chromaticities" in absent.source
+    # The last: a white point so near y = 0 that the solve loses every digit (a row of
+    # +-1e29 that does not sum to 1): refused, not used as weights.
     for broken in ((0, 0, 0, 0, 0, 0, 0.3, 0.3), (0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3, 0.0),
-                   (np.nan,) * 8, (0.1, 0.2)):
+                   (np.nan,) * 8, (0.1, 0.2), (0.64, 0.33, 0.3, 0.6, 0.15, 0.06, 0.3127, 1e-30)):
         fallback = luminance_weights(broken)
         assert np.allclose(fallback.weights, rec709, atol=1e-4)
         assert "unusable" in fallback.source
@@ -65,6 +69,9 @@ def test_filter_weights_are_the_file_weights_unless_one_is_negative() -> None:
     acescg = luminance_weights(ACESCG)
     assert acescg.for_filter() == acescg.weights
     assert "the filter uses" not in acescg.describe()
+    # ProPhoto's float64 row sums to 1 + 2e-16, not 1: still used as computed, bit for bit.
+    prophoto = luminance_weights(PROPHOTO)
+    assert prophoto.for_filter() == prophoto.weights
     ap0 = luminance_weights(AP0)
     assert ap0.for_filter() == ap0.non_negative()
     assert "the filter uses R 0.3208, G 0.6792, B 0.0000" in ap0.describe()

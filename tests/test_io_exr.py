@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
 import OpenImageIO as oiio
 import pytest
 
@@ -368,3 +371,52 @@ def test_lossy_refusal_lists_at_most_six_data_channels() -> None:
     with pytest.raises(UsageError) as refused:
         check_compression("dwaa", ["R", *six, "id"])
     assert "motion.Y ...; use zip" in str(refused.value) and "id" not in str(refused.value)
+
+
+def test_io_threads_grow_the_openexr_pool_to_what_was_asked() -> None:
+    # `--threads N` decodes with N threads: the library's global pool must hold them.
+    pool, asked = OpenEXR.global_thread_count(), exr.io_threads()
+    settings = [oiio.get_int_attribute(name) for name in ("threads", "exr_threads")]
+    try:
+        exr.set_io_threads(pool + 2)
+        assert exr.io_threads() == pool + 2
+        assert OpenEXR.global_thread_count() == pool + 2
+    finally:
+        OpenEXR.set_global_thread_count(pool)
+        exr.set_io_threads(asked)
+        for name, value in zip(("threads", "exr_threads"), settings, strict=True):
+            oiio.attribute(name, value)
+
+
+def test_the_colour_input_is_not_held_after_the_read(tmp_path: Path) -> None:
+    # The writer replaces the colour: its input pixels are let go as soon as the frame is
+    # read (a 1080p float colour layer is 25 MB per frame in flight).
+    path = tmp_path / "in.exr"
+    write_exr(path, gbuffer())
+    result = read_frame(path, build_mapping())
+    for name in result.colour_channels:
+        assert result.source.part_holding(name).channels[name].pixels is None
+    assert result.source.part_holding("albedo.R").channels["albedo.R"].pixels is not None
+
+
+def test_a_minus_infinity_in_motion_is_scrubbed(tmp_path: Path) -> None:
+    # Only the lowest value is off (no NaN, nothing above): still found and set to 0.
+    channels = gbuffer()
+    channels["motion.X"] = np.asarray(channels["motion.X"], np.float32).copy()
+    channels["motion.X"][1, 2] = -np.inf
+    path = tmp_path / "in.exr"
+    write_exr(path, channels)
+    result = read_frame(path, build_mapping())
+    assert np.isfinite(result.frame.motion).all()
+    assert result.warnings == [f"{path}: 1 NaN/Inf values in motion scrubbed to 0"]
+
+
+def test_decoding_is_single_threaded_until_threads_are_set() -> None:
+    # A library user who never calls set_io_threads decodes in the calling thread (0), and
+    # the OpenEXR pool is left as the library made it. A fresh interpreter: tests set it.
+    code = ("import OpenEXR; before = OpenEXR.global_thread_count(); "
+            "from svgf_cli.io import exr; "
+            "print(exr.io_threads(), OpenEXR.global_thread_count() == before)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.split() == ["0", "True"]

@@ -30,6 +30,20 @@ def test_each_part_says_whether_it_is_tiled(tmp_path: Path) -> None:
     assert [(p.name, p.tiled) for p in info.part_info] == [("rgba", False), ("data", True)]
 
 
+def test_the_file_compression_is_its_first_part_s(tmp_path: Path) -> None:
+    # `svgf inspect` prints one compression for the file (the first part's, where a
+    # single-part reader looks) and each part's own.
+    data = gbuffer()
+    beauty = {c: data.pop(c) for c in "RGB"}
+    path = write_parts(tmp_path / "mixed.exr", [
+        PartSpec(beauty, "rgba", {"compression": OpenEXR.PIZ_COMPRESSION}),
+        PartSpec(data, "data", {"compression": OpenEXR.ZIP_COMPRESSION}),
+    ])
+    info = read_info(path)
+    assert info.compression == "piz"
+    assert [p.compression for p in info.part_info] == ["piz", "zip"]
+
+
 def test_only_two_distinct_views_make_a_multi_view_file(tmp_path: Path) -> None:
     # A part tagged with a view (one view in the whole file) is an ordinary file; two
     # distinct views are stereo, which `svgf denoise` refuses.

@@ -8,11 +8,16 @@ import pytest
 from svgf_cli.errors import InputError, UsageError
 from svgf_cli.io.layers import (
     AOV_PRESETS,
+    EMISSION_IN_DIRECT,
+    LOBE_LIGHT_DIVIDED,
+    PRESET_MOTION_CONVENTION,
     ROLES,
     build_mapping,
+    describe_output_colour,
     parse_aov_override,
     resolve_layers,
     to_backward_pixels,
+    to_next_pixels,
 )
 
 SVGF_CHANNELS = [
@@ -28,6 +33,9 @@ def test_every_preset_covers_every_role() -> None:
     # (What describe() prints per role is tested in test_io_presets.py.)
     for preset, table in AOV_PRESETS.items():
         assert set(table) == set(ROLES), preset
+    # ...and has its conventions: a preset missing here would silently get the defaults.
+    for conventions in (EMISSION_IN_DIRECT, LOBE_LIGHT_DIVIDED, PRESET_MOTION_CONVENTION):
+        assert set(conventions) == set(AOV_PRESETS)
 
 
 def test_resolution_is_by_name_not_order() -> None:
@@ -60,6 +68,29 @@ def test_lone_direct_falls_back_to_color_with_a_note() -> None:
     resolved = resolve_layers(build_mapping(), [*SVGF_CHANNELS, "direct.R", "direct.G", "direct.B"])
     assert resolved.signal_roles == ("color",)
     assert any("without its partner" in note for note in resolved.notes)
+
+
+def test_a_file_with_only_the_colour_has_no_partner_note() -> None:
+    # The note is for a lone direct or indirect pass; a plain beauty file gets none.
+    resolved = resolve_layers(build_mapping(), SVGF_CHANNELS)
+    assert resolved.signal_roles == ("color",) and resolved.notes == []
+
+
+def test_description_shows_absent_roles_but_not_absent_lobes() -> None:
+    # `svgf inspect`: every basic role gets a line ("-" when absent); the many lobe roles
+    # appear only when the file has them.
+    lines = [line.strip() for line in
+             resolve_layers(build_mapping(), SVGF_CHANNELS).describe().splitlines()]
+    assert "emission: -" in lines and "id: -" in lines
+    assert not any(line.startswith(("diffuse_direct", "glossy_color", "environment"))
+                   for line in lines)
+
+
+def test_output_colour_description_lists_what_evaluate_looks_for() -> None:
+    # The words of `svgf evaluate`'s error for a file without a colour layer.
+    assert describe_output_colour(build_mapping("cycles")) == (
+        "Combined.R,Combined.G,Combined.B or Noisy Image.R,Noisy Image.G,Noisy Image.B")
+    assert describe_output_colour(build_mapping("svgf", ["color=none"])) == "(none)"
 
 
 def test_cycles_view_layer_prefix() -> None:
@@ -115,6 +146,25 @@ def test_missing_channel_error_names_file_and_lists_channels() -> None:
     assert err.value.exit_code == 3
 
 
+def test_missing_channel_error_shortens_a_long_channel_list() -> None:
+    # A deep compositing file can hold hundreds of channels: the one-line error lists 40.
+    names = [n for n in SVGF_CHANNELS if not n.startswith("N.")]
+    names += [f"extra{i}.R" for i in range(45)]
+    with pytest.raises(InputError) as err:
+        resolve_layers(build_mapping(), names, "f.exr")
+    assert str(err.value).endswith(f", ... ({len(names) - 40} more)")
+
+
+def test_an_override_with_nuke_style_names_matches_under_a_view_layer() -> None:
+    # Nuke names RGB channels rgba.red/green/blue (names of different lengths).
+    names = [n for n in SVGF_CHANNELS if n not in ("R", "G", "B")]
+    names += ["ViewLayer.rgba.red", "ViewLayer.rgba.green", "ViewLayer.rgba.blue"]
+    mapping = build_mapping("svgf", ["color=rgba.red,rgba.green,rgba.blue"])
+    resolved = resolve_layers(mapping, names, "f.exr")
+    assert resolved["color"] == ("ViewLayer.rgba.red", "ViewLayer.rgba.green",
+                                 "ViewLayer.rgba.blue")
+
+
 def test_overrides() -> None:
     assert parse_aov_override("motion=Vector.X,Vector.Y") == ("motion", ("Vector.X", "Vector.Y"))
     assert parse_aov_override(" Emission = none ") == ("emission", ())
@@ -123,6 +173,12 @@ def test_overrides() -> None:
     assert ("Nw.X", "Nw.Y", "Nw.Z") in mapping.candidates["normal"]
     assert mapping.overridden == ("motion", "normal")
     assert build_mapping("svgf", {"depth": "Pz"}).candidates["depth"][0] == ("Pz",)
+    assert parse_aov_override("motion_next=Vector.Z,Vector.W")[1] == ("Vector.Z", "Vector.W")
+    # The albedo is an RGB role: three channels, or a layer name expanded to them.
+    assert parse_aov_override("albedo=DiffCol.R,DiffCol.G,DiffCol.B")[1] == (
+        "DiffCol.R", "DiffCol.G", "DiffCol.B")
+    assert build_mapping("svgf", ["albedo=DiffCol"]).candidates["albedo"][0] == (
+        "DiffCol.R", "DiffCol.G", "DiffCol.B")
     names = [n for n in SVGF_CHANNELS if not n.startswith(("N.", "motion"))]
     names += ["Nw.R", "Nw.G", "Nw.B", "Vector.X", "Vector.Y"]
     resolved = resolve_layers(mapping, names, "f.exr")
@@ -176,3 +232,12 @@ def test_resolved_description_marks_only_the_colour_the_split_signals_replace() 
     stripped = [line.strip() for line in lines]
     assert "depth: Z" in stripped and "signals: direct + indirect" in stripped
     assert not [line for line in lines if "note:" in line]  # nothing absent is "ambiguous"
+
+
+def test_cycles_next_motion_flips_only_x() -> None:
+    # Cycles' Vector.Z/W is current - next with y up: forward pixels flip x only (y up and
+    # "current - next" cancel for y).
+    xy = np.stack([np.full((2, 3), 1.5, np.float32), np.full((2, 3), -0.25, np.float32)])
+    forward = to_next_pixels(xy, "cycles")
+    np.testing.assert_array_equal(forward[0], -xy[0])
+    np.testing.assert_array_equal(forward[1], xy[1])

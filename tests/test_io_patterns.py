@@ -95,6 +95,7 @@ def test_frame_spec_round_trip(frames: set[int]) -> None:
         ("in.####.exr", -5, "in.-005.exr"),  # the sign counts as a digit (printf, fileseq)
         ("in.@.exr", -5, "in.-5.exr"),
         ("shot.-005.exr", -12, "shot.-012.exr"),  # a signed concrete frame after a dot
+        ("plate.0042.jp2", 7, "plate.0007.jp2"),  # a digit in the extension is no frame
     ],
 )
 def test_pattern_path(text: str, frame: int, expected: str) -> None:

@@ -13,7 +13,7 @@ import pytest
 from svgf_cli.errors import InputError
 from svgf_cli.io.exr import fix_signal_set, read_frame, write_exr
 from svgf_cli.io.layers import build_mapping, resolve_layers
-from svgf_cli.io.signals import CHECK_SHARE, check_sum, plan_signals
+from svgf_cli.io.signals import CHECK_SHARE, _gradient_channels, check_sum, plan_signals
 
 TESTDATA = Path(__file__).resolve().parent.parent / "testdata"
 METAL = TESTDATA / "cycles" / "metal"
@@ -108,6 +108,45 @@ def test_cycles_direct_indirect_is_demodulated_by_the_capped_sum_of_the_colour_p
         np.testing.assert_array_equal(signal.albedo, expected)
     # Denoising Albedo is no reflectance on the mirror ball; the colour passes are.
     assert rgb(layers, "Denoising Albedo").max() > 1.05 >= expected.max()
+
+
+def test_the_sum_of_colour_passes_is_capped_at_one(tmp_path: Path) -> None:
+    # Diffuse colour x4 and its light passes /4 (exact in float): the same light, colour
+    # passes summing above 1, which the demodulating albedo caps at 1.
+    copy = cycles_copy(METAL / "in.0006.exr", tmp_path / "in.0006.exr",
+                       scale={"DiffCol": 4.0, "DiffDir": 0.25, "DiffInd": 0.25})
+    layers = channels(copy)
+    colours = rgb(layers, "DiffCol") + rgb(layers, "GlossCol") + rgb(layers, "TransCol")
+    assert colours.max() > 1.5
+    frame = read_frame(copy, build_mapping("cycles", signals="direct-indirect")).frame
+    for signal in frame.signals:
+        np.testing.assert_array_equal(signal.albedo, np.minimum(colours, 1.0))
+
+
+def test_a_pass_used_twice_is_cleaned_and_reported_once(tmp_path: Path) -> None:
+    # The diffuse colour multiplies the diffuse light and demodulates it: read once, so its
+    # NaN is one warning, not one per use.
+    layers = {n: p.astype(np.float32) for n, p in channels(METAL / "in.0006.exr").items()}
+    layers["ViewLayer.DiffCol.R"][0, 0] = np.nan
+    write_exr(tmp_path / "in.exr", layers)
+    result = read_frame(tmp_path / "in.exr", build_mapping("cycles", signals="lobes"))
+    assert [w for w in result.warnings if "diffuse_color" in w] == [
+        f"{tmp_path / 'in.exr'}: 1 NaN/Inf values in diffuse_color scrubbed to 0"]
+
+
+def test_traced_direct_indirect_without_its_layers_is_built_from_the_lobes(
+    tmp_path: Path
+) -> None:
+    # A tracer file whose direct/indirect layers were dropped: the pair is rebuilt from the
+    # lobe light passes times their colour passes (all of which must be read).
+    layers = {n: p.astype(np.float32) for n, p in channels(GLOSSY / "in.0004.exr").items()
+              if not n.startswith(("direct.", "indirect."))}
+    write_exr(tmp_path / "in.exr", layers)
+    frame = read_frame(tmp_path / "in.exr", build_mapping("svgf", signals="direct-indirect"))
+    for part, tag in (("direct", "Dir"), ("indirect", "Ind")):
+        expected = sum(rgb(layers, f"{s}{tag}", "") * rgb(layers, f"{s}Col", "")
+                       for s in ("Diff", "Gloss"))
+        np.testing.assert_allclose(frame.frame.signal(part).radiance, expected, rtol=1e-6)
 
 
 def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:
@@ -293,6 +332,29 @@ def test_arnold_lobe_aovs_are_radiance_and_its_direct_excludes_emission(tmp_path
                                np.stack([planes[c] for c in "RGB"]), rtol=1e-6)
 
 
+def test_arnold_lobes_need_no_albedo_aovs(tmp_path: Path) -> None:
+    # Radiance-style lobe AOVs are not divided by a colour: without the albedo AOVs the lobe
+    # set is still offered, each lobe filtered undemodulated (albedo 1).
+    planes = _arnold_frame(tmp_path / "a.exr")
+    kept = {n: p for n, p in planes.items() if not n.startswith(("diffuse_albedo",
+                                                                   "specular_albedo"))}
+    write_exr(tmp_path / "b.exr", kept)
+    lobes = read_frame(tmp_path / "b.exr", build_mapping("arnold", signals="lobes"))
+    assert lobes.plan.set == "lobes" and lobes.frame.names == ("diffuse", "glossy")
+    assert all(np.all(lobes.frame.signal(n).albedo == 1.0) for n in ("diffuse", "glossy"))
+
+
+def test_a_single_colour_pass_is_used_as_stored(tmp_path: Path) -> None:
+    # Only a sum of colour passes is capped at 1; one pass (here Arnold's specular albedo,
+    # above 1 on one pixel) demodulates its lobe with the values the renderer wrote.
+    planes = _arnold_frame(tmp_path / "a.exr")
+    planes["specular_albedo.G"][2, 3] = 1.5
+    write_exr(tmp_path / "b.exr", planes)
+    lobes = read_frame(tmp_path / "b.exr", build_mapping("arnold", signals="lobes"))
+    albedo = np.stack([planes[f"specular_albedo.{c}"] for c in "RGB"])
+    np.testing.assert_array_equal(lobes.frame.signal("glossy").albedo, albedo)
+
+
 # ------------------------------------------------------------------ gradient samples
 
 
@@ -324,3 +386,15 @@ def test_traced_gradient_samples_are_attached_to_the_signals_they_measure() -> N
     assert split.signal("diffuse_direct").gradient is None
     assert split.signal("diffuse_indirect").gradient is None
     assert split.signal("glossy").gradient is not None
+
+
+def test_gradient_samples_are_found_under_a_layer_prefix() -> None:
+    # A compositor may put the tracer's layers under a view-layer prefix: the samples are
+    # those next to the mask, whole sample names only, each with both of its halves.
+    names = ["ViewLayer.gradient.mask", "ViewLayer.gradient.diffuse.prev",
+             "ViewLayer.gradient.diffuse.curr", "ViewLayer.gradient.glossy.prev",
+             "ViewLayer.gradient.a.b.prev", "ViewLayer.gradient.a.b.curr"]
+    mask, samples = _gradient_channels(names)
+    assert mask == "ViewLayer.gradient.mask"
+    assert samples == {"diffuse": ("ViewLayer.gradient.diffuse.prev",
+                                   "ViewLayer.gradient.diffuse.curr")}

@@ -31,7 +31,7 @@ from svgf_cli.io.atomic import (
     stale_temporaries,
     temporary_path,
 )
-from svgf_cli.io.exr import ExrWriteError, read_frame, write_exr
+from svgf_cli.io.exr import ExrWriteError, output_error, read_frame, write_exr
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.output import write_output
 from svgf_cli.runner import load_history, save_history
@@ -127,6 +127,41 @@ def test_stale_temporaries_only_ours_and_only_dead(tmp_path: Path) -> None:
     assert left == {live.name, remote.name, not_ours.name, foreign.name}
 
 
+def test_a_live_process_of_another_user_keeps_its_temporary(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Farm users share output folders: kill(pid, 0) on another user's live process is
+    # refused (EPERM), and that process is still writing its temporary.
+    theirs, real_kill = 4242, os.kill
+
+    def kill(pid: int, sig: int) -> None:
+        if pid == theirs:
+            raise PermissionError(1, "Operation not permitted")
+        real_kill(pid, sig)
+
+    monkeypatch.setattr(os, "kill", kill)
+    host_ns = f"{atomic._host()}_{atomic._pid_namespace()}"
+    (tmp_path / f".o.0001.exr.{host_ns}.{theirs}.0123abcd.tmp.exr").write_bytes(b"partial")
+    assert stale_temporaries([tmp_path / "o.0001.exr"]) == []
+
+
+def test_temporaries_are_ours_without_a_proc_filesystem(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # macOS and BSD farms have no /proc: the temporary's name must still parse as ours, or
+    # an interrupted run's temporaries would never be cleaned up.
+    real_stat = os.stat
+
+    def stat(path, *args, **kwargs):
+        if str(path) == "/proc/self/ns/pid":
+            raise FileNotFoundError(2, "No such file or directory", str(path))
+        return real_stat(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "stat", stat)
+    parsed = parse_temporary(temporary_path(tmp_path / "o.0001.exr").name)
+    assert parsed is not None and parsed.target == "o.0001.exr" and parsed.pid == os.getpid()
+
+
 def test_history_file_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / "h.npz"
     state = {"colour": np.arange(24, dtype=np.float32).reshape(2, 3, 4)}
@@ -189,6 +224,17 @@ def test_failed_write_reports_the_real_cause(tmp_path: Path) -> None:
         assert message.startswith(f"{target}: cannot write") and reason in message, message
         assert "\n" not in message
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.0001.exr", "taken.exr"]
+
+
+def test_a_folder_removed_during_the_write_is_named(tmp_path: Path) -> None:
+    # The folder checks pass, then the write fails: a farm cleanup removed the folder (its
+    # name is the cause), or only the file's temporary vanished (the system's words).
+    gone = tmp_path / "gone" / "o.exr"
+    missing = FileNotFoundError(2, "No such file or directory")
+    assert str(output_error(missing, gone)) == (
+        f"{gone}: cannot write: folder {gone.parent} does not exist")
+    here = tmp_path / "o.exr"
+    assert str(output_error(missing, here)) == f"{here}: cannot write: No such file or directory"
 
 
 def test_alpha_and_passthrough_values_that_are_not_defaults(tmp_path: Path) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM
-from svgf_cli.runner import FrameTask, Interrupted, trim_tail
+from svgf_cli.runner import FrameTask, Interrupted, stop_on_signals, trim_tail
 
 
 def _tasks(written: list[bool]) -> list[FrameTask]:
@@ -37,3 +37,23 @@ def test_interrupted_keeps_its_exit_code_through_pickling(signum, code) -> None:
     again = pickle.loads(pickle.dumps(error))
     assert (error.exit_code, again.exit_code) == (code, code)
     assert again.signum == signum and str(again) == str(error)
+
+
+def test_first_signal_asks_to_stop_and_a_second_one_stops_at_once() -> None:
+    # A render-farm kill sends SIGTERM: the frame in flight is finished (the flag is polled
+    # between frames); a second signal means "now".
+    with stop_on_signals() as stop:
+        signal.raise_signal(signal.SIGTERM)
+        assert stop and stop.signum == signal.SIGTERM
+        with pytest.raises(Interrupted) as raised:
+            signal.raise_signal(signal.SIGINT)
+    assert raised.value.exit_code == EXIT_SIGINT
+
+
+def test_immediate_mode_stops_at_the_first_signal() -> None:
+    # Distributed runs (Dask) cannot finish a frame in flight on the client: stop at once.
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    with pytest.raises(Interrupted) as raised, stop_on_signals(immediate=True) as stop:
+        signal.raise_signal(signal.SIGTERM)
+    assert raised.value.exit_code == EXIT_SIGTERM and not stop
+    assert {s: signal.getsignal(s) for s in before} == before  # handlers given back

@@ -116,6 +116,9 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
     "svgf_cli/io/layers.py": _READ_TESTS,
     "svgf_cli/io/exr.py": _READ_TESTS + ("tests/test_farm_resume.py",),
     "svgf_cli/io/source.py": _READ_TESTS,
+    "svgf_cli/io/signals.py": ("tests/test_io_signals.py", "tests/test_cli_signals.py",
+                               *_READ_TESTS),
+    "svgf_cli/io/spill.py": ("tests/test_bidir_runs.py",),
     "svgf_cli/io/output.py": _READ_TESTS,
     "svgf_cli/io/atomic.py": _WRITE_TESTS,
     "svgf_cli/runner.py": ("tests/test_runner_tasks.py", "tests/test_runner_output.py",
@@ -126,7 +129,8 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
                            "tests/robustness/test_fault_files.py",
                            "tests/robustness/test_fault_values.py",
                            "tests/robustness/test_fault_structure.py",
-                           "tests/robustness/test_fault_processes.py"),
+                           "tests/robustness/test_fault_processes.py",
+                           "tests/test_bidir_runs.py"),
 }
 PACKAGES = {"io": ("svgf_cli/io", "svgf_cli/runner.py"), "filters": ("svgf_cli/filters",)}
 TIMEOUT_S = {"io": 180.0, "filters": 300.0}
@@ -135,7 +139,7 @@ TIMEOUT_S = {"io": 180.0, "filters": 300.0}
 @dataclass(frozen=True)
 class Equivalent:
     module: str
-    function: str
+    function: str | None  # None: module level
     operator: str
     line: str  # the original source line, stripped
     why: str
@@ -177,6 +181,95 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "self._pending[1].result()",
                "[1] -> [0]: the task has no result(), the AttributeError is suppressed like a "
                "write error, and executor.shutdown(wait=True) still waits for the write"),
+    Equivalent("svgf_cli/io/exr.py", "_keep_colour_part_only", "core/NumberReplacer",
+               'anchor = colour[0] if colour else (resolved[resolved.signal_roles[0]] or ("",))[0]',
+               "another channel or signal as anchor: a layer's channels share its alpha and "
+               "part; with no colour layer the writer keeps only a bare A, never a layer's"),
+    Equivalent("svgf_cli/io/exr.py", "_keep_colour_part_only", "core/NumberReplacer",
+               "part = source.part_holding(anchor) or source.parts[0]",
+               "fallback never taken: the anchor is a channel of the file (the colour's or "
+               "the first signal's), so part_holding finds its part"),
+    Equivalent("svgf_cli/io/patterns.py", "format_frame_spec", "core/ReplaceFalseWithTrue",
+               "return FrameSet.framesToFrameRange(ordered, sort=False, compress=False)",
+               "the frames are already sorted and unique (sorted(set(...))): sort and "
+               "compress have nothing to do"),
+    Equivalent("svgf_cli/io/output.py", "PreparedColour", "core/NumberReplacer",
+               "nonfinite: int = 0  # NaN/Inf set to 0",
+               "a default never used: both PreparedColour(...) calls pass nonfinite"),
+    Equivalent("svgf_cli/io/output.py", "write", "core/ExceptionReplacer", "except OSError:",
+               "never taken: the OpenEXR bindings report every write failure as RuntimeError "
+               "(missing folder, full disk, RLIMIT_FSIZE: test_fault_disk.py)"),
+    Equivalent("svgf_cli/io/spill.py", "read", "core/NumberReplacer", "part = exr.parts[0]",
+               "[0] -> [-1]: a scratch file is written by Spill.write with one part"),
+    Equivalent("svgf_cli/runner.py", "_default_reader", "core/ReplaceTrueWithFalse",
+               "def _default_reader(path: Path, mapping: Any, *, passthrough: bool = True) -> Any:",
+               "a default never used: frame_reader, its one caller, passes passthrough="),
+    Equivalent("svgf_cli/io/exr.py", "_scrub", "core/ReplaceComparisonOperator_GtE_Gt",
+               "if math.isfinite(low) and math.isfinite(high) and (low >= 0 or not "
+               "clamp_negative):",
+               "fast path >= 0 -> > 0: a plane whose minimum is 0 takes the full scan, which "
+               "finds nothing to fix: same values, same count, more time"),
+    Equivalent("svgf_cli/io/signals.py", None, "core/ReplaceTrueWithFalse",
+               "@dataclass(frozen=True)",
+               "frozen off: only assignment and hashing differ, and a class that were "
+               "assigned to or hashed would fail loudly (killed); the survivor is neither"),
+    Equivalent("svgf_cli/io/signals.py", "_recipes", "core/ReplaceTrueWithFalse",
+               "inside = EMISSION_IN_DIRECT.get(mapping.preset, True)",
+               "a default never used: every AOV preset has an entry (test_io_layers.py) and "
+               "build_mapping refuses other names"),
+    Equivalent("svgf_cli/io/source.py", "subsampled", "core/ReplaceOrWithAnd",
+               'f"{part.name or part.index}:{name}"',
+               "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
+               "channels itself)"),
+    Equivalent("svgf_cli/io/exr.py", "_renormalise", "core/ReplaceComparisonOperator_Gt_GtE",
+               "off = (length > 0) & (np.abs(length - 1.0) > 1e-5)",
+               "> -> >= at the 1e-5 tolerance: a normal exactly 1e-5 off unit length is "
+               "renormalised or kept, both within the tolerance (accepted, not observable)"),
+    Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer",
+               'alpha = values["alpha"][0] if "alpha" in values else None',
+               "[0] -> [-1]: the alpha role is one plane (1, H, W), first and last are the same"),
+    Equivalent("svgf_cli/io/patterns.py", "expand_inputs", "core/NumberReplacer",
+               "pattern = SequencePattern.parse(inputs[0])",
+               "[0] -> [-1]: read only when len(inputs) == 1"),
+    Equivalent("svgf_cli/io/patterns.py", "parse", "core/NumberReplacer",
+               'return cls(text, directory, name, "", 0, is_sequence=False)',
+               "a plain file's padding is never read: path() and display() return its name "
+               "before they look at it"),
+    Equivalent("svgf_cli/io/patterns.py", "expand_inputs", "core/NumberReplacer",
+               "raise InputError(reason, inputs[0])",
+               "[0] -> [-1]: read only when len(inputs) == 1"),
+    Equivalent("svgf_cli/io/signals.py", "compose_signals", "core/NumberReplacer",
+               "albedo = role(recipe.albedo[0])",
+               "[0] -> [-1]: read only when len(recipe.albedo) == 1"),
+    Equivalent("svgf_cli/io/source.py", "subsampled", "core/ReplaceComparisonOperator_NotEq_Eq",
+               "if channel.x_sampling != 1 or channel.y_sampling != 1",
+               "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
+               "channels itself)"),
+    Equivalent("svgf_cli/io/source.py", "subsampled", "core/NumberReplacer",
+               "if channel.x_sampling != 1 or channel.y_sampling != 1",
+               "dead code: SourceFile.subsampled has no caller (output.py lists subsampled "
+               "channels itself)"),
+    Equivalent("svgf_cli/io/colour.py", "for_filter", "core/ReplaceComparisonOperator_GtE_Gt",
+               "if min(self.weights) >= 0.0:",
+               ">= 0 -> > 0: only a weight of exactly 0 (CIE XYZ's (0, 1, 0)) takes "
+               "non_negative(), which gives back non-negative weights summing to 1 unchanged"),
+    Equivalent("svgf_cli/io/signals.py", "__init__", "core/AddNot",
+               "for role in (*term.light, *((term.colour,) if term.colour else ())):",
+               "use counts only decide when a role plane is let go: an uncounted colour is let "
+               "go early and gathered again: same values, its warnings deduplicated "
+               "(test_a_pass_used_twice_is_cleaned_and_reported_once), more work"),
+    Equivalent("svgf_cli/io/signals.py", "__init__", "core/ReplaceBinaryOperator_Add_Sub",
+               "uses[role] = uses.get(role, 0) + 1",
+               "+1 -> -1: a role plane is let go later (or early and gathered again, as "
+               "above): same values, other memory"),
+    Equivalent("svgf_cli/runner.py", "close", "core/AddNot",
+               "if self._pending is not None:",
+               "either way executor.shutdown(wait=True) waits for the write and its result "
+               "is discarded (suppressed); close() is the last call on the object"),
+    Equivalent("svgf_cli/io/signals.py", "_recipes", "core/ReplaceTrueWithFalse",
+               "divided = LOBE_LIGHT_DIVIDED.get(mapping.preset, True)",
+               "a default never used: every AOV preset has an entry (test_io_layers.py) and "
+               "build_mapping refuses other names"),
     Equivalent("svgf_cli/filters/reproject.py", "_reproject_rows",
                "core/ReplaceComparisonOperator_Lt_LtE", "if box_mask < 0:",
                "< 0 -> <= 0: -1 marks a 3x3 mask not yet computed (shared by the signals); "
@@ -397,15 +490,77 @@ def ensure_session(package: str, module: str) -> Path:
         skip_inert(db, ROOT / module)  # the rules may have grown since the session was made
         return db
     db.parent.mkdir(parents=True, exist_ok=True)
+    earlier = _tested_by_diff(db) if db.exists() else {}
     db.unlink(missing_ok=True)
     config.write_text(text)
     bin_dir = Path(sys.executable).parent
     subprocess.run([bin_dir / "cosmic-ray", "init", config, db], cwd=ROOT, check=True)
     subprocess.run([bin_dir / "cr-filter-operators", db, config], cwd=ROOT, check=True)
     skipped = skip_inert(db, ROOT / module)
-    print(f"{module}: session made ({skipped} inert mutants skipped)", file=sys.stderr)
+    carried = _carry_results(db, ROOT / module, earlier)
+    print(f"{module}: session made ({skipped} inert mutants skipped, {carried} results "
+          f"carried over from the previous session)", file=sys.stderr)
     stamp.write_text(key)
     return db
+
+
+def _diff_key(operator: str, function: str | None, diff: str) -> tuple[str, str, str]:
+    """A mutant by what it does to the text: its operator, its function and its diff without
+    line numbers (the changed line and three lines of context either side)."""
+    body = [line for line in diff.splitlines()
+            if not line.startswith(("--- ", "+++ ", "@@"))]
+    return (operator, function or "", "\n".join(body))
+
+
+def _tested_by_diff(db_path: Path) -> dict[tuple[str, str, str], list]:
+    """The tested mutants of a session about to be made again, by ``_diff_key``."""
+    from cosmic_ray.work_db import WorkDB, use_db
+    from cosmic_ray.work_item import WorkerOutcome
+
+    found: dict[tuple[str, str, str], list] = {}
+    with use_db(str(db_path), WorkDB.Mode.open) as db:
+        results = dict(db.results)
+        for item in db.work_items:
+            result = results.get(item.job_id)
+            if result is None or result.worker_outcome != WorkerOutcome.NORMAL or not result.diff:
+                continue
+            mutation = item.mutations[0]
+            key = _diff_key(mutation.operator_name, mutation.definition_name, result.diff)
+            found.setdefault(key, []).append(result)
+    return found
+
+
+def _carry_results(db_path: Path, module_file: Path, earlier: dict) -> int:
+    """Give a new session's mutants the results of the same mutants in the previous session
+    of an edited module: same operator, same function, same diff (a mutant whose line or
+    context changed is tested again). Carried survivors are retested by ``--survivors``."""
+    if not earlier:
+        return 0
+    import cosmic_ray.plugins
+    from cosmic_ray.mutating import _make_diff, mutate_code
+    from cosmic_ray.work_db import WorkDB, use_db
+
+    source = module_file.read_text()
+    wanted = {(operator, function) for operator, function, _ in earlier}
+    carried = 0
+    with use_db(str(db_path), WorkDB.Mode.open) as db:
+        results = dict(db.results)
+        for item in list(db.work_items):
+            mutation = item.mutations[0]
+            if item.job_id in results or \
+                    (mutation.operator_name, mutation.definition_name or "") not in wanted:
+                continue
+            operator = cosmic_ray.plugins.get_operator(mutation.operator_name)(
+                **(getattr(mutation, "operator_args", None) or {}))
+            mutated = mutate_code(source, operator, mutation.occurrence)
+            if mutated is None:
+                continue
+            diff = "\n".join(_make_diff(source, mutated, mutation.module_path))
+            same = earlier.get(_diff_key(mutation.operator_name, mutation.definition_name, diff))
+            if same:
+                db.set_result(item.job_id, same.pop(0))
+                carried += 1
+    return carried
 
 
 def prepare_tree(package: str) -> Path:
