@@ -87,3 +87,20 @@ def test_build_output_layout(tmp_path: Path) -> None:
     assert output.keep_only == {"view.beauty.A"}
     assert output.channels["view.beauty.R"].dtype == np.float32  # the input's type
     assert output.attributes["svgf/kind"] == "denoised"
+
+
+def test_a_stand_in_reader_s_alpha_is_written(tmp_path: Path) -> None:
+    """A reader that decoded no file (a library caller's stand-in) still gets its alpha
+    written next to the colour, not dropped or replaced by 1."""
+    from types import SimpleNamespace
+
+    alpha = np.linspace(0.0, 0.9, 6 * 4, dtype=np.float32).reshape(4, 6)
+    result = SimpleNamespace(info=SimpleNamespace(attributes={}, compression="zip"),
+                             alpha=alpha, source=None, colour_channels=None, resolved=None)
+    denoised = DenoisedFrame(color=np.ones((3, 4, 6), np.float32), layers={}, counts={})
+    task = FrameTask(1, tmp_path / "in.0001.exr", tmp_path / "o.0001.exr")
+    config = RunConfig(params=SVGFParams(), preset="paper", mapping=build_mapping())
+    output = build_output(result, denoised, config, task)
+    part = output.source.parts[output.part_index]
+    assert set(output.channels) == {"R", "G", "B"}
+    np.testing.assert_array_equal(part.channels["A"].pixels, alpha)

@@ -65,6 +65,8 @@ IO_TESTS = (
     "tests/test_cli_ground_truth.py",
 )
 WRITE_TESTS = (
+    "tests/test_io_write_safety.py",
+    "tests/test_runner_output.py",
     "tests/test_io_exr.py",
     "tests/test_cli_denoise.py",
     "tests/test_farm_resume.py",
@@ -312,30 +314,30 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- write safety: the io engineer's tests (issue 15 item 3); listed to run after merge
     Mutant(
         "temp-copied", "io", "output temp file copied instead of renamed",
-        "svgf_cli/io/exr.py",
-        (("        os.replace(tmp, path)\n",
-          "        __import__('shutil').copyfile(tmp, path)\n        tmp.unlink()\n"),),
+        "svgf_cli/io/atomic.py",
+        (("        os.replace(tmp, final)\n",
+          "        __import__('shutil').copyfile(tmp, final)\n        tmp.unlink()\n"),),
         WRITE_TESTS,
     ),
     Mutant(
         "temp-not-hidden", "io", "temp name not hidden",
-        "svgf_cli/io/exr.py",
-        (('return path.with_name(f".{path.name}.{os.getpid()}.tmp.exr")',
-          'return path.with_name(f"{path.name}.{os.getpid()}.tmp.exr")'),),
+        "svgf_cli/io/atomic.py",
+        (('f".{path.name}.{_host()}_{_pid_namespace()}.{os.getpid()}.{token}.tmp{ext}"',
+          'f"{path.name}.{_host()}_{_pid_namespace()}.{os.getpid()}.{token}.tmp{ext}"'),),
         WRITE_TESTS,
     ),
     Mutant(
         "history-no-temp", "io", "history .npz written without a temp file",
         "svgf_cli/runner.py",
-        (('    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")\n',
-          "    tmp = path\n"),),
+        (('        with atomic_target(path) as tmp, open(tmp, "wb") as handle:',
+          '        with open(path, "wb") as handle:'),),
         WRITE_TESTS,
     ),
     Mutant(
-        "alpha-always-1", "io", "output alpha always 1 (input A dropped)",
-        "svgf_cli/runner.py",
-        (('"A": alpha if alpha is not None else np.ones((height, width), np.float32),',
-          '"A": np.ones((height, width), np.float32),'),),
+        "alpha-always-1", "io", "output alpha dropped (stand-in readers' layout)",
+        "svgf_cli/io/output.py",
+        (("    if alpha is not None:\n        from svgf_cli.io.source import SourceChannel",
+          "    if False:\n        from svgf_cli.io.source import SourceChannel"),),
         WRITE_TESTS,
     ),
 )
