@@ -74,37 +74,28 @@ def _scatter(motion: np.ndarray, depth: np.ndarray, tolerance: np.float32,
             out[0, y, x] = _ZERO
             out[1, y, x] = _ZERO
     limit = F32(4.0) * F32(max(width, height))
-    # Pass 1: the nearest candidate depth per pixel of frame t.
-    for qy in range(height):
-        for qx in range(width):
-            z = depth[qy, qx]
-            mx, my = motion[0, qy, qx], motion[1, qy, qx]
-            if not (z > _ZERO and abs(mx) < limit and abs(my) < limit):
-                continue
-            x0, y0, fx, fy = _footprint(qx, qy, motion)
-            for k in range(4):
-                tx = x0 + (k & 1)
-                ty = y0 + (k >> 1)
-                w = (fx if k & 1 else _ONE - fx) * (fy if k >> 1 else _ONE - fy)
-                if w > _ZERO and 0 <= tx < width and 0 <= ty < height:
-                    nearest[ty, tx] = min(nearest[ty, tx], z)
-    # Pass 2: weighted mean of -m(q) over the candidates near the nearest depth.
-    for qy in range(height):
-        for qx in range(width):
-            z = depth[qy, qx]
-            mx, my = motion[0, qy, qx], motion[1, qy, qx]
-            if not (z > _ZERO and abs(mx) < limit and abs(my) < limit):
-                continue
-            x0, y0, fx, fy = _footprint(qx, qy, motion)
-            for k in range(4):
-                tx = x0 + (k & 1)
-                ty = y0 + (k >> 1)
-                w = (fx if k & 1 else _ONE - fx) * (fy if k >> 1 else _ONE - fy)
-                inside = w > _ZERO and 0 <= tx < width and 0 <= ty < height
-                if inside and z <= nearest[ty, tx] * (_ONE + tolerance):
-                    weight[ty, tx] += w
-                    out[0, ty, tx] -= w * mx
-                    out[1, ty, tx] -= w * my
+    # Pass 0: the nearest candidate depth per pixel of frame t. Pass 1: the weighted mean of
+    # -m(q) over the candidates near that depth. Both walk the same splat footprints.
+    for second in range(2):
+        for qy in range(height):
+            for qx in range(width):
+                z = depth[qy, qx]
+                mx, my = motion[0, qy, qx], motion[1, qy, qx]
+                if not (z > _ZERO and abs(mx) < limit and abs(my) < limit):
+                    continue
+                x0, y0, fx, fy = _footprint(qx, qy, motion)
+                for k in range(4):
+                    tx = x0 + (k & 1)
+                    ty = y0 + (k >> 1)
+                    w = (fx if k & 1 else _ONE - fx) * (fy if k >> 1 else _ONE - fy)
+                    if not (w > _ZERO and 0 <= tx < width and 0 <= ty < height):
+                        continue
+                    if second == 0:
+                        nearest[ty, tx] = min(nearest[ty, tx], z)
+                    elif z <= nearest[ty, tx] * (_ONE + tolerance):
+                        weight[ty, tx] += w
+                        out[0, ty, tx] -= w * mx
+                        out[1, ty, tx] -= w * my
     holes = 0
     for y in range(height):
         for x in range(width):

@@ -10,6 +10,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from svgf_cli.results.checks import all_checks
 from svgf_cli.results.page import page, write_images
@@ -20,27 +21,26 @@ from svgf_cli.results.table import METHODS, SEQUENCES, SVGF, MethodSpec, Sequenc
 REPO = Path(__file__).resolve().parents[2]
 
 
+def _named(items: Sequence[Any], names: Sequence[str], what: str) -> dict[str, Any]:
+    """``items`` by name; the first unknown name in ``names`` is an error."""
+    known = {item.name: item for item in items}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise SystemExit(f"ERROR: unknown {what} {unknown[0]!r} (choose from {', '.join(known)})")
+    return known
+
+
 def select(
     only: Sequence[str] | None, method_names: Sequence[str] | None
 ) -> tuple[list[SequenceSpec], list[MethodSpec]]:
     """The sequences and methods named (all by default); unknown names are an error."""
     sequences = list(SEQUENCES)
     if only:
-        known = {s.name: s for s in SEQUENCES}
-        unknown = [n for n in only if n not in known]
-        if unknown:
-            raise SystemExit(
-                f"ERROR: unknown sequence {unknown[0]!r} (choose from {', '.join(known)})"
-            )
+        known = _named(SEQUENCES, only, "sequence")
         sequences = [known[n] for n in only]
     methods = list(METHODS)
     if method_names:
-        known_m = {m.name: m for m in METHODS}
-        unknown = [n for n in method_names if n not in known_m]
-        if unknown:
-            raise SystemExit(
-                f"ERROR: unknown method {unknown[0]!r} (choose from {', '.join(known_m)})"
-            )
+        _named(METHODS, method_names, "method")
         methods = [m for m in METHODS if m.name in method_names or m.name == SVGF]
     return sequences, methods
 
