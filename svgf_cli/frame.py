@@ -272,6 +272,8 @@ COUNT_KEYS = {
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
     "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
     " matched them (information, not a problem)",
+    "despiked.<signal>": "output pixels brought down to the despike ratio times their"
+    " brightest neighbour (fireflies the spatial filter kept; information, not a problem)",
 }
 
 

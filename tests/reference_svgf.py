@@ -32,6 +32,7 @@ values                  :func:`apply_value_policy` (:func:`clean_value`,        
 4 a-trous               :func:`luminance_stop_guides`, :func:`atrous_iteration`  atrous
                         (paper eqs. 1-5), :func:`atrous_steps` (2^i)
 history guard           :func:`reset_nonfinite_history`                          values
++ despike               :func:`despike`                                          despike
 5 remodulation          :func:`remodulate`, :func:`radiance_with_background`,    modulate
                         emission added once
 + TAA                   :func:`taa_resolve`                                      taa
@@ -401,6 +402,35 @@ def firefly_clamp(illumination: np.ndarray, depth: np.ndarray, k: float,
                 if lum[s, y, x] > limit:
                     out[s, :, y, x] *= limit / lum[s, y, x]
     return out
+
+
+def despike(illumination: np.ndarray, radiance_mode: np.ndarray, depth: np.ndarray,
+            ratio: float, weights: Sequence[float] = REC709) -> tuple[np.ndarray, list[int]]:
+    """Per signal, bring a surface pixel whose luminance exceeds ``ratio`` times the largest
+    luminance among its in-image 8 neighbours that are surface pixels of the same mode down
+    to that bound (rgb scaled, hue kept). A pixel without such neighbours, or whose largest
+    neighbour luminance is negative, is left alone. Returns the result and the number of
+    pixels changed per signal."""
+    c = np.asarray(illumination, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    out = c.copy()
+    lum = luminance(c, weights)
+    num_signals, _, height, width = c.shape
+    changed = [0] * num_signals
+    for s in range(num_signals):
+        for y in range(height):
+            for x in range(width):
+                if z[y, x] <= 0.0:
+                    continue
+                values = [lum[s, yy, xx] for yy, xx in _neighbours(y, x, height, width, False)
+                          if z[yy, xx] > 0.0 and radiance_mode[s, yy, xx] == radiance_mode[s, y, x]]
+                if not values or max(values) < 0.0:
+                    continue
+                bound = ratio * max(values)
+                if lum[s, y, x] > bound:
+                    out[s, :, y, x] *= bound / lum[s, y, x]
+                    changed[s] += 1
+    return out, changed
 
 
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
@@ -1101,6 +1131,11 @@ class ReferenceDenoiser:
         p = self.params
         eps = p.albedo_epsilon
         variance_before_atrous = variance
+        if p.despike > 0.0:
+            colour, changed = despike(colour, radiance_mode, geom.depth, p.despike,
+                                      clean.weights)
+            for name, value in zip(clean.names, changed, strict=True):
+                counts[f"despiked.{name}"] = value
         per_signal = {}
         for index, name in enumerate(clean.names):
             radiance = remodulate(colour[index], clean.albedo[index], eps)

@@ -259,6 +259,31 @@ def test_firefly_clamp_removes_an_isolated_spike() -> None:
     assert out[0, 8, 8] < 1.0
 
 
+@pytest.mark.parametrize("iterations", [5, 1], ids=["feedback-then-more", "output-is-history"])
+def test_despike_bounds_a_firefly_the_atrous_kept_and_leaves_history_alone(
+    iterations: int,
+) -> None:
+    """A firefly in a noisy frame survives the a-trous as a spike (its neighbours reject it);
+    despike brings it to 2x its brightest neighbour, counts it, and changes nothing else:
+    not the other pixels (beyond a few noise spikes), not the colour history (also when the
+    last iteration's output is the history itself)."""
+    frames = static_sequence(2, 16, 16, noise=0.3, split=False)
+    frames[1].signal("color").radiance[:, 8, 8] = 1000.0
+    plain = Denoiser(resolve_params("paper", atrous_iterations=iterations))
+    guarded = Denoiser(resolve_params("paper", atrous_iterations=iterations, despike=2.0))
+    for frame in frames:
+        kept, out = plain.process(frame), guarded.process(frame)
+    neighbours = np.delete(out.color[1, 7:10, 7:10].ravel(), 4)
+    assert kept.color[1, 8, 8] > 4.0 * neighbours.max()  # the spike the a-trous leaves
+    assert out.color[1, 8, 8] <= 2.0 * neighbours.max() * 1.5  # bound (in luminance, ~rgb)
+    assert out.counts["despiked.color"] >= 1
+    changed = np.any(out.color != kept.color, axis=0)
+    assert changed[8, 8] and changed.sum() <= out.counts["despiked.color"]
+    history_plain, history_guarded = plain.state(), guarded.state()
+    for name in ("history_illumination", "history_moments", "history_length"):
+        np.testing.assert_array_equal(history_plain[name], history_guarded[name])
+
+
 def test_history_clamp_removes_lag_after_a_lighting_change() -> None:
     h, w = 16, 16
     before = static_sequence(8, w, h, split=False, illumination=1.0, noise=0.02)

@@ -26,6 +26,7 @@ from moving_scene import ACESCG_LUMINANCE, plant_extremes, scene_frame
 from svgf_cli.filters import values
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
+from svgf_cli.filters.despike import despike
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import REC709, float32_weights
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
@@ -299,6 +300,32 @@ def test_firefly_clamp_matches_reference(weights: tuple) -> None:
     changed = np.any(want != illumination, axis=1)
     assert changed[0, 4, 4] and changed[1, 0, 7] and changed.sum() > 10
     assert np.all(want[:, :, depth <= 0] == illumination[:, :, depth <= 0])
+
+
+@pytest.mark.parametrize("weights", [REC709, ACESCG], ids=["rec709", "acescg"])
+def test_despike_matches_reference(weights: tuple) -> None:
+    illumination, depth = _spiky_illumination(4)
+    rng = np.random.default_rng(5)
+    # Modes per signal: a block filtered as radiance (not a neighbour of the others), and a
+    # pixel whose every neighbour is of the other mode (left alone however bright).
+    radiance_mode = np.zeros((2, *depth.shape), dtype=bool)
+    radiance_mode[0, 5:, 6:] = True
+    radiance_mode[1] = rng.uniform(size=depth.shape) < 0.2
+    radiance_mode[0, 0:3, 0:3] = True
+    radiance_mode[0, 1, 1] = False
+    illumination[0, :, 1, 1] *= 50.0
+    illumination[1, :, 5, 2] = -illumination[1, :, 5, 2]  # a negative neighbour luminance
+    got = illumination.copy()
+    clamped = np.zeros((depth.shape[0], 2), dtype=np.int64)
+    scratch = np.empty((2, *depth.shape), dtype=F32)
+    despike(got, mode_mask(radiance_mode), depth, F32(2.0), weights, scratch, clamped)
+    want, changed = ref.despike(illumination, radiance_mode, depth, 2.0, weights)
+    _close(got, want, 2e-6, "despike")
+    assert clamped.sum(axis=0).tolist() == changed
+    moved = np.any(want != illumination, axis=1)
+    assert moved[0, 4, 4] and moved[1, 0, 7]  # the planted fireflies
+    assert not moved[0, 1, 1]  # no same-mode neighbour
+    assert 0 < moved.sum() < 0.2 * moved.size  # spikes only, not the noise
 
 
 def test_history_clamp_matches_reference() -> None:

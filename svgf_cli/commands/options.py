@@ -41,6 +41,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "albedo_epsilon": click.FloatRange(min=0.0, min_open=True),
     "firefly_clamp": click.FloatRange(min=0.0),
     "history_clamp": click.FloatRange(min=0.0),
+    "despike": click.FloatRange(min=0.0),
     "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
     "antilag_radius": click.IntRange(1, 16),
     "antilag_sigma": click.FloatRange(min=0.0),

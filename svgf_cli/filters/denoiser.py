@@ -9,8 +9,8 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
 2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over pairs of
    signals; the ``feedback_iteration`` output becomes next frame's colour history (stored by
    ``_store_history``, with the history guard);
-3. composition (``_finish_frame``): remodulate, sum the signals, add emission, restore
-   background -> optional TAA.
+3. composition (``_finish_frame``): optional despike (isolated spikes the a-trous kept) ->
+   remodulate, sum the signals, add emission, restore background -> optional TAA.
 
 All buffers are float32 structure-of-arrays planes (the mode mask uint16), allocated once per
 resolution and signal count and reused, so memory does not grow with the sequence length.
@@ -38,6 +38,7 @@ from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import SideHistory, combine_histories, effective_counts
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
+from svgf_cli.filters.despike import despike
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
@@ -464,7 +465,11 @@ class Denoiser:
         """Phase 3, composition: remodulate, sum the signals, add the emission, restore the
         background (+ TAA); record the frame's stage times."""
         p = self.params
-        output, layers = self._compose(run.frame, filtered.illumination, filtered.variance,
+        illumination = filtered.illumination
+        if p.despike > 0.0:
+            illumination = self._despike(run, filtered)
+            run.lap("despike")
+        output, layers = self._compose(run.frame, illumination, filtered.variance,
                                        filtered.history_length, run.mode, run.depth,
                                        run.counts)
         run.lap("modulate")
@@ -483,6 +488,20 @@ class Denoiser:
         self.stage_seconds = run.timings
         self.stage_cpu_seconds = run.cpu_timings
         return DenoisedFrame(color=output, layers=layers, counts=run.counts)
+
+    def _despike(self, run: _FrameRun, filtered: _Filtered) -> np.ndarray:
+        """The despiked output illumination (``filters.despike``), counted per signal. In
+        place unless the output is the colour history (no a-trous iteration after the
+        feedback one): the history keeps the samples."""
+        illumination = filtered.illumination
+        if filtered.name == filtered.history_name:
+            illumination = illumination.copy()
+        clamped = np.zeros((run.depth.shape[0], len(run.names)), dtype=np.int64)
+        despike(illumination, run.mode, run.depth, F32(self.params.despike), run.weights,
+                run.work["guide_luminance"], clamped)
+        for name, total in zip(run.names, clamped.sum(axis=0), strict=True):
+            run.counts[f"despiked.{name}"] = int(total)
+        return illumination
 
     # ----------------------------------------------------------------- bidirectional
     def forward_step(self, frame: Frame,
@@ -850,6 +869,8 @@ def _check_params(p: SVGFParams) -> None:
         raise ValueError("albedo_epsilon must be > 0")
     if not 0.0 < p.taa_alpha <= 1.0:
         raise ValueError("taa_alpha must lie in (0, 1]")
+    if 0.0 < p.despike < 1.0:
+        raise ValueError("despike must be 0 (off) or >= 1 (a ratio to the neighbours)")
 
 
 def _encode(text: str) -> np.ndarray:

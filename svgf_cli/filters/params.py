@@ -127,6 +127,11 @@ class SVGFParams:
         "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame,"
         " its luminance moments scaled with it (0 = off; glossy signals: glossy_history_clamp).",
     )
+    despike: float = _p(
+        0.0,
+        "Output guard: a filtered pixel brighter than this many times every same-mode"
+        " neighbour is brought down to that bound (fireflies the a-trous kept; 0 = off).",
+    )
     taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
     taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
 
@@ -143,9 +148,14 @@ PRESETS: dict[str, SVGFParams] = {
     # first iteration fed back as history.
     "paper": SVGFParams(),
     # The recommended set: the paper's filter plus anti-lag, a loose history clamp against
-    # outliers (k = 3) and the glossy rules (measured in docs/results.md).
+    # outliers (k = 3), the glossy rules and the firefly guards (measured in
+    # docs/results.md).
+    # The spatial variance (short history) uses a tighter relative luminance stop (0.5), so
+    # fireflies and lit/shadowed neighbours do not inflate it into an over-blur, and the
+    # output is despiked (ratio 2).
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
-                          glossy_sigma_luminance=1.0),
+                          glossy_sigma_luminance=1.0, spatial_variance_sigma_luminance=0.5,
+                          despike=2.0),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

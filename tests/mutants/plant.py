@@ -253,6 +253,20 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "despike-ignores-modes", "filters", "despike compares neighbours of the other mode",
+        "svgf_cli/filters/despike.py",
+        (("                        candidate = lum_row[q] if same else _NONE",
+          "                        candidate = lum_row[q]"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "despike-changes-history", "filters", "despike runs on the colour history too",
+        "svgf_cli/filters/denoiser.py",
+        (("        if filtered.name == filtered.history_name:\n            illumination = "
+          "illumination.copy()\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "reverse-pass-drops-glossy", "filters", "the reverse pass forgets which signals are glossy",
         "svgf_cli/filters/two_pass.py",
         (("signals=[dataclasses.replace(s, gradient=None) for s in frame.signals],",

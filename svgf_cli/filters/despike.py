@@ -1,0 +1,102 @@
+"""Despike: the last guard before remodulation against fireflies the spatial filter kept.
+
+The a-trous stops at luminance differences measured against the *centre* pixel's noise. A
+fresh firefly (one bright path sample, e.g. a specular bounce that found a light) makes its
+neighbours reject it, since their own noise is small, while the bright pixel keeps most of its
+value: the firefly survives filtering as an isolated spike several times brighter than
+everything around it (up to 20x the converged image's local maximum on glossy metal). After
+filtering, genuine detail is spread over more than one pixel, so a filtered pixel brighter
+than ``ratio`` times every one of its 8 neighbours is a spike: :func:`despike` brings its
+luminance down to that bound, hue kept.
+
+Only the output is changed: the colour history (fed back from an earlier iteration) keeps the
+sample, so its energy still enters the temporal average, at the usual weight. Neighbours
+count only when they are surface pixels filtered in the same mode (demodulated or radiance)
+as the centre; a pixel without such neighbours is left alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import FASTMATH
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_NONE = F32(-np.inf)  # the luminance of a pixel that is never a neighbour (background)
+
+
+@njit(
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def despike(
+    illumination: np.ndarray,
+    mode: np.ndarray,
+    depth: np.ndarray,
+    ratio: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    luminance: np.ndarray,
+    clamped: np.ndarray,
+) -> None:
+    """In place, per signal ``s`` and surface pixel ``p``: with ``M = max l(q)`` over the 8
+    neighbours ``q`` of ``p`` that are surface pixels of the same mode (bit ``s`` of the
+    uint16 ``mode``), where ``M >= 0`` and ``l(p) > ratio * M``, scale the rgb of ``p`` by
+    ``ratio * M / l(p)``.
+
+    ``illumination`` is (S, 3, H, W); ``luminance`` an (S, H, W) float32 scratch; ``clamped``
+    (H, S) int64 receives the number of pixels changed per row and signal.
+    """
+    num_signals = illumination.shape[0]
+    height, width = depth.shape
+    wr, wg, wb = luminance_weights
+    # Pass 1: luminance of every pixel, background excluded once and for all.
+    for y in prange(height):
+        d = depth[y]
+        for s in range(num_signals):
+            r = illumination[s, 0, y]
+            g = illumination[s, 1, y]
+            b = illumination[s, 2, y]
+            lum = luminance[s, y]
+            for x in range(width):
+                value = wr * r[x] + wg * g[x] + wb * b[x]
+                lum[x] = value if d[x] > _ZERO else _NONE
+    # Pass 2: the brightest same-mode neighbour, then the bound.
+    for y in prange(height):
+        neighbour_max = np.empty(width, dtype=F32)
+        d = depth[y]
+        centre_mode = mode[y]
+        for s in range(num_signals):
+            bit = np.uint16(1 << s)
+            neighbour_max[:] = _NONE
+            for dy in range(-1, 2):
+                yy = y + dy
+                if yy < 0 or yy >= height:
+                    continue
+                lum_row = luminance[s, yy]
+                mode_row = mode[yy]
+                for dx in range(-1, 2):
+                    if dy == 0 and dx == 0:
+                        continue
+                    # x + dx stays inside the row for x in [first, last).
+                    first = max(0, -dx)
+                    last = width - max(0, dx)
+                    for x in range(first, last):
+                        q = x + dx
+                        same = (mode_row[q] & bit) == (centre_mode[x] & bit)
+                        candidate = lum_row[q] if same else _NONE
+                        neighbour_max[x] = max(neighbour_max[x], candidate)
+            lum = luminance[s, y]
+            r = illumination[s, 0, y]
+            g = illumination[s, 1, y]
+            b = illumination[s, 2, y]
+            count = 0
+            for x in range(width):
+                bound = ratio * neighbour_max[x]
+                if d[x] > _ZERO and neighbour_max[x] >= _ZERO and lum[x] > bound:
+                    scale = bound / lum[x]
+                    r[x] *= scale
+                    g[x] *= scale
+                    b[x] *= scale
+                    count += 1
+            clamped[y, s] = count
