@@ -317,7 +317,7 @@ def test_despike_matches_reference(weights: tuple) -> None:
     illumination[1, :, 5, 2] = -illumination[1, :, 5, 2]  # a negative neighbour luminance
     got = illumination.copy()
     clamped = np.zeros((depth.shape[0], 2), dtype=np.int64)
-    scratch = np.empty((2, *depth.shape), dtype=F32)
+    scratch = np.empty(depth.shape, dtype=F32)
     despike(got, mode_mask(radiance_mode), depth, F32(2.0), weights, scratch, clamped)
     want, changed = ref.despike(illumination, radiance_mode, depth, 2.0, weights)
     _close(got, want, 2e-6, "despike")

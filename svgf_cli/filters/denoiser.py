@@ -112,6 +112,7 @@ class _Workspace:
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
+            "despike_luminance": ((h, w), F32),
             "antilag_scratch": (scratch_shape(s, h, w), F32),
             "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
@@ -498,7 +499,7 @@ class Denoiser:
             illumination = illumination.copy()
         clamped = np.zeros((run.depth.shape[0], len(run.names)), dtype=np.int64)
         despike(illumination, run.mode, run.depth, F32(self.params.despike), run.weights,
-                run.work["guide_luminance"], clamped)
+                run.work["despike_luminance"], clamped)
         for name, total in zip(run.names, clamped.sum(axis=0), strict=True):
             run.counts[f"despiked.{name}"] = int(total)
         return illumination

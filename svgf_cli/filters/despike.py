@@ -44,36 +44,35 @@ def despike(
     uint16 ``mode``), where ``M >= 0`` and ``l(p) > ratio * M``, scale the rgb of ``p`` by
     ``ratio * M / l(p)``.
 
-    ``illumination`` is (S, 3, H, W); ``luminance`` an (S, H, W) float32 scratch; ``clamped``
-    (H, S) int64 receives the number of pixels changed per row and signal.
+    ``illumination`` is (S, 3, H, W); ``luminance`` an (H, W) float32 scratch (a signal's
+    luminance is complete before any of its pixels changes, so the result does not depend
+    on the order rows run in); ``clamped`` (H, S) int64 receives the number of pixels
+    changed per row and signal.
     """
     num_signals = illumination.shape[0]
     height, width = depth.shape
     wr, wg, wb = luminance_weights
-    # Pass 1: luminance of every pixel, background excluded once and for all.
-    for y in prange(height):
-        d = depth[y]
-        for s in range(num_signals):
+    for s in range(num_signals):
+        bit = np.uint16(1 << s)
+        # Pass 1: the signal's luminance, background excluded once and for all.
+        for y in prange(height):
+            d = depth[y]
             r = illumination[s, 0, y]
             g = illumination[s, 1, y]
             b = illumination[s, 2, y]
-            lum = luminance[s, y]
+            lum = luminance[y]
             for x in range(width):
                 value = wr * r[x] + wg * g[x] + wb * b[x]
                 lum[x] = value if d[x] > _ZERO else _NONE
-    # Pass 2: the brightest same-mode neighbour, then the bound.
-    for y in prange(height):
-        neighbour_max = np.empty(width, dtype=F32)
-        d = depth[y]
-        centre_mode = mode[y]
-        for s in range(num_signals):
-            bit = np.uint16(1 << s)
-            neighbour_max[:] = _NONE
+        # Pass 2: the brightest same-mode neighbour, then the bound.
+        for y in prange(height):
+            neighbour_max = np.full(width, _NONE, dtype=F32)
+            centre_mode = mode[y]
             for dy in range(-1, 2):
                 yy = y + dy
                 if yy < 0 or yy >= height:
                     continue
-                lum_row = luminance[s, yy]
+                lum_row = luminance[yy]
                 mode_row = mode[yy]
                 for dx in range(-1, 2):
                     if dy == 0 and dx == 0:
@@ -86,7 +85,8 @@ def despike(
                         same = (mode_row[q] & bit) == (centre_mode[x] & bit)
                         candidate = lum_row[q] if same else _NONE
                         neighbour_max[x] = max(neighbour_max[x], candidate)
-            lum = luminance[s, y]
+            d = depth[y]
+            lum = luminance[y]
             r = illumination[s, 0, y]
             g = illumination[s, 1, y]
             b = illumination[s, 2, y]
