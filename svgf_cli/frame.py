@@ -76,6 +76,11 @@ class Signal:
     surface: a glossy or transmission lobe. Its reprojected history is not where the
     reflection now is, so the filter clamps it to the current neighbourhood and stops the
     spatial filter at smaller luminance differences (``SVGFParams.glossy_*``).
+    ``guide_albedo`` marks a signal demodulated by the G-buffer albedo (the renderer's
+    albedo AOV, a guide for denoisers) rather than by the reflectance of this light alone:
+    over a dark diffuse base that albedo stays dark where glossy light arrives, so dividing
+    by it amplifies that light; such signals get a higher demodulation floor
+    (``SVGFParams.guide_albedo_floor``).
     """
 
     name: str
@@ -83,6 +88,7 @@ class Signal:
     albedo: np.ndarray
     gradient: TemporalGradient | None = None
     glossy: bool = False
+    guide_albedo: bool = False
 
 
 @dataclass(kw_only=True)
@@ -119,8 +125,8 @@ class Frame:
         signal here and added back after filtering."""
         return cls(
             signals=[
-                Signal("direct", _without(direct, emission), albedo),
-                Signal("indirect", indirect, albedo),
+                Signal("direct", _without(direct, emission), albedo, guide_albedo=True),
+                Signal("indirect", indirect, albedo, guide_albedo=True),
             ],
             albedo=albedo, normal=normal, depth=depth, motion=motion, mesh_id=mesh_id,
             emission=emission, luminance_weights=luminance_weights,
@@ -142,7 +148,7 @@ class Frame:
         """One combined signal named ``color``, demodulated by ``albedo``. ``emission``
         (when given) is part of ``color``; it is taken out and added back after filtering."""
         return cls(
-            signals=[Signal("color", _without(color, emission), albedo)],
+            signals=[Signal("color", _without(color, emission), albedo, guide_albedo=True)],
             albedo=albedo, normal=normal, depth=depth, motion=motion, mesh_id=mesh_id,
             emission=emission, luminance_weights=luminance_weights,
         )

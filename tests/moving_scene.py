@@ -6,8 +6,9 @@ Three layers over a two-row background strip (depth 0, id -1, a constant sky rad
 * a **wall** (id 1): a tilted plane (depth ``6 + 0.04 u + 0.03 y``) panning right by 0.5 px
   per frame (backward motion ``(-0.5, 0)``: every wall pixel has a half-pixel bilinear
   footprint, and the left column's footprint leaves the image), with a smooth albedo
-  texture, a black-albedo patch (filtered as radiance, not demodulated) and a patch whose
-  green albedo is 0 (floored, still demodulated);
+  texture, a black-albedo patch (filtered as radiance, not demodulated), a patch whose
+  green albedo is 0 (floored, still demodulated) and a dark patch (0.05: demodulated
+  unless the signal's guide-albedo floor is above it);
 * a **sticker** (id 3): coplanar with the wall (same depth and normal), sliding left by
   1 px per frame: where it uncovers the wall only the mesh-id test tells them apart;
 * an **object** (id 2) at depth 3 moving by (2.5, 1) px per frame in front of both, with a
@@ -73,6 +74,8 @@ def _wall_albedo(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     albedo[:, (u >= 3) & (u < 7) & (v >= 12) & (v < 15)] = 0.0  # black: not demodulated
     green_black = (u >= 9) & (u < 12) & (v >= 3) & (v < 5)
     albedo[1, green_black] = 0.0  # one channel below eps: floored, still demodulated
+    # Dark but a reflectance: demodulated, except under a guide-albedo floor above 0.05.
+    albedo[:, (u >= 14) & (u < 17) & (v >= 3) & (v < 6)] = 0.05
     return albedo
 
 

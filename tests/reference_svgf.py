@@ -154,6 +154,7 @@ class CleanFrame:
     weights: tuple[float, float, float]
     counts: dict[str, int] = field(default_factory=dict)
     glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
+    guide: list[bool] = field(default_factory=list)  # per signal: Signal.guide_albedo
 
 
 def _count(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
@@ -197,6 +198,7 @@ def apply_value_policy(frame: Frame) -> CleanFrame:
         motion=clean_motion(frame.motion), mesh_id=np.asarray(frame.mesh_id),
         weights=(weights[0], weights[1], weights[2]), counts=counts,
         glossy=[s.glossy for s in frame.signals],
+        guide=[s.guide_albedo for s in frame.signals],
     )
 
 
@@ -338,6 +340,14 @@ def effective_albedo(albedo: np.ndarray, black: float,
     floor = np.maximum(black, relative_floor * brightest)
     divisor = np.where(demodulated, np.maximum(a, floor), 1.0)
     return ~demodulated[..., 0, :, :], divisor
+
+
+def demodulation_floor(params: SVGFParams, clean: CleanFrame, index: int) -> float:
+    """The ``black`` of :func:`effective_albedo` for signal ``index``: ``albedo_epsilon``,
+    raised to ``guide_albedo_floor`` for a signal demodulated by the G-buffer albedo."""
+    if clean.guide and clean.guide[index]:
+        return max(params.albedo_epsilon, params.guide_albedo_floor)
+    return params.albedo_epsilon
 
 
 def demodulate(radiance: np.ndarray, albedo: np.ndarray,
@@ -1046,7 +1056,6 @@ class ReferenceDenoiser:
 
     def process(self, frame: Frame) -> ReferenceOutput:
         p = self.params
-        eps = p.albedo_epsilon
         clean = apply_value_policy(frame)
         counts = clean.counts
         geom = geometry(clean.depth, clean.normal)
@@ -1054,7 +1063,8 @@ class ReferenceDenoiser:
         planes = []
         for index, name in enumerate(clean.names):
             illumination, mode, clamped = demodulate(clean.radiance[index],
-                                                     clean.albedo[index], eps)
+                                                     clean.albedo[index],
+                                                     demodulation_floor(p, clean, index))
             brightest = clean.albedo[index].max(axis=0)
             counts[f"clamped.{name}"] = clamped
             counts[f"radiance_mode.{name}"] = int(np.sum(mode & surface))
@@ -1129,7 +1139,6 @@ class ReferenceDenoiser:
                 counts: dict[str, int]) -> ReferenceOutput:
         """Remodulate, restore the background, sum the signals, add the emission (+ TAA)."""
         p = self.params
-        eps = p.albedo_epsilon
         variance_before_atrous = variance
         if p.despike > 0.0:
             colour, changed = despike(colour, radiance_mode, geom.depth, p.despike,
@@ -1138,7 +1147,8 @@ class ReferenceDenoiser:
                 counts[f"despiked.{name}"] = value
         per_signal = {}
         for index, name in enumerate(clean.names):
-            radiance = remodulate(colour[index], clean.albedo[index], eps)
+            radiance = remodulate(colour[index], clean.albedo[index],
+                                  demodulation_floor(p, clean, index))
             per_signal[name] = radiance_with_background(radiance, clean.radiance[index],
                                                         geom.depth)
         output = sum(per_signal.values())
@@ -1281,7 +1291,8 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
         else:
             motion = np.full((2, *frame.depth.shape), NO_MOTION)
         reversed_frame = Frame(
-            signals=[Signal(s.name, s.radiance, s.albedo, glossy=s.glossy)
+            signals=[Signal(s.name, s.radiance, s.albedo, glossy=s.glossy,
+                            guide_albedo=s.guide_albedo)
                      for s in frame.signals],
             normal=frame.normal, depth=frame.depth,
             motion=np.ascontiguousarray(motion, dtype=np.float32), mesh_id=frame.mesh_id,

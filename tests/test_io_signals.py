@@ -156,6 +156,13 @@ def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> Non
     # The glossy lobe is a signal of its own, marked glossy (the filter's glossy rules).
     glossy = {s.name: s.glossy for s in cycles.frame.signals}
     assert glossy == {"diffuse_direct": False, "diffuse_indirect": False, "specular": True}
+    # Lobe signals are demodulated by their own colours; only a signal demodulated by the
+    # G-buffer albedo AOV (combined; the tracer's direct + indirect) is marked as such.
+    assert not any(s.guide_albedo for s in cycles.frame.signals)
+    combined = read_frame(ROLL / "in.0001.exr", build_mapping("cycles", signals="combined"))
+    assert [s.guide_albedo for s in combined.frame.signals] == [True]
+    paired = read_frame(TESTDATA / "seq" / "in.0001.exr", build_mapping("svgf")).frame
+    assert [s.guide_albedo for s in paired.signals] == [True, True]
     # The tracer's lobe passes where it wrote them, else its own direct and indirect layers.
     traced = read_frame(GLOSSY / "in.0002.exr", build_mapping("svgf"))
     assert traced.plan.set == "lobes-split" and traced.plan.checked

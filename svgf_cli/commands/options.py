@@ -39,6 +39,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "sigma_normal": click.FloatRange(min=0.0, min_open=True),
     "sigma_depth": click.FloatRange(min=0.0, min_open=True),
     "albedo_epsilon": click.FloatRange(min=0.0, min_open=True),
+    "guide_albedo_floor": click.FloatRange(0.0, 1.0),
     "firefly_clamp": click.FloatRange(min=0.0),
     "history_clamp": click.FloatRange(min=0.0),
     "despike": click.FloatRange(min=0.0),

@@ -207,8 +207,9 @@ class Denoiser:
     Per signal and pixel, a mode (``filters.modulate``): demodulated by the signal's colour
     where that is a plausible reflectance (brightest channel in ``[albedo_epsilon,
     MAX_REFLECTANCE]``, per-channel floor ``max(albedo_epsilon, RELATIVE_ALBEDO_FLOOR *
-    brightest)``), else filtered as radiance. Modes never exchange weight (a-trous, spatial
-    variance) nor history (reprojection).
+    brightest)``; for a signal with ``guide_albedo`` the floor ``albedo_epsilon`` is raised
+    to ``guide_albedo_floor``), else filtered as radiance. Modes never exchange weight
+    (a-trous, spatial variance) nor history (reprojection).
 
     Values (``filters.values``): non-finite and beyond-1e15 inputs are replaced and counted,
     demodulated values are clamped to +-1e15, the history can never hold a non-finite value.
@@ -231,7 +232,11 @@ class Denoiser:
         self.params = params
         self.debug_layers = debug_layers
         self._squarings = normal_squarings(params.sigma_normal)
-        self._rule = (F32(params.albedo_epsilon), F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
+        self._rules = {
+            guide: (F32(max(params.albedo_epsilon, params.guide_albedo_floor if guide else 0.0)),
+                    F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
+            for guide in (False, True)
+        }
         # Effective sample counts per history length, for a bidirectional run's combination.
         self._colour_counts = effective_counts(params.alpha, params.history_cap)
         self._moment_counts = effective_counts(params.moments_alpha, params.history_cap)
@@ -668,7 +673,8 @@ class Denoiser:
                     mode: np.ndarray, counts: dict[str, int]) -> None:
         rows = np.zeros((depth.shape[0], modulate.DEMODULATE_COUNTERS), dtype=np.int64)
         for index, signal in enumerate(signals):
-            modulate.demodulate(signal.radiance, signal.albedo, depth, *self._rule,
+            modulate.demodulate(signal.radiance, signal.albedo, depth,
+                                *self._rules[signal.guide_albedo],
                                 index, out[index], mode, rows)
             total = rows.sum(axis=0)
             name = signal.name
@@ -721,7 +727,8 @@ class Denoiser:
         for index, signal in enumerate(frame.signals):
             add_emission = has_emission and index == 0
             modulate.remodulate_add(filtered[index], signal.radiance, signal.albedo, depth,
-                                    emission_plane, add_emission, *self._rule, radiance, rows)
+                                    emission_plane, add_emission,
+                                    *self._rules[signal.guide_albedo], radiance, rows)
             if add_emission:
                 total = rows.sum(axis=0)
                 _add(counts, "nonfinite", "emission", int(total[0]))
@@ -730,7 +737,8 @@ class Denoiser:
                 name = signal.name
                 alone = np.zeros((3, height, width), dtype=F32)
                 modulate.remodulate_add(filtered[index], signal.radiance, signal.albedo, depth,
-                                        emission_plane, False, *self._rule, alone, rows)
+                                        emission_plane, False,
+                                        *self._rules[signal.guide_albedo], alone, rows)
                 for c, channel in enumerate("RGB"):
                     layers[f"{name}.{channel}"] = alone[c]
                 layers[f"variance.{name}"] = variance[index].copy()
@@ -868,6 +876,8 @@ def _check_params(p: SVGFParams) -> None:
         raise ValueError("spatial variance sigma must be > 0 and radius >= 0")
     if p.albedo_epsilon <= 0.0:
         raise ValueError("albedo_epsilon must be > 0")
+    if not 0.0 <= p.guide_albedo_floor <= 1.0:
+        raise ValueError("guide_albedo_floor must lie in [0, 1]")
     if not 0.0 < p.taa_alpha <= 1.0:
         raise ValueError("taa_alpha must lie in (0, 1]")
     if 0.0 < p.despike < 1.0:

@@ -116,6 +116,13 @@ class SVGFParams:
         " as radiance; otherwise each channel is floored at max(albedo_epsilon, 0.02 * the"
         " brightest channel).",
     )
+    guide_albedo_floor: float = _p(
+        0.0,
+        "Demodulation floor of signals demodulated by the G-buffer albedo (a combined colour"
+        " over the renderer's albedo AOV): glossy light over a dark diffuse base is not"
+        " modulated by that albedo, and dividing by it amplifies the light (0 ="
+        " albedo_epsilon).",
+    )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
         0.0,
@@ -152,10 +159,11 @@ PRESETS: dict[str, SVGFParams] = {
     # docs/results.md).
     # The spatial variance (short history) uses a tighter relative luminance stop (0.5), so
     # fireflies and lit/shadowed neighbours do not inflate it into an over-blur, and the
-    # output is despiked (ratio 2).
+    # output is despiked (ratio 2). Signals demodulated by the G-buffer albedo are only
+    # demodulated where it is at least 0.1.
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
                           glossy_sigma_luminance=1.0, spatial_variance_sigma_luminance=0.5,
-                          despike=2.0),
+                          despike=2.0, guide_albedo_floor=0.1),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

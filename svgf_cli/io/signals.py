@@ -95,7 +95,8 @@ class SignalRecipe:
     part of them); demodulated by ``albedo`` (one role as is, several summed, capped at 1
     as a reflectance when ``albedo_cap``; none: white, i.e. filtered as radiance);
     ``gradient`` names the gradient samples summed into its `TemporalGradient` (empty:
-    none)."""
+    none); ``guide_albedo``: ``albedo`` is the G-buffer albedo AOV, not this light's own
+    reflectance (``Signal.guide_albedo``)."""
 
     name: str
     terms: tuple[Term, ...]
@@ -104,6 +105,7 @@ class SignalRecipe:
     gradient: tuple[str, ...] = ()
     glossy: bool = False
     albedo_cap: bool = True
+    guide_albedo: bool = False
 
 
 # Lobes whose light follows reflections or refractions rather than the surface
@@ -354,8 +356,9 @@ def _recipes(
         if resolved.split:
             inside = EMISSION_IN_DIRECT.get(mapping.preset, True)
             return (
-                SignalRecipe("direct", (Term(("direct",)),), ("albedo",), minus_emission=inside),
-                SignalRecipe("indirect", (Term(("indirect",)),), ("albedo",)),
+                SignalRecipe("direct", (Term(("direct",)),), ("albedo",), minus_emission=inside,
+                             guide_albedo=True),
+                SignalRecipe("indirect", (Term(("indirect",)),), ("albedo",), guide_albedo=True),
             ), False
         if DIRECT_INDIRECT_ALBEDO.get(mapping.preset) == "lobe-colours":
             albedo = tuple(c for lobe in lobes.present if (c := colour(lobe)) is not None)
@@ -366,7 +369,8 @@ def _recipes(
                                      for lobe in lobes.present), albedo)
             for part in ("direct", "indirect")
         ), True
-    return (SignalRecipe("color", (Term(("color",)),), ("albedo",), minus_emission=True),), False
+    return (SignalRecipe("color", (Term(("color",)),), ("albedo",), minus_emission=True,
+                         guide_albedo=True),), False
 
 
 def plan_signals(
@@ -521,7 +525,8 @@ def compose_signals(
             if recipe.albedo_cap:
                 np.minimum(albedo, np.float32(1.0), out=albedo)
         signals.append(Signal(recipe.name, np.ascontiguousarray(radiance), albedo,
-                              _gradient(plan, recipe, channel), glossy=recipe.glossy))
+                              _gradient(plan, recipe, channel), glossy=recipe.glossy,
+                              guide_albedo=recipe.guide_albedo))
     return signals, emission
 
 

@@ -253,6 +253,21 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "guide-floor-ignored", "filters",
+        "signals demodulated by the G-buffer albedo get no floor",
+        "svgf_cli/filters/denoiser.py",
+        (("params.guide_albedo_floor if guide else 0.0", "0.0"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "guide-flag-dropped", "io", "a combined signal is not marked as demodulated by the "
+        "albedo AOV",
+        "svgf_cli/io/signals.py",
+        (("                              guide_albedo=recipe.guide_albedo))",
+          "                              ))"),),
+        ("tests/test_io_signals.py", *IO_TESTS),
+    ),
+    Mutant(
         "despike-ignores-modes", "filters", "despike compares neighbours of the other mode",
         "svgf_cli/filters/despike.py",
         (("                        candidate = lum_row[q] if same else _NONE",
