@@ -6,9 +6,9 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
    gradients -> demodulate every signal, with its per-pixel mode (+ optional firefly clamp)
    -> reproject every signal's history -> the pre-accumulation hook (optional history
    clamp, anti-lag) -> accumulate;
-2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over pairs of
-   signals; the ``feedback_iteration`` output becomes next frame's colour history (stored by
-   ``_store_history``, with the history guard);
+2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over groups
+   of two or three signals; the ``feedback_iteration`` output becomes next frame's colour
+   history (stored by ``_store_history``, with the history guard);
 3. composition (``_finish_frame``): remodulate, sum the signals, add emission, restore
    background -> optional TAA.
 
@@ -423,8 +423,7 @@ class Denoiser:
             variance_names = ("variance_a", "variance", "variance_b")
         guide_luminance = work["guide_luminance"]
         guide_inverse_scale = work["guide_inverse_scale"]
-        names = run.names
-        pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]
+        groups = signal_groups(len(run.names))
         glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance
         sigmas = [glossy_sigma if signal.glossy else p.sigma_luminance
                   for signal in run.frame.signals]
@@ -439,21 +438,19 @@ class Denoiser:
                     work[v] for v in variance_names if work[v] is not filtered_variance
                 )
             out_illumination = work[out_name]
-            # Signals in pairs: the kernel is register-blocked for two, sharing the geometry.
-            for pair in pairs:
-                # A pair of different sigma_l (a glossy and a non-glossy signal) gets its
-                # guides one signal at a time.
-                for part in _same_sigma_parts(pair, sigmas):
-                    luminance_stop_guides(
-                        filtered[part], filtered_variance[part], mode, part.start, depth,
-                        F32(sigmas[part.start]), weights, guide_luminance[part],
-                        guide_inverse_scale[part],
-                    )
+            # Signals in groups of two or three: the kernel is register-blocked for them,
+            # sharing the geometric weights (each signal keeps its own sigma_l).
+            for group in groups:
+                luminance_stop_guides(
+                    filtered[group], filtered_variance[group], mode, group.start, depth,
+                    sigmas[group], weights, guide_luminance[group],
+                    guide_inverse_scale[group],
+                )
                 atrous_iteration(
-                    filtered[pair], filtered_variance[pair], guide_luminance[pair],
-                    guide_inverse_scale[pair], depth, work["ddx"], work["ddy"], normal,
+                    filtered[group], filtered_variance[group], guide_luminance[group],
+                    guide_inverse_scale[group], depth, work["ddx"], work["ddy"], normal,
                     1 << iteration, p.sigma_depth, p.sigma_normal, propagate,
-                    out_illumination[pair], out_variance[pair],
+                    out_illumination[group], out_variance[group],
                 )
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
@@ -780,11 +777,17 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
 
 
-def _same_sigma_parts(pair: slice, sigmas: list[float]) -> list[slice]:
-    """``pair`` whole when its signals share sigma_l, else one slice per signal."""
-    if pair.stop - pair.start == 2 and sigmas[pair.start] != sigmas[pair.start + 1]:
-        return [slice(pair.start, pair.start + 1), slice(pair.start + 1, pair.stop)]
-    return [pair]
+def signal_groups(num_signals: int) -> list[slice]:
+    """The a-trous filters signals in groups sharing the geometric weights: threes, but
+    4 as 2 + 2 (a lone signal costs nearly as much as a pair), and 1 or 2 as they are."""
+    sizes: list[int] = []
+    left = num_signals
+    while left > 0:
+        size = 2 if left in (2, 4) else min(left, 3)
+        sizes.append(size)
+        left -= size
+    starts = np.cumsum([0, *sizes])
+    return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
 def _gradient_samples(
