@@ -75,7 +75,10 @@ _HISTORY_SHAPES = {
 }
 
 # Illumination-shaped (S, 3, H, W) scratch roles, in order of preference for a-trous outputs.
-_ILLUMINATION_SCRATCH = ("demodulated", "accumulated", "spare_a", "spare_b", "spare_c")
+# "stale_colour" is last frame's colour history, dead once reprojected (see _lend_stale_history).
+_ILLUMINATION_SCRATCH = (
+    "demodulated", "accumulated", "stale_colour", "spare_a", "spare_b", "spare_c",
+)
 
 
 @dataclass
@@ -108,6 +111,8 @@ class _Workspace:
             "variance": ((s, h, w), F32),
             "variance_a": ((s, h, w), F32),
             "variance_b": ((s, h, w), F32),
+            # the reprojection's normal threshold where "variance" has no second plane
+            "normal_width": ((h, w), F32),
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
@@ -149,6 +154,8 @@ class TemporalState:
     luminance_weights: tuple[np.float32, np.float32, np.float32]
     gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None
     glossy: tuple[bool, ...] = ()
+    # Where anti-lag may keep its statistics (None: a workspace plane of its own).
+    antilag_scratch: np.ndarray | None = None
 
 
 @dataclass
@@ -167,10 +174,19 @@ class _FrameRun:
     motion: np.ndarray = field(default_factory=lambda: np.empty((2, 0, 0), F32))
     mode: np.ndarray = field(default_factory=lambda: np.empty((0, 0), np.uint16))
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
+    # Scratch roles lent by last frame's history once it is reprojected (dead until
+    # _store_history replaces it); they take precedence over the workspace's own planes.
+    borrowed: dict[str, np.ndarray] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     cpu_timings: dict[str, float] = field(default_factory=dict)
     clock: tuple[float, float] = field(
         default_factory=lambda: (time.perf_counter(), time.process_time()))
+
+    def plane(self, name: str) -> np.ndarray:
+        """The scratch plane of role ``name``: borrowed from the stale history, else the
+        workspace's own."""
+        borrowed = self.borrowed.get(name)
+        return borrowed if borrowed is not None else self.work[name]
 
     def lap(self, stage: str) -> None:
         """Add the wall and CPU time since the last lap to ``stage``."""
@@ -236,6 +252,9 @@ class Denoiser:
         self._work: _Workspace | None = None
         self._signal_names: tuple[str, ...] | None = None
         self._history: dict[str, np.ndarray] | None = None
+        # History arrays allocated before there is any history (the first frame lends them
+        # as scratch; _store_history adopts them).
+        self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
@@ -275,7 +294,7 @@ class Denoiser:
                                           work["history_length"], self.params.atrous_iterations)
         # Hand this frame's buffers to the history by swapping (no copies); the workspace
         # takes the stale history arrays and overwrites them next frame.
-        self._store_history(run.frame, run.depth, filtered.history_name, run.counts)
+        self._store_history(run, filtered.history_name)
         run.lap("history")
         return self._finish_frame(run, filtered)
 
@@ -312,10 +331,10 @@ class Denoiser:
 
         normal = work["normal"]
         unit_normals(normal_in, depth, normal)
-        # The reprojection thresholds are only needed until the a-trous writes variance:
-        # they borrow its variance buffers (one (H, W) plane each, also with one signal).
-        depth_slope = work["variance_a"][0]
-        normal_width = work["variance_b"][0]
+        # The reprojection thresholds are only needed until the variance is estimated: they
+        # borrow its planes (a plane of their own for the second with one signal).
+        depth_slope = work["variance"][0]
+        normal_width = work["variance"][1] if run.work.num_signals > 1 else work["normal_width"]
         depth_gradients(depth, work["ddx"], work["ddy"], depth_slope)
         normal_gradient(normal, depth, normal_width)
         run.lap("gradients")
@@ -347,10 +366,12 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
+            self._lend_stale_history(run)
             temporal = TemporalState(
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
                 run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
                 tuple(signal.glossy for signal in frame.signals),
+                antilag_scratch=run.plane("antilag_scratch"),
             )
             shortened = self._before_accumulation(temporal)
             if p.antilag:
@@ -360,6 +381,7 @@ class Denoiser:
             history_length.fill(0.0)
             accumulated.fill(0.0)
             moments.fill(0.0)
+            self._lend_stale_history(run)
             temporal = TemporalState(run.names, illumination, mode, accumulated, moments,
                                      history_length, depth, run.weights)
         if before_blend is not None:
@@ -399,9 +421,9 @@ class Denoiser:
         blurred = None
         if p.spatial_variance_blur_color:
             filtered_name = scratch(*busy)
-            blurred = work[filtered_name]
+            blurred = run.plane(filtered_name)
         estimate_variance(
-            work[source], moments, history_length, mode, depth, work["ddx"], work["ddy"],
+            run.plane(source), moments, history_length, mode, depth, work["ddx"], work["ddy"],
             normal, history_threshold=float(p.variance_history_threshold),
             radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
             sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
@@ -415,14 +437,14 @@ class Denoiser:
         feedback = min(p.feedback_iteration, p.atrous_iterations - 1) if feeds_back else -1
         history_name = filtered_name
         filtered_name_now = filtered_name
-        filtered = work[filtered_name]
+        filtered = run.plane(filtered_name)
         filtered_variance = variance
         # "variance" itself is reported as a debug layer; otherwise it is scratch after use.
         variance_names = ("variance_a", "variance_b")
         if not self.debug_layers:
             variance_names = ("variance_a", "variance", "variance_b")
-        guide_luminance = work["guide_luminance"]
-        guide_inverse_scale = work["guide_inverse_scale"]
+        guide_luminance = run.plane("guide_luminance")
+        guide_inverse_scale = run.plane("guide_inverse_scale")
         groups = signal_groups(len(run.names))
         glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance
         sigmas = [glossy_sigma if signal.glossy else p.sigma_luminance
@@ -435,9 +457,10 @@ class Denoiser:
             out_variance = filtered_variance  # not written when not propagated
             if propagate:
                 out_variance = next(
-                    work[v] for v in variance_names if work[v] is not filtered_variance
+                    run.plane(v) for v in variance_names
+                    if run.plane(v) is not filtered_variance
                 )
-            out_illumination = work[out_name]
+            out_illumination = run.plane(out_name)
             # Signals in groups of two or three: the kernel is register-blocked for them,
             # sharing the geometric weights (each signal keeps its own sigma_l).
             for group in groups:
@@ -501,7 +524,7 @@ class Denoiser:
 
         self._accumulate_temporally(run, capture)
         own = self._feedback_filtering(run)
-        self._store_history(run.frame, run.depth, own.history_name, run.counts)
+        self._store_history(run, own.history_name)
         self._frames_processed += 1
         return kept[0]
 
@@ -539,7 +562,7 @@ class Denoiser:
                 run, combined, work["combined_moments"], work["combined_length"],
                 self.params.atrous_iterations, protected=(own.history_name,), feeds_back=False,
             )
-        self._store_history(run.frame, run.depth, own.history_name, run.counts)
+        self._store_history(run, own.history_name)
         run.lap("history")
         if filtered is None:
             self._frames_processed += 1
@@ -672,11 +695,14 @@ class Denoiser:
             return 0
         work = self._work
         assert work is not None
+        scratch = temporal.antilag_scratch
+        if scratch is None:
+            scratch = work["antilag_scratch"]
         return antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
             p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
-            work["antilag_scratch"], work["antilag_lambda"], temporal.gradients,
+            scratch, work["antilag_lambda"], temporal.gradients,
         )
 
     def _compose(
@@ -741,18 +767,52 @@ class Denoiser:
             self._work = work
         return work
 
-    def _store_history(self, frame: Frame, depth: np.ndarray, illumination_name: str,
-                       counts: dict[str, int]) -> None:
-        work = self._work
-        assert work is not None
+    def _history_buffers(self, work: _Workspace) -> dict[str, np.ndarray]:
+        """The history arrays: last frame's history, or before there is one a fresh set that
+        :meth:`_store_history` adopts (so the first frame's scratch is no extra memory)."""
+        shape = _HISTORY_SHAPES["history_illumination"][0](work.num_signals, work.height,
+                                                           work.width)
         history = self._history
-        if history is None or history["history_illumination"].shape != (
-            work[illumination_name].shape
-        ):
+        if history is not None and history["history_illumination"].shape == shape:
+            return history
+        fresh = self._fresh_history
+        if fresh is None or fresh["history_illumination"].shape != shape:
             h, w, s = work.height, work.width, work.num_signals
-            history = {key: np.zeros(shape_of(s, h, w), dtype=dtype)
-                       for key, (shape_of, dtype) in _HISTORY_SHAPES.items()}
-            self._history = history
+            fresh = {key: np.zeros(shape_of(s, h, w), dtype=dtype)
+                     for key, (shape_of, dtype) in _HISTORY_SHAPES.items()}
+            self._fresh_history = fresh
+        return fresh
+
+    def _lend_stale_history(self, run: _FrameRun) -> None:
+        """Once reprojected, last frame's colour, moments and length are dead until
+        :meth:`_store_history` replaces them: they lend their memory to this frame as
+        scratch (an a-trous colour buffer, the guides, a variance buffer, the anti-lag
+        scratch), 3S + S + 2S planes the workspace no longer needs."""
+        work = run.work
+        stale = self._history_buffers(work)
+        s, h, w = work.num_signals, work.height, work.width
+        colour = stale["history_illumination"]
+        # (S, 2, H, W) moments as two contiguous (S, H, W) halves (scratch: layout is free).
+        halves = stale["history_moments"].reshape(2, s, h, w)
+        run.borrowed = {
+            "stale_colour": colour,
+            "guide_luminance": halves[0],
+            "guide_inverse_scale": halves[1],
+            "variance_a": stale["history_length"],
+        }
+        shape = scratch_shape(s, h, w)
+        size = int(np.prod(shape))
+        if size <= colour.size:  # always but for images of a few pixels
+            run.borrowed["antilag_scratch"] = colour.reshape(-1)[:size].reshape(shape)
+
+    def _store_history(self, run: _FrameRun, illumination_name: str) -> None:
+        """Hand this frame's buffers to the history by swapping (no copies); the workspace
+        takes the stale history arrays and overwrites them next frame."""
+        work, frame, counts = run.work, run.frame, run.counts
+        history = self._history_buffers(work)
+        self._history = history
+        self._fresh_history = None
+        colour = run.plane(illumination_name)
         for key, name in (
             ("history_illumination", illumination_name),
             ("history_moments", "moments"),
@@ -760,9 +820,11 @@ class Denoiser:
             ("history_mode", "mode"),
             ("prev_normal", "normal"),
         ):
+            if key == "history_illumination" and colour is history[key]:
+                continue  # the feedback iteration wrote into the stale history itself
             history[key], work.planes[name] = work.planes[name], history[key]
         # The frame's planes belong to the caller: copy.
-        np.copyto(history["prev_depth"], depth)
+        np.copyto(history["prev_depth"], run.depth)
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
         counts["history_resets"] += values.reset_nonfinite_history(
             history["history_illumination"], history["history_moments"],
