@@ -684,13 +684,12 @@ class Denoiser:
         then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
         p = self.params
         glossy_k = p.glossy_history_clamp or p.history_clamp
-        for s, glossy in enumerate(temporal.glossy or (False,) * len(temporal.names)):
-            k = glossy_k if glossy else p.history_clamp
-            if k > 0.0:
-                one = slice(s, s + 1)
-                history_clamp(temporal.history_illumination[one], temporal.history_moments[one],
-                              temporal.history_length[one], temporal.current[one],
-                              temporal.depth, F32(k), temporal.luminance_weights)
+        ks = [glossy_k if glossy else p.history_clamp
+              for glossy in temporal.glossy or (False,) * len(temporal.names)]
+        if max(ks) > 0.0:  # one pass for all signals; k <= 0 leaves a signal alone
+            history_clamp(temporal.history_illumination, temporal.history_moments,
+                          temporal.history_length, temporal.current, temporal.depth, ks,
+                          temporal.luminance_weights)
         if not p.antilag:
             return 0
         work = self._work
