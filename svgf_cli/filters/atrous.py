@@ -290,11 +290,18 @@ def _atrous_rows(
             continue
         # Per signal: sum w, sum w r, sum w g, sum w b, sum w^2 Var.
         sums = np.empty((3, 5, CHUNK), dtype=np.float32)
-        _atrous_row(
-            y, sums, illumination, variance, guide_luminance, guide_inverse_scale,
-            depth, ddx, ddy, normal, step, sigma_depth, normal_log_scale, propagate_variance,
-            out_illumination, out_variance,
-        )
+        if illumination.shape[0] == 3:
+            _atrous_row3(
+                y, sums, illumination, variance, guide_luminance, guide_inverse_scale,
+                depth, ddx, ddy, normal, step, sigma_depth, normal_log_scale,
+                propagate_variance, out_illumination, out_variance,
+            )
+        else:
+            _atrous_row(
+                y, sums, illumination, variance, guide_luminance, guide_inverse_scale,
+                depth, ddx, ddy, normal, step, sigma_depth, normal_log_scale,
+                propagate_variance, out_illumination, out_variance,
+            )
 
 
 @noalias_njit(**_JIT)
@@ -318,14 +325,15 @@ def _atrous_row(
 ) -> None:
     """Row ``y``: chunks of ``CHUNK`` pixels, kernel rows, then per-tap-validity segments.
 
-    One or two signals run the pair loop: a single signal is read as both (``second`` = 0);
-    the duplicate sums are identical and discarded (one compiled pair body instead of two
-    keeps compile time and code paths down). Three signals run the triple loop.
+    The loop always filters two signals. A single signal is read as both (``second`` = 0);
+    the duplicate sums are identical and discarded. One compiled loop body instead of two
+    (or four with numba flag specialisations) keeps compile time and code paths down.
+    Three signals have a row function of their own, :func:`_atrous_row3`, the same steps
+    around the triple loop body: one function holding both bodies measured ~5% slower for
+    pairs, and the shared steps factored into inlined helpers ~8% slower for triples.
     """
     num_signals = illumination.shape[0]
-    three = num_signals == 3
-    lanes = 3 if three else 2
-    second = min(num_signals, 2) - 1
+    second = num_signals - 1
     height, width = depth.shape
     # Only the span between the first and last surface pixel of the row is filtered;
     # background outside it passes through (sky rows cost nothing).
@@ -354,8 +362,8 @@ def _atrous_row(
     kernel = np.empty(5, dtype=np.float32)
     for chunk_start in range(first, last, CHUNK):
         chunk_end = min(last, chunk_start + CHUNK)
-        for t in range(lanes):
-            s = min(t, num_signals - 1)
+        for t in range(2):
+            s = t * second
             for i in range(chunk_end - chunk_start):
                 x = U(chunk_start + i)
                 sums[t, 0, i] = centre
@@ -391,18 +399,11 @@ def _atrous_row(
                     offsets[k] = offset if inside else 0
                     real = inside and not (oy == 0 and k == 2)
                     kernel[k] = _B3[k] * _B3[oy + 2] if real else _ZERO
-                if three:
-                    _segment3(
-                        sums, illumination, variance, guide_luminance, guide_inverse_scale,
-                        depth, ddx, ddy, normal, y, yy, start, count, start - chunk_start,
-                        step, oy, offsets, kernel, sigma_depth, normal_log_scale,
-                    )
-                else:
-                    _segment(
-                        sums, illumination, variance, guide_luminance, guide_inverse_scale,
-                        depth, ddx, ddy, normal, y, yy, start, count, start - chunk_start,
-                        step, oy, offsets, kernel, sigma_depth, normal_log_scale, second,
-                    )
+                _segment(
+                    sums, illumination, variance, guide_luminance, guide_inverse_scale, depth,
+                    ddx, ddy, normal, y, yy, start, count, start - chunk_start, step, oy,
+                    offsets, kernel, sigma_depth, normal_log_scale, second,
+                )
         for s in range(num_signals):
             for i in range(chunk_end - chunk_start):
                 x = U(chunk_start + i)
@@ -415,6 +416,113 @@ def _atrous_row(
                     x = U(chunk_start + i)
                     inverse = _ONE / sums[s, 0, i]
                     out_variance[s, y, x] = sums[s, 4, i] * (inverse * inverse)
+
+
+
+@noalias_njit(**_JIT)
+def _atrous_row3(
+    y: int,
+    sums: np.ndarray,
+    illumination: np.ndarray,
+    variance: np.ndarray,
+    guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
+    depth: np.ndarray,
+    ddx: np.ndarray,
+    ddy: np.ndarray,
+    normal: np.ndarray,
+    step: int,
+    sigma_depth: np.float32,
+    normal_log_scale: np.float32,
+    propagate_variance: bool,
+    out_illumination: np.ndarray,
+    out_variance: np.ndarray,
+) -> None:
+    """:func:`_atrous_row` for three signals (the loop body :func:`_segment3`); keep the
+    two in step."""
+    num_signals = illumination.shape[0]
+    height, width = depth.shape
+    # Only the span between the first and last surface pixel of the row is filtered;
+    # background outside it passes through (sky rows cost nothing).
+    z_row = depth[y]
+    first = 0
+    while first < width and z_row[first] <= _ZERO:
+        first += 1
+    last = width
+    while last > first and z_row[last - 1] <= _ZERO:
+        last -= 1
+    for s in range(num_signals):
+        for x in range(0, first):
+            for c in range(3):
+                out_illumination[s, c, y, x] = illumination[s, c, y, x]
+        for x in range(last, width):
+            for c in range(3):
+                out_illumination[s, c, y, x] = illumination[s, c, y, x]
+        if propagate_variance:
+            for x in range(0, first):
+                out_variance[s, y, x] = variance[s, y, x]
+            for x in range(last, width):
+                out_variance[s, y, x] = variance[s, y, x]
+    centre = _B3[2] * _B3[2]
+    bounds = np.empty(6, dtype=np.int64)
+    offsets = np.empty(5, dtype=np.int64)
+    kernel = np.empty(5, dtype=np.float32)
+    for chunk_start in range(first, last, CHUNK):
+        chunk_end = min(last, chunk_start + CHUNK)
+        for s in range(3):
+            for i in range(chunk_end - chunk_start):
+                x = U(chunk_start + i)
+                sums[s, 0, i] = centre
+                sums[s, 1, i] = centre * illumination[s, 0, y, x]
+                sums[s, 2, i] = centre * illumination[s, 1, y, x]
+                sums[s, 3, i] = centre * illumination[s, 2, y, x]
+                sums[s, 4, i] = (centre * centre) * variance[s, y, x]
+        # Tap validity changes at x = s, 2s, w - 2s and w - s (in any order when w < 4s);
+        # between consecutive bounds every tap is either inside the image or not.
+        bounds[0] = chunk_start
+        bounds[1] = step
+        bounds[2] = 2 * step
+        bounds[3] = width - 2 * step
+        bounds[4] = width - step
+        bounds[5] = chunk_end
+        for i in range(1, 5):
+            bounds[i] = min(max(bounds[i], chunk_start), chunk_end)
+        bounds[1:5].sort()
+        for oy in range(-2, 3):
+            yy = y + oy * step
+            if yy < 0 or yy >= height:
+                continue
+            for segment in range(5):
+                start = bounds[segment]
+                count = bounds[segment + 1] - start
+                if count <= 0:
+                    continue
+                for k in range(5):
+                    offset = (k - 2) * step
+                    inside = start + offset >= 0 and start + count - 1 + offset < width
+                    # Outside taps (and the centre, already in the sums) read the centre
+                    # pixel with weight 0: same loop, no branch, nothing added.
+                    offsets[k] = offset if inside else 0
+                    real = inside and not (oy == 0 and k == 2)
+                    kernel[k] = _B3[k] * _B3[oy + 2] if real else _ZERO
+                _segment3(
+                    sums, illumination, variance, guide_luminance, guide_inverse_scale, depth,
+                    ddx, ddy, normal, y, yy, start, count, start - chunk_start, step, oy,
+                    offsets, kernel, sigma_depth, normal_log_scale,
+                )
+        for s in range(num_signals):
+            for i in range(chunk_end - chunk_start):
+                x = U(chunk_start + i)
+                inverse = _ONE / sums[s, 0, i]
+                out_illumination[s, 0, y, x] = sums[s, 1, i] * inverse
+                out_illumination[s, 1, y, x] = sums[s, 2, i] * inverse
+                out_illumination[s, 2, y, x] = sums[s, 3, i] * inverse
+            if propagate_variance:
+                for i in range(chunk_end - chunk_start):
+                    x = U(chunk_start + i)
+                    inverse = _ONE / sums[s, 0, i]
+                    out_variance[s, y, x] = sums[s, 4, i] * (inverse * inverse)
+
 
 
 @njit(inline="always", **_JIT)
