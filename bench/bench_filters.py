@@ -3,9 +3,12 @@
 Synthetic but realistic input: a textured ground plane and spheres (depth, normals, mesh ids
 from the analytic geometry), heavy-tailed 1-spp-like noise on direct and indirect, emission
 on one object, a background strip, and a camera pan of one pixel per frame with exact
-backward motion. ``--signals 3`` filters a Cycles-like lobe set instead of direct +
-indirect: diffuse (the checker colour), glossy (a grey specular colour) and transmission
-(black colour except on one sphere, so mostly radiance mode). A warm-up sequence excludes
+backward motion. ``--signals 3`` filters the signals ``--signals lobes-split`` makes of a
+Cycles file with glossy and transmission passes instead of direct + indirect:
+``diffuse_direct`` and ``diffuse_indirect`` (the checker colour) and ``specular`` (glossy
+plus transmission light, demodulated by the sum of their colours: a grey 0.5, plus up to 1
+on one sphere, which is therefore filtered as radiance; ``glossy=True``, so the preset's
+glossy rules apply). A warm-up sequence excludes
 JIT compilation and the cold first frames; the timed frames are in steady state (most
 pixels have history >= 4).
 
@@ -102,11 +105,12 @@ class SceneCanvas:
         else:
             gloss, trans = crop(self.gloss_colour), crop(self.trans_colour)
             light = crop(self.direct) + crop(self.indirect)
+            specular = (gloss + trans) * light * spp[2]
             signals = [
-                Signal("diffuse", np.ascontiguousarray(direct + indirect, dtype=F32), albedo),
-                Signal("glossy", np.ascontiguousarray(gloss * light * spp[1], dtype=F32), gloss),
-                Signal("transmission", np.ascontiguousarray(trans * light * spp[2], dtype=F32),
-                       trans),
+                Signal("diffuse_direct", np.ascontiguousarray(direct, dtype=F32), albedo),
+                Signal("diffuse_indirect", np.ascontiguousarray(indirect, dtype=F32), albedo),
+                Signal("specular", np.ascontiguousarray(specular, dtype=F32),
+                       np.ascontiguousarray(gloss + trans, dtype=F32), glossy=True),
             ]
         return Frame(
             signals=signals, albedo=albedo, normal=crop(self.normal), depth=crop(self.depth),
@@ -186,9 +190,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sizes", default="1280x720,1920x1080")
     parser.add_argument("--preset", default="paper")
     parser.add_argument("--signals", type=int, choices=(2, 3), default=2,
-                        help="2: direct + indirect; 3: diffuse, glossy, transmission")
+                        help="2: direct + indirect; 3: Cycles lobes-split (diffuse_direct, "
+                             "diffuse_indirect, specular)")
     args = parser.parse_args(argv)
-    kind = "direct + indirect" if args.signals == 2 else "diffuse + glossy + transmission"
+    kind = ("direct + indirect" if args.signals == 2
+            else "diffuse_direct + diffuse_indirect + specular (lobes-split)")
     print(f"SVGF filter core, preset {args.preset}, {kind}, "
           f"{args.frames} timed frames after {args.warmup} warm-up frames")
     for size in args.sizes.split(","):

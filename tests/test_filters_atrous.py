@@ -62,7 +62,7 @@ def _radiance_mode(mode: np.ndarray, num_signals: int, first: int = 0) -> np.nda
 @pytest.mark.parametrize(
     ("num_signals", "step", "sigma_normal", "width"),
     [(2, 1, 128.0, 23), (2, 2, 128.0, 19), (1, 4, 128.0, 21), (2, 8, 64.0, 13),
-     (1, 2, 100.0, 17), (2, 1, 1.0, 9)],
+     (1, 2, 100.0, 17), (2, 1, 1.0, 9), (3, 1, 128.0, 22), (3, 4, 64.0, 15)],
 )
 def test_atrous_iteration_matches_the_equations(
     num_signals: int, step: int, sigma_normal: float, width: int
@@ -106,9 +106,12 @@ def test_atrous_iteration_matches_the_equations(
     np.testing.assert_allclose(out_c[hole], scene["illumination"][hole], rtol=1e-6)
 
 
-@pytest.mark.parametrize(("num_signals", "width"), [(2, 11), (1, 7), (2, 2), (1, 1)])
+@pytest.mark.parametrize(("num_signals", "width", "sigmas"), [
+    (2, 11, 4.0), (1, 7, 4.0), (2, 2, 4.0), (1, 1, 4.0), (3, 9, 4.0), (3, 8, (4.0, 1.0, 2.5)),
+    (2, 5, (1.0, 4.0)),
+])
 def test_luminance_stop_guides_match_the_renormalised_gaussian(
-    num_signals: int, width: int
+    num_signals: int, width: int, sigmas: float | tuple[float, ...]
 ) -> None:
     height = 6
     scene = _scene(num_signals, height, max(width, 3), seed=width)
@@ -116,10 +119,10 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     luminance = np.empty((num_signals, height, width), dtype=F32)
     inverse_scale = np.empty_like(luminance)
     luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
-                          scene["depth"], F32(4.0), REC709, luminance, inverse_scale)
+                          scene["depth"], sigmas, REC709, luminance, inverse_scale)
     radiance_mode = _radiance_mode(scene["mode"], num_signals)
     want_luminance, want_inverse_scale = ref.luminance_stop_guides(
-        scene["illumination"], scene["variance"], scene["depth"], 4.0, ref.REC709)
+        scene["illumination"], scene["variance"], scene["depth"], sigmas, ref.REC709)
     # The mode rides in the sign: radiance-mode guides are -(l + 1e-30), so even l = 0 is
     # negative there.
     assert np.all((luminance < 0) == radiance_mode)
@@ -132,15 +135,49 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
     padded = np.pad(np.where(scene["depth"] > 0, scene["variance"], 0.0), ((0, 0), (1, 1), (1, 1)))
     plain = sum(g[i] * g[j] * padded[:, j:j + height, i:i + width]
                 for j in range(3) for i in range(3))
-    unnormalised = 1.0 / (4.0 * np.sqrt(plain + (1e-5 * want_luminance) ** 2))
+    sigma = np.broadcast_to(np.asarray(sigmas, dtype=np.float64), (num_signals,))[:, None, None]
+    unnormalised = 1.0 / (sigma * np.sqrt(plain + (1e-5 * want_luminance) ** 2))
     assert np.mean(np.abs(unnormalised / want_inverse_scale - 1.0) > 0.01) > 0.2
     # Where the variance is 0 the floor is relative to l (1e-5 l, so scaling the input
     # scales the output), not absolute: 1 / (4e-5 l), far from 1 / 4e-5 unless l = 1.
     flat = (slice(None), slice(4, 6), slice(3, 5))
     if width >= 5:
         np.testing.assert_allclose(want_inverse_scale[flat],
-                                   1.0 / (4e-5 * want_luminance[flat]), rtol=1e-9)
+                                   1.0 / (1e-5 * sigma * want_luminance[flat]), rtol=1e-9)
         assert np.all(np.abs(want_luminance[flat] - 1.0) > 0.01)
+
+
+@pytest.mark.parametrize(("step", "width"), [(1, 20), (2, 9)])
+def test_three_signals_in_one_pass_equal_a_pair_and_a_single(step: int, width: int) -> None:
+    """The triple loop shares only the geometric weights: each signal's result is the one
+    the pair loop gives it, bit for bit (so grouping never changes an output)."""
+    scene = _scene(3, 12, width, seed=step)
+    sigmas = (4.0, 1.0, 4.0)
+    luminance = np.empty((3, 12, width), dtype=F32)
+    inverse_scale = np.empty_like(luminance)
+    luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                          scene["depth"], sigmas, REC709, luminance, inverse_scale)
+    geometry = (scene["depth"], scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, 128.0,
+                True)
+    together_c = np.empty_like(scene["illumination"])
+    together_v = np.empty_like(scene["variance"])
+    atrous_iteration(scene["illumination"], scene["variance"], luminance, inverse_scale,
+                     *geometry, together_c, together_v)
+    apart_c = np.empty_like(together_c)
+    apart_v = np.empty_like(together_v)
+    for part in (slice(0, 2), slice(2, 3)):
+        part_luminance = np.empty_like(luminance[part])
+        part_inverse = np.empty_like(part_luminance)
+        luminance_stop_guides(scene["illumination"][part], scene["variance"][part],
+                              scene["mode"], part.start, scene["depth"], sigmas[part],
+                              REC709, part_luminance, part_inverse)
+        np.testing.assert_array_equal(part_luminance, luminance[part])
+        np.testing.assert_array_equal(part_inverse, inverse_scale[part])
+        atrous_iteration(scene["illumination"][part], scene["variance"][part], part_luminance,
+                         part_inverse, *geometry, apart_c[part], apart_v[part])
+    np.testing.assert_array_equal(together_c, apart_c)
+    np.testing.assert_array_equal(together_v, apart_v)
+    assert not np.array_equal(together_c[2], together_c[0])
 
 
 def test_atrous_iteration_without_variance_leaves_it_alone_and_refuses_aliasing() -> None:

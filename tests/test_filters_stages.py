@@ -313,6 +313,29 @@ def test_firefly_clamp_scales_outliers_only() -> None:
     assert np.mean(change == 0.0) > 0.8
 
 
+def test_history_clamp_per_signal_k_equals_one_signal_at_a_time() -> None:
+    """One pass with a k per signal: each signal as if clamped alone, k = 0 leaves it be."""
+    h, w = 7, 9
+    current = np.stack([texture(w, h, seed=s) + F32(1.0) for s in range(3)])
+    history = (current * F32(3.0))[:, :, ::-1, :].copy()
+    length = np.full((3, h, w), 4.0, dtype=F32)
+    moments = np.ones((3, 2, h, w), dtype=F32)
+    depth = np.ones((h, w), dtype=F32)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    ks = (1.0, 0.0, 3.0)
+    together, together_moments = history.copy(), moments.copy()
+    history_clamp(together, together_moments, length, current, depth, ks, weights)
+    for s, k in enumerate(ks):
+        alone, alone_moments = history[s:s + 1].copy(), moments[s:s + 1].copy()
+        if k > 0:
+            history_clamp(alone, alone_moments, length[s:s + 1], current[s:s + 1], depth,
+                          F32(k), weights)
+        np.testing.assert_array_equal(together[s], alone[0])
+        np.testing.assert_array_equal(together_moments[s], alone_moments[0])
+    assert np.array_equal(together[1], history[1])
+    assert not np.array_equal(together[0], history[0])
+
+
 def test_history_clamp_pulls_stale_history_into_neighbourhood_range() -> None:
     h, w = 6, 6
     current = texture(w, h, seed=2)[None] + F32(1.0)

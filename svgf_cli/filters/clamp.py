@@ -13,6 +13,8 @@ Neighbour statistics use only in-image, non-background pixels.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numba import njit, prange
 
@@ -93,16 +95,13 @@ def _three_tap(column: np.ndarray, out: np.ndarray) -> None:
     out[width - 1] = column[width - 2] + column[width - 1]
 
 
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
 def history_clamp(
     history: np.ndarray,
     history_moments: np.ndarray,
     history_length: np.ndarray,
     current: np.ndarray,
     depth: np.ndarray,
-    k: np.float32,
+    k: float | Sequence[float],
     luminance_weights: tuple[np.float32, np.float32, np.float32],
 ) -> None:
     """In place: clamp each history channel to the current 3x3 mean +- k*sigma, and let the
@@ -115,6 +114,28 @@ def history_clamp(
     (S, 2, H, W), ``history_length`` (S, H, W); a signal's pixels without history are left
     alone. The 3x3 sums are separable (column sums over three rows, then three taps), so
     every inner loop runs over a row.
+
+    ``k`` is one for all signals or one per signal; a signal with ``k <= 0`` is not clamped.
+    All signals in one parallel pass (the background count is shared).
+    """
+    ks = np.ascontiguousarray(np.broadcast_to(np.asarray(k, dtype=F32), (history.shape[0],)))
+    _history_clamp_rows(history, history_moments, history_length, current, depth, ks,
+                        luminance_weights)
+
+
+@njit(
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def _history_clamp_rows(
+    history: np.ndarray,
+    history_moments: np.ndarray,
+    history_length: np.ndarray,
+    current: np.ndarray,
+    depth: np.ndarray,
+    ks: np.ndarray,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+) -> None:
+    """All rows of :func:`history_clamp` (``ks`` per signal).
     """
     num_signals = history.shape[0]
     height, width = depth.shape
@@ -135,6 +156,9 @@ def history_clamp(
         _three_tap(column, count)
         z = depth[y]
         for s in range(num_signals):
+            k = ks[s]
+            if k <= _ZERO:
+                continue
             h = history_length[s, y]
             hr, hg, hb = history[s, 0, y], history[s, 1, y], history[s, 2, y]
             for x in range(width):

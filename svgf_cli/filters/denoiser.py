@@ -6,9 +6,9 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
    gradients -> demodulate every signal, with its per-pixel mode (+ optional firefly clamp)
    -> reproject every signal's history -> the pre-accumulation hook (optional history
    clamp, anti-lag) -> accumulate;
-2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over pairs of
-   signals; the ``feedback_iteration`` output becomes next frame's colour history (stored by
-   ``_store_history``, with the history guard);
+2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over groups
+   of two or three signals; the ``feedback_iteration`` output becomes next frame's colour
+   history (stored by ``_store_history``, with the history guard);
 3. composition (``_finish_frame``): optional despike (isolated spikes the a-trous kept) ->
    remodulate, sum the signals, add emission, restore background -> optional TAA.
 
@@ -16,10 +16,11 @@ All buffers are float32 structure-of-arrays planes (the mode mask uint16), alloc
 resolution and signal count and reused, so memory does not grow with the sequence length.
 Scratch is shared between stages (names are roles; a buffer is taken on first use): the
 reprojected history is accumulated in place, the a-trous ping-pong reuses the demodulated
-illumination once it is dead, the reprojection thresholds live in the a-trous variance
-buffers until those are needed, and the output radiance is a fresh array per frame handed to
-the caller (no resident copy). At 1080p with two signals the resident set is about 60
-float32 planes (~0.5 GB) including the history.
+illumination once it is dead, last frame's history (dead once reprojected) lends its planes
+as a-trous, guide and anti-lag scratch until it is replaced, the reprojection thresholds live
+in the variance planes until the variance is estimated, and the output radiance is a fresh
+array per frame handed to the caller (no resident copy). At 1080p the resident set including
+the history is 344 MB with two signals and 473 MB with three.
 """
 
 from __future__ import annotations
@@ -76,7 +77,10 @@ _HISTORY_SHAPES = {
 }
 
 # Illumination-shaped (S, 3, H, W) scratch roles, in order of preference for a-trous outputs.
-_ILLUMINATION_SCRATCH = ("demodulated", "accumulated", "spare_a", "spare_b", "spare_c")
+# "stale_colour" is last frame's colour history, dead once reprojected (see _lend_stale_history).
+_ILLUMINATION_SCRATCH = (
+    "demodulated", "accumulated", "stale_colour", "spare_a", "spare_b", "spare_c",
+)
 
 
 @dataclass
@@ -109,6 +113,8 @@ class _Workspace:
             "variance": ((s, h, w), F32),
             "variance_a": ((s, h, w), F32),
             "variance_b": ((s, h, w), F32),
+            # the reprojection's normal threshold where "variance" has no second plane
+            "normal_width": ((h, w), F32),
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
@@ -151,6 +157,8 @@ class TemporalState:
     luminance_weights: tuple[np.float32, np.float32, np.float32]
     gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None
     glossy: tuple[bool, ...] = ()
+    # Where anti-lag may keep its statistics (None: a workspace plane of its own).
+    antilag_scratch: np.ndarray | None = None
 
 
 @dataclass
@@ -169,10 +177,19 @@ class _FrameRun:
     motion: np.ndarray = field(default_factory=lambda: np.empty((2, 0, 0), F32))
     mode: np.ndarray = field(default_factory=lambda: np.empty((0, 0), np.uint16))
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
+    # Scratch roles lent by last frame's history once it is reprojected (dead until
+    # _store_history replaces it); they take precedence over the workspace's own planes.
+    borrowed: dict[str, np.ndarray] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     cpu_timings: dict[str, float] = field(default_factory=dict)
     clock: tuple[float, float] = field(
         default_factory=lambda: (time.perf_counter(), time.process_time()))
+
+    def plane(self, name: str) -> np.ndarray:
+        """The scratch plane of role ``name``: borrowed from the stale history, else the
+        workspace's own."""
+        borrowed = self.borrowed.get(name)
+        return borrowed if borrowed is not None else self.work[name]
 
     def lap(self, stage: str) -> None:
         """Add the wall and CPU time since the last lap to ``stage``."""
@@ -243,6 +260,9 @@ class Denoiser:
         self._work: _Workspace | None = None
         self._signal_names: tuple[str, ...] | None = None
         self._history: dict[str, np.ndarray] | None = None
+        # History arrays allocated before there is any history (the first frame lends them
+        # as scratch; _store_history adopts them).
+        self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
@@ -282,7 +302,7 @@ class Denoiser:
                                           work["history_length"], self.params.atrous_iterations)
         # Hand this frame's buffers to the history by swapping (no copies); the workspace
         # takes the stale history arrays and overwrites them next frame.
-        self._store_history(run.frame, run.depth, filtered.history_name, run.counts)
+        self._store_history(run, filtered.history_name)
         run.lap("history")
         return self._finish_frame(run, filtered)
 
@@ -319,10 +339,10 @@ class Denoiser:
 
         normal = work["normal"]
         unit_normals(normal_in, depth, normal)
-        # The reprojection thresholds are only needed until the a-trous writes variance:
-        # they borrow its variance buffers (one (H, W) plane each, also with one signal).
-        depth_slope = work["variance_a"][0]
-        normal_width = work["variance_b"][0]
+        # The reprojection thresholds are only needed until the variance is estimated: they
+        # borrow its planes (a plane of their own for the second with one signal).
+        depth_slope = work["variance"][0]
+        normal_width = work["variance"][1] if run.work.num_signals > 1 else work["normal_width"]
         depth_gradients(depth, work["ddx"], work["ddy"], depth_slope)
         normal_gradient(normal, depth, normal_width)
         run.lap("gradients")
@@ -354,10 +374,12 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
+            self._lend_stale_history(run)
             temporal = TemporalState(
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
                 run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
                 tuple(signal.glossy for signal in frame.signals),
+                antilag_scratch=run.plane("antilag_scratch"),
             )
             shortened = self._before_accumulation(temporal)
             if p.antilag:
@@ -367,6 +389,7 @@ class Denoiser:
             history_length.fill(0.0)
             accumulated.fill(0.0)
             moments.fill(0.0)
+            self._lend_stale_history(run)
             temporal = TemporalState(run.names, illumination, mode, accumulated, moments,
                                      history_length, depth, run.weights)
         if before_blend is not None:
@@ -406,9 +429,9 @@ class Denoiser:
         blurred = None
         if p.spatial_variance_blur_color:
             filtered_name = scratch(*busy)
-            blurred = work[filtered_name]
+            blurred = run.plane(filtered_name)
         estimate_variance(
-            work[source], moments, history_length, mode, depth, work["ddx"], work["ddy"],
+            run.plane(source), moments, history_length, mode, depth, work["ddx"], work["ddy"],
             normal, history_threshold=float(p.variance_history_threshold),
             radius=p.spatial_variance_radius, sigma_depth=p.sigma_depth,
             sigma_luminance=p.spatial_variance_sigma_luminance, squarings=self._squarings,
@@ -422,16 +445,15 @@ class Denoiser:
         feedback = min(p.feedback_iteration, p.atrous_iterations - 1) if feeds_back else -1
         history_name = filtered_name
         filtered_name_now = filtered_name
-        filtered = work[filtered_name]
+        filtered = run.plane(filtered_name)
         filtered_variance = variance
         # "variance" itself is reported as a debug layer; otherwise it is scratch after use.
         variance_names = ("variance_a", "variance_b")
         if not self.debug_layers:
             variance_names = ("variance_a", "variance", "variance_b")
-        guide_luminance = work["guide_luminance"]
-        guide_inverse_scale = work["guide_inverse_scale"]
-        names = run.names
-        pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]
+        guide_luminance = run.plane("guide_luminance")
+        guide_inverse_scale = run.plane("guide_inverse_scale")
+        groups = signal_groups(len(run.names))
         glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance
         sigmas = [glossy_sigma if signal.glossy else p.sigma_luminance
                   for signal in run.frame.signals]
@@ -443,24 +465,23 @@ class Denoiser:
             out_variance = filtered_variance  # not written when not propagated
             if propagate:
                 out_variance = next(
-                    work[v] for v in variance_names if work[v] is not filtered_variance
+                    run.plane(v) for v in variance_names
+                    if run.plane(v) is not filtered_variance
                 )
-            out_illumination = work[out_name]
-            # Signals in pairs: the kernel is register-blocked for two, sharing the geometry.
-            for pair in pairs:
-                # A pair of different sigma_l (a glossy and a non-glossy signal) gets its
-                # guides one signal at a time.
-                for part in _same_sigma_parts(pair, sigmas):
-                    luminance_stop_guides(
-                        filtered[part], filtered_variance[part], mode, part.start, depth,
-                        F32(sigmas[part.start]), weights, guide_luminance[part],
-                        guide_inverse_scale[part],
-                    )
+            out_illumination = run.plane(out_name)
+            # Signals in groups of two or three: the kernel is register-blocked for them,
+            # sharing the geometric weights (each signal keeps its own sigma_l).
+            for group in groups:
+                luminance_stop_guides(
+                    filtered[group], filtered_variance[group], mode, group.start, depth,
+                    sigmas[group], weights, guide_luminance[group],
+                    guide_inverse_scale[group],
+                )
                 atrous_iteration(
-                    filtered[pair], filtered_variance[pair], guide_luminance[pair],
-                    guide_inverse_scale[pair], depth, work["ddx"], work["ddy"], normal,
+                    filtered[group], filtered_variance[group], guide_luminance[group],
+                    guide_inverse_scale[group], depth, work["ddx"], work["ddy"], normal,
                     1 << iteration, p.sigma_depth, p.sigma_normal, propagate,
-                    out_illumination[pair], out_variance[pair],
+                    out_illumination[group], out_variance[group],
                 )
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
@@ -529,7 +550,7 @@ class Denoiser:
 
         self._accumulate_temporally(run, capture)
         own = self._feedback_filtering(run)
-        self._store_history(run.frame, run.depth, own.history_name, run.counts)
+        self._store_history(run, own.history_name)
         self._frames_processed += 1
         return kept[0]
 
@@ -567,7 +588,7 @@ class Denoiser:
                 run, combined, work["combined_moments"], work["combined_length"],
                 self.params.atrous_iterations, protected=(own.history_name,), feeds_back=False,
             )
-        self._store_history(run.frame, run.depth, own.history_name, run.counts)
+        self._store_history(run, own.history_name)
         run.lap("history")
         if filtered is None:
             self._frames_processed += 1
@@ -690,22 +711,24 @@ class Denoiser:
         then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
         p = self.params
         glossy_k = p.glossy_history_clamp or p.history_clamp
-        for s, glossy in enumerate(temporal.glossy or (False,) * len(temporal.names)):
-            k = glossy_k if glossy else p.history_clamp
-            if k > 0.0:
-                one = slice(s, s + 1)
-                history_clamp(temporal.history_illumination[one], temporal.history_moments[one],
-                              temporal.history_length[one], temporal.current[one],
-                              temporal.depth, F32(k), temporal.luminance_weights)
+        ks = [glossy_k if glossy else p.history_clamp
+              for glossy in temporal.glossy or (False,) * len(temporal.names)]
+        if max(ks) > 0.0:  # one pass for all signals; k <= 0 leaves a signal alone
+            history_clamp(temporal.history_illumination, temporal.history_moments,
+                          temporal.history_length, temporal.current, temporal.depth, ks,
+                          temporal.luminance_weights)
         if not p.antilag:
             return 0
         work = self._work
         assert work is not None
+        scratch = temporal.antilag_scratch
+        if scratch is None:
+            scratch = work["antilag_scratch"]
         return antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
             p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
-            work["antilag_scratch"], work["antilag_lambda"], temporal.gradients,
+            scratch, work["antilag_lambda"], temporal.gradients,
         )
 
     def _compose(
@@ -772,18 +795,52 @@ class Denoiser:
             self._work = work
         return work
 
-    def _store_history(self, frame: Frame, depth: np.ndarray, illumination_name: str,
-                       counts: dict[str, int]) -> None:
-        work = self._work
-        assert work is not None
+    def _history_buffers(self, work: _Workspace) -> dict[str, np.ndarray]:
+        """The history arrays: last frame's history, or before there is one a fresh set that
+        :meth:`_store_history` adopts (so the first frame's scratch is no extra memory)."""
+        shape = _HISTORY_SHAPES["history_illumination"][0](work.num_signals, work.height,
+                                                           work.width)
         history = self._history
-        if history is None or history["history_illumination"].shape != (
-            work[illumination_name].shape
-        ):
+        if history is not None and history["history_illumination"].shape == shape:
+            return history
+        fresh = self._fresh_history
+        if fresh is None or fresh["history_illumination"].shape != shape:
             h, w, s = work.height, work.width, work.num_signals
-            history = {key: np.zeros(shape_of(s, h, w), dtype=dtype)
-                       for key, (shape_of, dtype) in _HISTORY_SHAPES.items()}
-            self._history = history
+            fresh = {key: np.zeros(shape_of(s, h, w), dtype=dtype)
+                     for key, (shape_of, dtype) in _HISTORY_SHAPES.items()}
+            self._fresh_history = fresh
+        return fresh
+
+    def _lend_stale_history(self, run: _FrameRun) -> None:
+        """Once reprojected, last frame's colour, moments and length are dead until
+        :meth:`_store_history` replaces them: they lend their memory to this frame as
+        scratch (an a-trous colour buffer, the guides, a variance buffer, the anti-lag
+        scratch), 3S + S + 2S planes the workspace no longer needs."""
+        work = run.work
+        stale = self._history_buffers(work)
+        s, h, w = work.num_signals, work.height, work.width
+        colour = stale["history_illumination"]
+        # (S, 2, H, W) moments as two contiguous (S, H, W) halves (scratch: layout is free).
+        halves = stale["history_moments"].reshape(2, s, h, w)
+        run.borrowed = {
+            "stale_colour": colour,
+            "guide_luminance": halves[0],
+            "guide_inverse_scale": halves[1],
+            "variance_a": stale["history_length"],
+        }
+        shape = scratch_shape(s, h, w)
+        size = int(np.prod(shape))
+        if size <= colour.size:  # always but for images of a few pixels
+            run.borrowed["antilag_scratch"] = colour.reshape(-1)[:size].reshape(shape)
+
+    def _store_history(self, run: _FrameRun, illumination_name: str) -> None:
+        """Hand this frame's buffers to the history by swapping (no copies); the workspace
+        takes the stale history arrays and overwrites them next frame."""
+        work, frame, counts = run.work, run.frame, run.counts
+        history = self._history_buffers(work)
+        self._history = history
+        self._fresh_history = None
+        colour = run.plane(illumination_name)
         for key, name in (
             ("history_illumination", illumination_name),
             ("history_moments", "moments"),
@@ -791,9 +848,11 @@ class Denoiser:
             ("history_mode", "mode"),
             ("prev_normal", "normal"),
         ):
+            if key == "history_illumination" and colour is history[key]:
+                continue  # the feedback iteration wrote into the stale history itself
             history[key], work.planes[name] = work.planes[name], history[key]
         # The frame's planes belong to the caller: copy.
-        np.copyto(history["prev_depth"], depth)
+        np.copyto(history["prev_depth"], run.depth)
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
         counts["history_resets"] += values.reset_nonfinite_history(
             history["history_illumination"], history["history_moments"],
@@ -808,11 +867,17 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
 
 
-def _same_sigma_parts(pair: slice, sigmas: list[float]) -> list[slice]:
-    """``pair`` whole when its signals share sigma_l, else one slice per signal."""
-    if pair.stop - pair.start == 2 and sigmas[pair.start] != sigmas[pair.start + 1]:
-        return [slice(pair.start, pair.start + 1), slice(pair.start + 1, pair.stop)]
-    return [pair]
+def signal_groups(num_signals: int) -> list[slice]:
+    """The a-trous filters signals in groups sharing the geometric weights: threes, but
+    4 as 2 + 2 (a lone signal costs nearly as much as a pair), and 1 or 2 as they are."""
+    sizes: list[int] = []
+    left = num_signals
+    while left > 0:
+        size = 2 if left in (2, 4) else min(left, 3)
+        sizes.append(size)
+        left -= size
+    starts = np.cumsum([0, *sizes])
+    return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
 def _gradient_samples(

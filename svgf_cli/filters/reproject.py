@@ -186,6 +186,13 @@ def _reproject_rows(
         if y >= height:
             continue
         uy = U(y)
+        # Pixels whose usable taps all agree with their modes (the common case) only record
+        # their taps and weights here; their signals are resampled after the row's pass,
+        # one signal at a time (fewer memory streams at once than all signals per pixel).
+        agreed = np.zeros(width, dtype=np.uint8)
+        tap_rows = np.empty((2, width), dtype=np.uint64)
+        tap_columns = np.empty((2, width), dtype=np.uint64)
+        tap_weights = np.empty((4, width), dtype=np.float32)
         for x in range(width):
             ux = U(x)
             z = depth[uy, ux]
@@ -254,11 +261,13 @@ def _reproject_rows(
                 weight_sum = g00 + g10 + g01 + g11
                 if weight_sum >= _MIN_BILINEAR_WEIGHT:
                     inv = _ONE / weight_sum
-                    for s in range(num_signals):
-                        _bilinear(s, uy, ux, ya, yb, xa, xb, g00 * inv, g10 * inv, g01 * inv,
-                                  g11 * inv, prev_illumination, prev_moments,
-                                  prev_history_length, out_illumination, out_moments,
-                                  out_history_length)
+                    agreed[ux] = 1
+                    tap_rows[0, ux], tap_rows[1, ux] = ya, yb
+                    tap_columns[0, ux], tap_columns[1, ux] = xa, xb
+                    tap_weights[0, ux] = g00 * inv
+                    tap_weights[1, ux] = g10 * inv
+                    tap_weights[2, ux] = g01 * inv
+                    tap_weights[3, ux] = g11 * inv
                     continue
             # Per signal: a tap counts only where its stored mode equals the pixel's (a
             # history pixel marked NO_HISTORY matches no signal).
@@ -310,6 +319,15 @@ def _reproject_rows(
                     out_illumination[s, c, uy, ux] *= inv
                 out_moments[s, 0, uy, ux] *= inv
                 out_moments[s, 1, uy, ux] *= inv
+        for s in range(num_signals):
+            for x in range(width):
+                if agreed[x]:
+                    ux = U(x)
+                    _bilinear(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux], tap_columns[0, ux],
+                              tap_columns[1, ux], tap_weights[0, ux], tap_weights[1, ux],
+                              tap_weights[2, ux], tap_weights[3, ux], prev_illumination,
+                              prev_moments, prev_history_length, out_illumination,
+                              out_moments, out_history_length)
 
 
 @njit(
