@@ -31,7 +31,8 @@ from svgf_cli.frame import Frame, Signal
 
 F32 = np.float32
 STAGES = (
-    "values", "gradients", "demodulate", "reproject", "variance", "atrous", "history", "modulate",
+    "values", "gradients", "demodulate", "reproject", "variance", "atrous", "history", "despike",
+    "modulate",
 )
 
 
