@@ -463,6 +463,29 @@ def test_reprojection_fallback_and_rejection_cases() -> None:
     np.testing.assert_allclose(out[2][:, 5, 0], history["length"][:, 5, 0], rtol=1e-6)
 
 
+def test_reprojection_from_just_outside_the_image_takes_the_fallback() -> None:
+    """A position up to 1.5 pixels outside the image (both bilinear taps outside) rounds to
+    the row or column next to the image, whose 3x3 box reaches the border pixels: the
+    fallback averages them. Beyond 1.5 pixels the box is all outside: rejected. Each side."""
+    height, width = 10, 12
+    prev = _flat(width, height)
+    motion = np.zeros((2, height, width), F32)
+    motion[1, 0, 3], motion[1, 0, 6] = -1.4, -1.6  # above the top row
+    motion[0, 3, 0], motion[0, 6, 0] = -1.4, -1.6  # left of the first column
+    motion[1, height - 1, 3], motion[1, height - 1, 6] = 1.4, 1.6  # below the last row
+    motion[0, 3, width - 1], motion[0, 6, width - 1] = 1.4, 1.6  # right of the last column
+    cur = _flat(width, height, motion=motion)
+    out, want = _run_reproject(prev, cur, _history_for(prev, seed=2))
+    _assert_reprojection_matches(out, want)
+    for inside, outside in (((0, 3), (0, 6)), ((3, 0), (6, 0)),
+                            ((height - 1, 3), (height - 1, 6)),
+                            ((3, width - 1), (6, width - 1))):
+        assert np.all(want.path[(slice(None), *inside)] == ref.FALLBACK)
+        assert np.all(out[2][(slice(None), *inside)] > 0)
+        assert np.all(want.path[(slice(None), *outside)] == ref.REJECTED)
+        assert np.all(out[2][(slice(None), *outside)] == 0)
+
+
 def test_resampled_history_length_keeps_whole_counts() -> None:
     """A footprint of equal history lengths resamples to exactly that length at any
     sub-pixel position. (Float32 renormalised weights used to give 2.9999998 for 3 at about

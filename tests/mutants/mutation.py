@@ -77,7 +77,11 @@ FILTER_TESTS = (
     "tests/test_filters_antilag.py",
     "tests/test_filters_denoiser.py",
     "tests/test_filters_determinism_flags.py",
+    "tests/test_filters_glossy.py",
+    "tests/test_filters_bidirectional.py",
 )
+# The bidirectional kernels' own tests first (the rest of FILTER_TESTS never calls them).
+_BIDIRECTIONAL_TESTS = ("tests/test_filters_bidirectional.py", *FILTER_TESTS[:-1])
 _READ_TESTS = (
     "tests/test_io_source.py",
     "tests/test_io_header.py",
@@ -108,6 +112,10 @@ _WRITE_TESTS = (
 )
 # Which tests exercise a module, fastest first (a killed mutant stops at its first failure).
 MODULE_TESTS: dict[str, tuple[str, ...]] = {
+    "svgf_cli/filters/bidirectional.py": _BIDIRECTIONAL_TESTS,
+    "svgf_cli/filters/two_pass.py": _BIDIRECTIONAL_TESTS,
+    "svgf_cli/filters/invert_motion.py": ("tests/test_filters_bidirectional.py",
+                                          "tests/test_motion_next.py", *FILTER_TESTS[:-1]),
     "svgf_cli/io/colour.py": ("tests/test_io_colour.py", "tests/test_io_exr.py",
                               "tests/test_io_passthrough.py", "tests/test_cli_denoise.py"),
     "svgf_cli/io/patterns.py": ("tests/test_io_patterns.py", "tests/test_farm_plan.py",
@@ -288,6 +296,26 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/filters/denoiser.py", "process", "core/NumberReplacer",
                "history_length.fill(0.0)",
                "0 -> -1: accumulation reuses history only where h_prev > 0; both give h = 1"),
+    Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
+               "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
+               "2 -> 3: a third scratch slice that is never written or read (the row kernel "
+               "always filters two signals, t in range(2), and reads back sums[s] for s < 2)"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "samples.append((mask, np.where(finite, gradient.previous, F32(0.0)),",
+               "the stand-in for a non-finite sample only needs to be finite: its mask is 0 and "
+               "_gradient_row_sums, the only reader, multiplies every term by the mask"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "np.where(finite, gradient.current, F32(0.0))))",
+               "the stand-in for a non-finite sample only needs to be finite: its mask is 0 and "
+               "_gradient_row_sums, the only reader, multiplies every term by the mask"),
+    Equivalent("svgf_cli/filters/variance.py", "_needed_row", "core/NumberReplacer",
+               "largest = np.uint8(0)",
+               "0 -> 1: every row is then scanned for runs of needed pixels, and a row with "
+               "none yields no run: same pixels written, more time"),
+    Equivalent("svgf_cli/filters/variance.py", "_spatial_variance_run", "core/NumberReplacer",
+               "if count <= 0:",
+               "<= 0 -> <= -1: a tap column with count 0 then runs loops of range(0) over "
+               "empty slices: nothing is added"),
 )
 
 
