@@ -332,6 +332,41 @@ def test_arnold_lobe_aovs_are_radiance_and_its_direct_excludes_emission(tmp_path
                                np.stack([planes[c] for c in "RGB"]), rtol=1e-6)
 
 
+def test_cycles_direct_layer_holds_the_emission_and_it_is_taken_out_once(
+    tmp_path: Path,
+) -> None:
+    # Cycles writes no direct/indirect passes of its own; a file that has them (a compositor
+    # built them from the light passes, so `direct` holds the camera-visible emission, as the
+    # tracer's does) is filtered with the emission taken out of `direct` and added back
+    # once: the frame still adds up to Combined.
+    rng = np.random.default_rng(6)
+    h, w = 6, 8
+    planes: dict[str, np.ndarray] = {}
+
+    def layer(name: str, value: np.ndarray, channels: str = "RGB") -> np.ndarray:
+        for i, c in enumerate(channels):
+            planes[f"ViewLayer.{name}.{c}"] = value[i]
+        return value
+
+    emission = np.zeros((3, h, w), np.float32)
+    emission[:, 1, 2] = 5.0
+    layer("Emit", emission)
+    direct = layer("direct", rng.uniform(0.1, 1.0, (3, h, w)).astype(np.float32) + emission)
+    indirect = layer("indirect", rng.uniform(0.0, 0.5, (3, h, w)).astype(np.float32))
+    layer("Combined", direct + indirect)
+    layer("Denoising Albedo", np.full((3, h, w), 0.5, np.float32))
+    layer("Normal", np.stack([np.zeros((h, w)), np.zeros((h, w)), np.ones((h, w))])
+          .astype(np.float32), "XYZ")
+    layer("Depth", np.full((1, h, w), 3.0, np.float32), "Z")
+    layer("Vector", np.zeros((4, h, w), np.float32), "XYZW")
+    write_exr(tmp_path / "c.exr", planes)
+    pair = read_frame(tmp_path / "c.exr", build_mapping("cycles", signals="direct-indirect"))
+    assert pair.plan.set == "direct-indirect"
+    np.testing.assert_allclose(pair.frame.signal("direct").radiance, direct - emission,
+                               rtol=1e-6)
+    np.testing.assert_allclose(pair.frame.total_radiance(), direct + indirect, rtol=1e-6)
+
+
 def test_arnold_lobes_need_no_albedo_aovs(tmp_path: Path) -> None:
     # Radiance-style lobe AOVs are not divided by a colour: without the albedo AOVs the lobe
     # set is still offered, each lobe filtered undemodulated (albedo 1).

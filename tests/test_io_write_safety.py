@@ -127,6 +127,18 @@ def test_stale_temporaries_only_ours_and_only_dead(tmp_path: Path) -> None:
     assert left == {live.name, remote.name, not_ours.name, foreign.name}
 
 
+def test_another_hosts_temporary_is_stale_after_an_hour_untouched(tmp_path: Path) -> None:
+    # docs/robustness.md: a temporary of another host (PIDs not checkable) is removed once it
+    # has been untouched for an hour; a live write touches it continually.
+    outputs = [tmp_path / "o.0001.exr"]
+    remote = tmp_path / ".o.0001.exr.otherhost_4026531836.12.00ff00ff.tmp.exr"
+    remote.write_bytes(b"partial")
+    touched = 1_000_000_000.0
+    os.utime(remote, (touched, touched))
+    assert stale_temporaries(outputs, now=touched + 3599.5) == []
+    assert stale_temporaries(outputs, now=touched + 3600.5) == [remote]
+
+
 def test_a_live_process_of_another_user_keeps_its_temporary(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
