@@ -84,6 +84,7 @@ FILTER_TESTS = (
 _BIDIRECTIONAL_TESTS = ("tests/test_filters_bidirectional.py", *FILTER_TESTS[:-1])
 _READ_TESTS = (
     "tests/test_io_source.py",
+    "tests/test_io_signals.py",
     "tests/test_io_header.py",
     "tests/test_io_exr.py",
     "tests/test_io_layers.py",
