@@ -113,6 +113,7 @@ _WRITE_TESTS = (
 )
 # Which tests exercise a module, fastest first (a killed mutant stops at its first failure).
 MODULE_TESTS: dict[str, tuple[str, ...]] = {
+    "svgf_cli/filters/params.py": ("tests/test_filters_params.py", *FILTER_TESTS),
     "svgf_cli/filters/bidirectional.py": _BIDIRECTIONAL_TESTS,
     "svgf_cli/filters/two_pass.py": _BIDIRECTIONAL_TESTS,
     "svgf_cli/filters/invert_motion.py": ("tests/test_filters_bidirectional.py",
