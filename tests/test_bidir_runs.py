@@ -121,6 +121,7 @@ def test_a_bad_frame_fails_the_run_and_removes_the_scratch(
 def test_a_dead_runs_scratch_is_removed_and_a_live_ones_kept(tmp_path: Path) -> None:
     with ScratchFolder(tmp_path) as live:
         name = live.path.name
+        assert live.path.stat().st_mode & 0o777 == 0o700  # private to the user who runs svgf
         dead_pid = 2**22 + 12345
         while _alive(dead_pid):
             dead_pid += 1

@@ -247,6 +247,11 @@ def test_a_folder_removed_during_the_write_is_named(tmp_path: Path) -> None:
         f"{gone}: cannot write: folder {gone.parent} does not exist")
     here = tmp_path / "o.exr"
     assert str(output_error(missing, here)) == f"{here}: cannot write: No such file or directory"
+    # A folder that appeared at the output's name is the cause, whatever the system said.
+    taken = tmp_path / "taken.exr"
+    taken.mkdir()
+    busy = OSError(16, "Device or resource busy")
+    assert str(output_error(busy, taken)) == f"{taken}: cannot write: is a directory"
 
 
 def test_alpha_and_passthrough_values_that_are_not_defaults(tmp_path: Path) -> None:
