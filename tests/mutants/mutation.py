@@ -298,6 +298,12 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/filters/denoiser.py", "process", "core/NumberReplacer",
                "history_length.fill(0.0)",
                "0 -> -1: accumulation reuses history only where h_prev > 0; both give h = 1"),
+    Equivalent("svgf_cli/io/source.py", "data_window", "core/NumberReplacer",
+               "return (int(low[0]), int(low[1]), int(high[0] - low[0] + 1), int(high[1] - "
+               "low[1] + 1))",
+               "an index of the x or y origin: SourcePart.data_window's one reader (exr.py's "
+               "shape check) unpacks only width and height (a width/height mutant fails "
+               "that check on every read)"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
