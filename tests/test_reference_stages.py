@@ -463,6 +463,41 @@ def test_reprojection_fallback_and_rejection_cases() -> None:
     np.testing.assert_allclose(out[2][:, 5, 0], history["length"][:, 5, 0], rtol=1e-6)
 
 
+def _guarded(history: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The history planes as views into buffers with a plane of NaN before and after: a
+    kernel reading outside an array (even with weight 0) turns its output NaN."""
+    guarded = {}
+    for key, array in history.items():
+        guard = array.shape[-2] * array.shape[-1]
+        buffer = np.full(array.size + 2 * guard, np.nan, array.dtype)
+        view = buffer[guard:guard + array.size].reshape(array.shape)
+        view[...] = array
+        guarded[key] = view
+    return guarded
+
+
+def test_reprojection_at_the_image_border_reads_only_inside() -> None:
+    """Positions less than a pixel outside each side (and a corner): the bilinear taps
+    outside get weight 0 and the inside ones are renormalised; the outside taps' memory is
+    never read (the history sits between NaN guard planes)."""
+    height, width = 10, 12
+    prev = _flat(width, height)
+    motion = np.zeros((2, height, width), F32)
+    motion[1, 0, 3] = -0.4  # above the top row
+    motion[1, height - 1, 3] = 0.4  # below the last row
+    motion[0, 3, 0] = -0.4  # left of the first column
+    motion[0, 3, width - 1] = 0.4  # right of the last column
+    motion[:, 0, 0] = -0.4  # the top-left corner
+    motion[:, height - 1, width - 1] = 0.4  # the bottom-right corner
+    cur = _flat(width, height, motion=motion)
+    out, want = _run_reproject(prev, cur, _guarded(_history_for(prev, seed=3)))
+    assert all(np.isfinite(plane).all() for plane in out)
+    _assert_reprojection_matches(out, want)
+    for y, x in ((0, 3), (height - 1, 3), (3, 0), (3, width - 1), (0, 0),
+                 (height - 1, width - 1)):
+        assert np.all(want.path[:, y, x] == ref.BILINEAR)
+
+
 def test_reprojection_from_just_outside_the_image_takes_the_fallback() -> None:
     """A position up to 1.5 pixels outside the image (both bilinear taps outside) rounds to
     the row or column next to the image, whose 3x3 box reaches the border pixels: the
@@ -475,7 +510,8 @@ def test_reprojection_from_just_outside_the_image_takes_the_fallback() -> None:
     motion[1, height - 1, 3], motion[1, height - 1, 6] = 1.4, 1.6  # below the last row
     motion[0, 3, width - 1], motion[0, 6, width - 1] = 1.4, 1.6  # right of the last column
     cur = _flat(width, height, motion=motion)
-    out, want = _run_reproject(prev, cur, _history_for(prev, seed=2))
+    out, want = _run_reproject(prev, cur, _guarded(_history_for(prev, seed=2)))
+    assert all(np.isfinite(plane).all() for plane in out)
     _assert_reprojection_matches(out, want)
     for inside, outside in (((0, 3), (0, 6)), ((3, 0), (6, 0)),
                             ((height - 1, 3), (height - 1, 6)),
