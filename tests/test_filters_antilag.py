@@ -172,6 +172,27 @@ def test_gradient_samples_match_float64_reference(change, noise):
     np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
 
 
+@pytest.mark.parametrize("samples", [1, 2])
+def test_one_gradient_sample_is_no_evidence(samples):
+    """A window's gradient samples count only from two on (their spread is unknown with
+    one): a single sample that halved decides nothing, two that agree shorten the history.
+    The window statistics themselves see no change here."""
+    case = _flat_case(1.0, 0.01)
+    mask = np.zeros((12, 12), F32)
+    mask[5, 5:5 + samples] = 1.0
+    previous = mask.copy()
+    current = (mask * F32(0.5)).astype(F32)
+    gradients = [(mask, previous, current)]
+    lam, length, count = _run(case, radius=1, gradients=gradients)
+    ref_lam, ref_length = _reference(*case, REC709, 1, 3.0, 32.0, 0.02, gradients=gradients)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+    if samples == 1:
+        assert count == 0 and np.all(lam == 0)
+    else:
+        assert count > 0 and lam.max() > 0.5
+
+
 def test_gradient_samples_see_what_the_noise_hides():
     """A 20% dimming is lost in 1-spp noise for the window statistics but plain in the
     re-shaded samples; unchanged samples change nothing."""

@@ -187,7 +187,11 @@ def test_history_guard_matches_reference() -> None:
     illumination = rng.gamma(2.0, 0.5, (3, 3, 7, 9)).astype(F32)
     moments = rng.gamma(2.0, 0.5, (3, 2, 7, 9)).astype(F32)
     length = rng.choice([0.0, 1.0, 4.0], size=shape).astype(F32)
+    # one non-finite value in each plane the guard checks, each at its own pixel
+    illumination[0, 0, 5, 1] = np.inf
     illumination[2, 1, 0, 0] = np.nan
+    illumination[1, 2, 4, 7] = -np.inf
+    moments[2, 0, 1, 6] = np.nan
     moments[0, 1, 3, 4] = -np.inf
     length[1, 6, 8] = np.inf
     moments[1, 0, 2, 2] = 3e38  # finite: not the guard's business
@@ -198,7 +202,7 @@ def test_history_guard_matches_reference() -> None:
                           np.ones((7, 9), np.int32))
     want = ref.reset_nonfinite_history(history)
     got = values.reset_nonfinite_history(illumination, moments, length, mode)
-    assert got == want == 3
+    assert got == want == 6
     np.testing.assert_array_equal(illumination, history.illumination)
     np.testing.assert_array_equal(moments, history.moments)
     np.testing.assert_array_equal(length, history.history_length)

@@ -304,6 +304,12 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "an index of the x or y origin: SourcePart.data_window's one reader (exr.py's "
                "shape check) unpacks only width and height (a width/height mutant fails "
                "that check on every read)"),
+    Equivalent("svgf_cli/filters/variance.py", "spatial_variance",
+               "core/ReplaceComparisonOperator_Lt_GtE",
+               "while x < width and x - last <= RUN_GAP:",
+               "run merging off: every needed pixel becomes its own run, and the run kernel "
+               "sums each pixel's taps in the same order: bit-identical values (checked on "
+               "the reference test's inputs), more calls"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
