@@ -310,6 +310,28 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "run merging off: every needed pixel becomes its own run, and the run kernel "
                "sums each pixel's taps in the same order: bit-identical values (checked on "
                "the reference test's inputs), more calls"),
+    Equivalent("svgf_cli/io/signals.py", "__init__", "core/NumberReplacer",
+               "uses[role] = uses.get(role, 0) + 1",
+               "a count off by one either way: a role plane is let go later, never, or early "
+               "and gathered again (as the +1 -> -1 entry): same values, other memory"),
+    Equivalent("svgf_cli/io/signals.py", "_gradient_channels", "core/NumberReplacer",
+               'prefix = mask[0][: -len("gradient.mask")]',
+               "[0] -> [-1]: match_channels of one wanted name returns one channel"),
+    Equivalent("svgf_cli/io/exr.py", "fetch", "core/NumberReplacer",
+               "changed = _clean_depth(data[0], path, warnings)",
+               "[0] -> [-1]: the depth role is one plane (1, H, W), first and last are the same"),
+    Equivalent("svgf_cli/io/patterns.py", None, "core/ReplaceTrueWithFalse",
+               "@dataclass(frozen=True)",
+               "frozen off: only attribute assignment and hashing differ; no code assigns to "
+               "or hashes a SequencePattern (either would fail loudly, killed)"),
+    Equivalent("svgf_cli/runner.py", "close", "core/ReplaceTrueWithFalse",
+               "self._executor.shutdown(wait=True, cancel_futures=True)",
+               "the read-ahead holds at most one prefetch, usually already running (then "
+               "cancel cannot stop it either); its result is dropped unread either way"),
+    Equivalent("svgf_cli/runner.py", "save_history", "core/ReplaceOrWithAnd",
+               "if self.size is None or self._stats.last_frame is None:",
+               "or -> and: the same frame sets both (admit, then process) and save_history runs "
+               "only after the loop: both are None or both are set"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
