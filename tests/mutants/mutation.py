@@ -332,6 +332,9 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "if self.size is None or self._stats.last_frame is None:",
                "or -> and: the same frame sets both (admit, then process) and save_history runs "
                "only after the loop: both are None or both are set"),
+    Equivalent("svgf_cli/io/layers.py", "_match_tuple", "core/ReplaceComparisonOperator_Gt_GtE",
+               "if len(hits) > 1:",
+               "> 1 -> >= 1: len(hits) == 1 has returned just above, so both read len >= 2"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
