@@ -335,6 +335,19 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/layers.py", "_match_tuple", "core/ReplaceComparisonOperator_Gt_GtE",
                "if len(hits) > 1:",
                "> 1 -> >= 1: len(hits) == 1 has returned just above, so both read len >= 2"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "mask = np.where(finite & (gradient.mask > 0), F32(1.0), F32(0.0))",
+               "the mask's one reader (_gradient_row_sums) tests only mask > 0: any positive "
+               "value for a sample, 0 (or below) for none"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_before_accumulation",
+               "core/ReplaceFalseWithTrue",
+               "for s, glossy in enumerate(temporal.glossy or (False,) * len(temporal.names)):",
+               "fallback never taken: the one caller passes one glossy flag per signal, and a "
+               "frame has at least one signal"),
+    Equivalent("svgf_cli/filters/variance.py", "spatial_variance",
+               "core/ReplaceComparisonOperator_Lt_LtE", "while x < width:",
+               "< -> <=: at x == width the skip loop does nothing and `if x >= width: break` "
+               "leaves, as the loop test would have"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
