@@ -136,6 +136,7 @@ def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
     channels["motion.Y"][3, 3] = np.nan
     channels["N.X"][0, 0], channels["N.Y"][0, 0], channels["N.Z"][0, 0] = np.nan, 3.0, 4.0
     channels["N.X"][0, 1], channels["N.Y"][0, 1], channels["N.Z"][0, 1] = 0.0, 0.0, 0.0
+    channels["N.X"][0, 2], channels["N.Y"][0, 2], channels["N.Z"][0, 2] = 0.0, 0.3, 0.4
     channels["Z"][5, :4] = [np.nan, -1.0, 0.0, np.inf]
     channels["Z"][5, 4] = 1e10  # Cycles' background depth
     channels["id"] = np.full((H, W), 2.6, np.float32)
@@ -162,6 +163,7 @@ def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
     assert direct[1, 0, 0] == 0 and indirect[2, 1, 1] == 0
     assert np.allclose(frame.normal[:, 0, 0], [0.0, 0.6, 0.8])  # NaN -> 0, renormalised
     assert np.array_equal(frame.normal[:, 0, 1], [0.0, 0.0, 0.0])  # zero stays zero
+    assert np.allclose(frame.normal[:, 0, 2], [0.0, 0.6, 0.8])  # too short: lengthened
     assert np.array_equal(frame.depth[5, :5], np.zeros(5, np.float32))
     assert frame.depth[5, 5] == channels["Z"][5, 5]
     assert frame.mesh_id[0, 0] == 3 and frame.mesh_id.dtype == np.int32

@@ -116,6 +116,11 @@ def test_the_sum_of_colour_passes_is_capped_at_one(tmp_path: Path) -> None:
     copy = cycles_copy(METAL / "in.0006.exr", tmp_path / "in.0006.exr",
                        scale={"DiffCol": 4.0, "DiffDir": 0.25, "DiffInd": 0.25})
     layers = channels(copy)
+    # The scene has no glass (no transmission light): a transmission colour of 0.25 changes
+    # no light but is the third term of the sum.
+    for c in "RGB":
+        layers[f"ViewLayer.TransCol.{c}"] = np.full_like(layers[f"ViewLayer.TransCol.{c}"], 0.25)
+    write_exr(copy, layers)
     colours = rgb(layers, "DiffCol") + rgb(layers, "GlossCol") + rgb(layers, "TransCol")
     assert colours.max() > 1.5
     frame = read_frame(copy, build_mapping("cycles", signals="direct-indirect")).frame

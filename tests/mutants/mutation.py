@@ -348,6 +348,13 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "core/ReplaceComparisonOperator_Lt_LtE", "while x < width:",
                "< -> <=: at x == width the skip loop does nothing and `if x >= width: break` "
                "leaves, as the loop test would have"),
+    Equivalent("svgf_cli/io/signals.py", "_sum", "core/NumberReplacer", "return planes[0]",
+               "[0] -> [-1]: read only when len(planes) == 1"),
+    Equivalent("svgf_cli/io/signals.py", "per_lobe", "core/ReplaceComparisonOperator_Eq_NotEq",
+               "elif lobe == specular[0]:",
+               "the merged specular signal is built from the list, not the lobe, and put at "
+               "the second glossy lobe instead of the first: glossy and transmission are "
+               "adjacent in LOBES (the order of lobes.present), so the order is the same"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
