@@ -355,6 +355,9 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "the merged specular signal is built from the list, not the lobe, and put at "
                "the second glossy lobe instead of the first: glossy and transmission are "
                "adjacent in LOBES (the order of lobes.present), so the order is the same"),
+    Equivalent("svgf_cli/io/output.py", "write_output", "core/NumberReplacer", "threads: int = 0,",
+               "a default never used: write_output's one caller (runner.frame_writer) passes "
+               "threads="),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
