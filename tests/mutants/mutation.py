@@ -358,6 +358,11 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/output.py", "write_output", "core/NumberReplacer", "threads: int = 0,",
                "a default never used: write_output's one caller (runner.frame_writer) passes "
                "threads="),
+    Equivalent("svgf_cli/io/signals.py", "compose_signals", "core/AddNot", "if fresh:",
+               "not fresh (both sites): the next term is added, or the emission subtracted, "
+               "in the first term's role plane instead of a new array: the same values; every "
+               "plan reads each light role once and lets the plane go after it, so nothing "
+               "reads the changed plane (a fallback plan gathers it again)"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
