@@ -23,6 +23,7 @@ from svgf_cli.io.exr import (
     write_exr,
 )
 from svgf_cli.io.layers import build_mapping
+from svgf_cli.io.output import write_output
 
 H, W = 6, 8
 
@@ -333,10 +334,15 @@ def test_offset_data_window_and_tiled(tmp_path: Path, tiled: bool) -> None:
     assert out.open(str(path), spec)
     assert out.write_image(np.ascontiguousarray(np.stack([channels[n] for n in names], -1)))
     assert out.close()
-    frame = read_frame(path, build_mapping()).frame
+    result = read_frame(path, build_mapping())
+    frame = result.frame
     assert np.array_equal(frame.signal("color").radiance, planes(channels, "R", "G", "B"))
     assert np.array_equal(frame.depth, channels["Z"])
     assert np.array_equal(frame.motion, planes(channels, "motion.X", "motion.Y"))
+    # Written back: one-level tiles (or scanlines) stay as they are, nothing to note.
+    colour = {c: channels[c] for c in "RGB"}
+    assert write_output(tmp_path / "o.exr", result.source, part_index=0, channels=colour,
+                        attributes={}) == []
 
 
 def test_half_colour_and_uint_id_channels_decode_exactly(tmp_path: Path) -> None:

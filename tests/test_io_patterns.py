@@ -112,6 +112,13 @@ def test_plain_file_is_not_a_sequence() -> None:
     assert pattern.frame_of("some/dir/beauty.exr") is None
 
 
+def test_a_plain_file_on_disk_is_frame_zero(tmp_path: Path) -> None:
+    pattern = SequencePattern.parse(str(tmp_path / "beauty.exr"))
+    assert pattern.frames_on_disk() == []
+    (tmp_path / "beauty.exr").write_bytes(b"x")
+    assert pattern.frames_on_disk() == [0]
+
+
 @pytest.mark.parametrize("name", ["shot.1001", "x.1001", "a.7"])
 def test_digits_only_in_the_extension_make_a_plain_file(name: str) -> None:
     # The extension is never the frame number, whatever the stem's length.

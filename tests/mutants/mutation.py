@@ -363,6 +363,14 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "in the first term's role plane instead of a new array: the same values; every "
                "plan reads each light role once and lets the plane go after it, so nothing "
                "reads the changed plane (a fallback plan gathers it again)"),
+    Equivalent("svgf_cli/io/signals.py", "__call__", "core/NumberReplacer",
+               "self._uses[role] -= 1",
+               "a use count that does not fall (or falls by two): the role plane is let go "
+               "never, or early and gathered again: same values, other memory"),
+    Equivalent("svgf_cli/io/colour.py", "rgb_to_xyz_matrix",
+               "core/ReplaceComparisonOperator_Lt_LtE", "if abs(np.linalg.det(primaries)) < 1e-9:",
+               "< -> <= at the degeneracy tolerance: primaries whose determinant is exactly "
+               "1e-9 are degenerate either way (a tolerance boundary, not observable)"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
                "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
                "2 -> 3: a third scratch slice that is never written or read (the row kernel "
