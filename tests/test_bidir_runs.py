@@ -137,6 +137,27 @@ def test_a_dead_runs_scratch_is_removed_and_a_live_ones_kept(tmp_path: Path) -> 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.me"]
 
 
+def test_stale_scratch_behind_a_live_one_is_removed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Whatever order the folder lists them in: a live run's folder first does not end the
+    # scan before the dead ones.
+    from svgf_cli.io.spill import remove_stale_scratch
+
+    with ScratchFolder(tmp_path) as live:
+        host_ns, _, rest = live.path.name[len(".svgf-scratch."):].partition(".")
+        dead_pid = 2**22 + 12345
+        while _alive(dead_pid):
+            dead_pid += 1
+        dead = tmp_path / f".svgf-scratch.{host_ns}.{dead_pid}.{rest.split('.')[-1]}"
+        dead.mkdir()
+        listed = Path.iterdir
+        monkeypatch.setattr(Path, "iterdir", lambda self: iter(
+            sorted(listed(self), key=lambda p: p != live.path)))
+        assert remove_stale_scratch(tmp_path) == [dead]
+        assert live.path.exists() and not dead.exists()
+
+
 def test_a_scratch_folder_of_another_pid_namespace_is_kept(tmp_path: Path) -> None:
     # Same host, another PID namespace (a container on this node): its PIDs mean nothing
     # here, so even a PID that is dead here does not make its folder stale.

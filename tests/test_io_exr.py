@@ -320,6 +320,16 @@ def test_write_into_missing_directory_fails_cleanly(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_without_an_id_every_surface_pixel_is_one_mesh(tmp_path: Path) -> None:
+    # No id channel: mesh 0 wherever there is a surface, at any depth; -1 on background.
+    channels = gbuffer(seed=4)
+    channels["Z"][0, :3] = [0.25, 1.0, 0.0]
+    write_exr(tmp_path / "f.exr", channels)
+    frame = read_frame(tmp_path / "f.exr", build_mapping()).frame
+    assert frame.mesh_id[0, :3].tolist() == [0, 0, -1]
+    assert np.all(frame.mesh_id[1:] == 0)
+
+
 @pytest.mark.parametrize("tiled", [False, True])
 def test_offset_data_window_and_tiled(tmp_path: Path, tiled: bool) -> None:
     channels = gbuffer(seed=3)
