@@ -121,6 +121,7 @@ def test_a_bad_frame_fails_the_run_and_removes_the_scratch(
 def test_a_dead_runs_scratch_is_removed_and_a_live_ones_kept(tmp_path: Path) -> None:
     with ScratchFolder(tmp_path) as live:
         name = live.path.name
+        assert live.path.stat().st_mode & 0o777 == 0o700  # private to the user who runs svgf
         dead_pid = 2**22 + 12345
         while _alive(dead_pid):
             dead_pid += 1
@@ -134,6 +135,53 @@ def test_a_dead_runs_scratch_is_removed_and_a_live_ones_kept(tmp_path: Path) -> 
             assert not dead.exists() and live.path.exists() and other.exists()
             assert second.path != live.path
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.me"]
+
+
+def test_stale_scratch_behind_a_live_one_is_removed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Whatever order the folder lists them in: a live run's folder first does not end the
+    # scan before the dead ones.
+    from svgf_cli.io.spill import remove_stale_scratch
+
+    with ScratchFolder(tmp_path) as live:
+        host_ns, _, rest = live.path.name[len(".svgf-scratch."):].partition(".")
+        dead_pid = 2**22 + 12345
+        while _alive(dead_pid):
+            dead_pid += 1
+        dead = tmp_path / f".svgf-scratch.{host_ns}.{dead_pid}.{rest.split('.')[-1]}"
+        dead.mkdir()
+        listed = Path.iterdir
+        monkeypatch.setattr(Path, "iterdir", lambda self: iter(
+            sorted(listed(self), key=lambda p: p != live.path)))
+        assert remove_stale_scratch(tmp_path) == [dead]
+        assert live.path.exists() and not dead.exists()
+
+
+def test_a_scratch_folder_of_another_pid_namespace_is_kept(tmp_path: Path) -> None:
+    # Same host, another PID namespace (a container on this node): its PIDs mean nothing
+    # here, so even a PID that is dead here does not make its folder stale.
+    with ScratchFolder(tmp_path) as live:
+        host, _, rest = live.path.name[len(".svgf-scratch."):].partition(".")
+        host_name, _, namespace = host.rpartition("_")
+        dead_pid = 2**22 + 12345
+        while _alive(dead_pid):
+            dead_pid += 1
+        other = tmp_path / (f".svgf-scratch.{host_name}_{int(namespace) + 1}.{dead_pid}."
+                            f"{rest.split('.')[-1]}")
+        other.mkdir()
+        with ScratchFolder(tmp_path):
+            assert other.exists()
+
+
+def test_a_failed_scratch_write_is_a_one_line_error(tmp_path: Path) -> None:
+    from svgf_cli.errors import SvgfError
+
+    with ScratchFolder(tmp_path) as scratch:
+        os.rmdir(scratch.path)  # e.g. a cleanup job removed it
+        planes = {"a.R": np.zeros((2, 3), np.float16)}
+        with pytest.raises(SvgfError, match="cannot write scratch file"):
+            scratch.write(1, planes, {"a.R": 1.0})
 
 
 def _alive(pid: int) -> bool:

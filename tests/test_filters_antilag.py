@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from reference_svgf import antilag as reference_antilag
 
-from svgf_cli.filters.antilag import MIN_SAMPLES, antilag, cell_shape, scratch_shape
+from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 
 F32 = np.float32
 REC709 = np.array([0.2126, 0.7152, 0.0722], dtype=F32)
@@ -16,10 +16,11 @@ REC709 = np.array([0.2126, 0.7152, 0.0722], dtype=F32)
 
 def _reference(current, moments, history_length, depth, weights, radius, sigma,
                spatial_samples, tolerance, moments_alpha=0.2, gradients=None):
-    """The float64 reference stage (lambda per cell, new history length)."""
+    """The float64 reference stage (lambda per cell, new history length), with its own
+    minimum of four pixels with history per window."""
     lam, length, _ = reference_antilag(current, moments, history_length, depth, weights,
                                        radius, sigma, spatial_samples, tolerance,
-                                       moments_alpha, gradients, MIN_SAMPLES)
+                                       moments_alpha, gradients)
     return lam, length
 
 
@@ -94,6 +95,57 @@ def test_matches_float64_reference_when_the_stationary_noise_share_binds(step):
     assert count == int(np.count_nonzero(ref_length < case[2] - 1e-3))
 
 
+def _flat_case(history_mean: float, temporal_variance: float, size: int = 12):
+    """One signal, grey current luminance 1 everywhere, an 8-frame history whose first
+    moment is ``history_mean`` and whose temporal variance is ``temporal_variance``: every
+    window's statistics are known exactly (radius 1: 36 pixels inside, 24 on an edge)."""
+    current = np.ones((1, 3, size, size), F32)
+    m1 = np.full((size, size), history_mean)
+    moments = np.stack([m1, m1 * m1 + temporal_variance])[None].astype(F32)
+    length = np.full((1, size, size), 8.0, F32)
+    depth = np.ones((size, size), F32)
+    return current, moments, length, depth
+
+
+@pytest.mark.parametrize(("factor", "stale"), [(1.27, False), (1.40, True)])
+def test_staleness_threshold_counts_the_stationary_noise_share(factor, stale):
+    """With moments_alpha 0.5 the history's own noise share is a/(2-a) = 1/3 (above 1/h):
+    a window of n = 36 is stale when diff^2 > k^2 var/n (1 + 1/3). A difference 1.27x the
+    bare k^2 var/n stays (it would not with a share of 0.2), 1.40x is stale."""
+    temporal_variance = 0.04
+    bare = 9.0 * temporal_variance / 36.0  # k = 3, radius 1, an inside window
+    case = _flat_case(1.0 + np.sqrt(factor * bare), temporal_variance)
+    lam, length, count = _run(case, radius=1, sigma=3.0, tolerance=0.0, moments_alpha=0.5)
+    ref_lam, ref_length = _reference(*case, REC709, 1, 3.0, 32.0, 0.0, moments_alpha=0.5)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+    inside = lam[0, 1:-1, 1:-1]
+    if stale:
+        assert np.all(inside > 0) and count > 0
+    else:
+        assert np.all(lam == 0) and count == 0
+
+
+@pytest.mark.parametrize(("pixels", "decides"), [(4, True), (3, False)])
+def test_a_window_decides_from_four_pixels_with_history(pixels, decides):
+    """A window needs four pixels with history: with fewer its statistics are noise and it
+    makes no decision, however far the history is off (here 3x the current level)."""
+    case = _flat_case(3.0, 0.01)
+    length = case[2]
+    length[:] = 0.0
+    block = [(4, 4), (4, 5), (5, 4), (5, 5)][:pixels]  # one cell
+    for y, x in block:
+        length[0, y, x] = 8.0
+    lam, out_length, count = _run(case, radius=1)
+    ref_lam, ref_length = _reference(*case, REC709, 1, 3.0, 32.0, 0.02)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(out_length, ref_length, rtol=2e-4, atol=2e-4)
+    if decides:
+        assert count == pixels and np.all(out_length[0, 4:6, 4:6] < 1.0)
+    else:
+        assert count == 0 and np.all(lam == 0)
+
+
 def _gradient_samples(seed, height, width, num_signals, change, noise=0.0):
     """One sample per 3x3 stratum; the shading changed by the factor ``change`` (plus some
     re-shading noise)."""
@@ -118,6 +170,27 @@ def test_gradient_samples_match_float64_reference(change, noise):
     ref_lam, ref_length = _reference(*case, REC709, 2, 3.0, 32.0, 0.02, gradients=gradients)
     np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
     np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+
+
+@pytest.mark.parametrize("samples", [1, 2])
+def test_one_gradient_sample_is_no_evidence(samples):
+    """A window's gradient samples count only from two on (their spread is unknown with
+    one): a single sample that halved decides nothing, two that agree shorten the history.
+    The window statistics themselves see no change here."""
+    case = _flat_case(1.0, 0.01)
+    mask = np.zeros((12, 12), F32)
+    mask[5, 5:5 + samples] = 1.0
+    previous = mask.copy()
+    current = (mask * F32(0.5)).astype(F32)
+    gradients = [(mask, previous, current)]
+    lam, length, count = _run(case, radius=1, gradients=gradients)
+    ref_lam, ref_length = _reference(*case, REC709, 1, 3.0, 32.0, 0.02, gradients=gradients)
+    np.testing.assert_allclose(lam, ref_lam, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(length, ref_length, rtol=2e-4, atol=2e-4)
+    if samples == 1:
+        assert count == 0 and np.all(lam == 0)
+    else:
+        assert count > 0 and lam.max() > 0.5
 
 
 def test_gradient_samples_see_what_the_noise_hides():

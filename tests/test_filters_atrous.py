@@ -33,6 +33,13 @@ def _scene(num_signals: int, height: int, width: int, seed: int) -> dict[str, np
     background[:, :2] = True
     background[0] = True
     background[height - 2, width // 3] = True  # an isolated hole
+    # Row ends: background at the right end of a row; a lone surface pixel at the right end
+    # after a background gap; a row whose only surface pixel is its third.
+    background[1, width - 2:] = True
+    if width > 4:
+        background[2, width - 2] = True
+    if height > 9:
+        background[9, 3:] = True
     depth[background] = 0.0
     normal[:, background] = 0.0
     ddx = np.gradient(depth, axis=1)

@@ -132,6 +132,13 @@ def test_pack_history_error_is_half_rounding_at_any_exposure() -> None:
         spread = scaled.moments[:, 1] - scaled.moments[:, 0] ** 2
         np.testing.assert_allclose(back.moments[:, 1] - back.moments[:, 0] ** 2, spread,
                                    rtol=5e-3, atol=2e-3 * float(spread.max()))
+    # Unscaled float32 planes (half=False) restore the colour and first moment exactly.
+    planes, factors = pack_history(("a", "b"), side, half=False)
+    assert planes["a.R"].dtype == np.float32
+    back = unpack_history(("a", "b"), planes, factors)
+    np.testing.assert_array_equal(back.colour, side.colour)
+    np.testing.assert_array_equal(back.moments[:, 0], side.moments[:, 0])
+    np.testing.assert_allclose(back.moments[:, 1], side.moments[:, 1], rtol=1e-5)
 
 
 def test_forward_step_keeps_the_causal_history() -> None:

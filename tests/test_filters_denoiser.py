@@ -212,6 +212,17 @@ def test_state_round_trip_continues_bit_identically() -> None:
         Denoiser(params).load_state(broken)
 
 
+@pytest.mark.parametrize("missing", ["params", "frames_processed"])
+def test_a_state_without_its_header_is_refused_as_not_a_state(missing: str) -> None:
+    """A history file from elsewhere (an npz without svgf's keys) is a ValueError that says
+    so (the runner reports it as "cannot use history" naming the file), not a KeyError."""
+    params = resolve_params("paper")
+    state = Denoiser(params).state()
+    del state[missing]
+    with pytest.raises(ValueError, match="not a denoiser state"):
+        Denoiser(params).load_state(state)
+
+
 def test_reset_makes_the_next_frame_cold() -> None:
     frames = static_sequence(3, 16, 12, noise=0.2)
     denoiser = Denoiser(resolve_params("paper"), debug_layers=True)

@@ -31,6 +31,9 @@ def test_normal_squarings_only_for_powers_of_two() -> None:
     assert normal_squarings(1.0) == 0
     assert normal_squarings(100.0) == -1
     assert normal_squarings(0.5) == -1
+    # Up to 2^12 (the largest power the squaring path takes); beyond, the general power.
+    assert normal_squarings(4096.0) == 12
+    assert normal_squarings(8192.0) == -1
 
 
 RULE = (F32(1e-3), F32(1.05), F32(0.02))  # black, max reflectance, relative floor

@@ -23,6 +23,7 @@ from svgf_cli.io.exr import (
     write_exr,
 )
 from svgf_cli.io.layers import build_mapping
+from svgf_cli.io.output import write_output
 
 H, W = 6, 8
 
@@ -136,6 +137,7 @@ def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
     channels["motion.Y"][3, 3] = np.nan
     channels["N.X"][0, 0], channels["N.Y"][0, 0], channels["N.Z"][0, 0] = np.nan, 3.0, 4.0
     channels["N.X"][0, 1], channels["N.Y"][0, 1], channels["N.Z"][0, 1] = 0.0, 0.0, 0.0
+    channels["N.X"][0, 2], channels["N.Y"][0, 2], channels["N.Z"][0, 2] = 0.0, 0.3, 0.4
     channels["Z"][5, :4] = [np.nan, -1.0, 0.0, np.inf]
     channels["Z"][5, 4] = 1e10  # Cycles' background depth
     channels["id"] = np.full((H, W), 2.6, np.float32)
@@ -162,6 +164,7 @@ def test_scrubbing_counts_and_g_buffer_rules(tmp_path: Path) -> None:
     assert direct[1, 0, 0] == 0 and indirect[2, 1, 1] == 0
     assert np.allclose(frame.normal[:, 0, 0], [0.0, 0.6, 0.8])  # NaN -> 0, renormalised
     assert np.array_equal(frame.normal[:, 0, 1], [0.0, 0.0, 0.0])  # zero stays zero
+    assert np.allclose(frame.normal[:, 0, 2], [0.0, 0.6, 0.8])  # too short: lengthened
     assert np.array_equal(frame.depth[5, :5], np.zeros(5, np.float32))
     assert frame.depth[5, 5] == channels["Z"][5, 5]
     assert frame.mesh_id[0, 0] == 3 and frame.mesh_id.dtype == np.int32
@@ -317,6 +320,16 @@ def test_write_into_missing_directory_fails_cleanly(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_without_an_id_every_surface_pixel_is_one_mesh(tmp_path: Path) -> None:
+    # No id channel: mesh 0 wherever there is a surface, at any depth; -1 on background.
+    channels = gbuffer(seed=4)
+    channels["Z"][0, :3] = [0.25, 1.0, 0.0]
+    write_exr(tmp_path / "f.exr", channels)
+    frame = read_frame(tmp_path / "f.exr", build_mapping()).frame
+    assert frame.mesh_id[0, :3].tolist() == [0, 0, -1]
+    assert np.all(frame.mesh_id[1:] == 0)
+
+
 @pytest.mark.parametrize("tiled", [False, True])
 def test_offset_data_window_and_tiled(tmp_path: Path, tiled: bool) -> None:
     channels = gbuffer(seed=3)
@@ -331,10 +344,15 @@ def test_offset_data_window_and_tiled(tmp_path: Path, tiled: bool) -> None:
     assert out.open(str(path), spec)
     assert out.write_image(np.ascontiguousarray(np.stack([channels[n] for n in names], -1)))
     assert out.close()
-    frame = read_frame(path, build_mapping()).frame
+    result = read_frame(path, build_mapping())
+    frame = result.frame
     assert np.array_equal(frame.signal("color").radiance, planes(channels, "R", "G", "B"))
     assert np.array_equal(frame.depth, channels["Z"])
     assert np.array_equal(frame.motion, planes(channels, "motion.X", "motion.Y"))
+    # Written back: one-level tiles (or scanlines) stay as they are, nothing to note.
+    colour = {c: channels[c] for c in "RGB"}
+    assert write_output(tmp_path / "o.exr", result.source, part_index=0, channels=colour,
+                        attributes={}) == []
 
 
 def test_half_colour_and_uint_id_channels_decode_exactly(tmp_path: Path) -> None:

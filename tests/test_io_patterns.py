@@ -112,6 +112,21 @@ def test_plain_file_is_not_a_sequence() -> None:
     assert pattern.frame_of("some/dir/beauty.exr") is None
 
 
+def test_a_plain_file_on_disk_is_frame_zero(tmp_path: Path) -> None:
+    pattern = SequencePattern.parse(str(tmp_path / "beauty.exr"))
+    assert pattern.frames_on_disk() == []
+    (tmp_path / "beauty.exr").write_bytes(b"x")
+    assert pattern.frames_on_disk() == [0]
+
+
+@pytest.mark.parametrize("name", ["shot.1001", "x.1001", "a.7"])
+def test_digits_only_in_the_extension_make_a_plain_file(name: str) -> None:
+    # The extension is never the frame number, whatever the stem's length.
+    pattern = SequencePattern.parse(f"dir/{name}")
+    assert not pattern.is_sequence
+    assert pattern.path(3) == Path(f"dir/{name}")
+
+
 def test_frame_of_rejects_wrong_padding_and_names() -> None:
     pattern = SequencePattern.parse("in.####.exr")
     assert pattern.frame_of("in.0012.exr") == 12

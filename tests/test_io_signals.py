@@ -116,6 +116,11 @@ def test_the_sum_of_colour_passes_is_capped_at_one(tmp_path: Path) -> None:
     copy = cycles_copy(METAL / "in.0006.exr", tmp_path / "in.0006.exr",
                        scale={"DiffCol": 4.0, "DiffDir": 0.25, "DiffInd": 0.25})
     layers = channels(copy)
+    # The scene has no glass (no transmission light): a transmission colour of 0.25 changes
+    # no light but is the third term of the sum.
+    for c in "RGB":
+        layers[f"ViewLayer.TransCol.{c}"] = np.full_like(layers[f"ViewLayer.TransCol.{c}"], 0.25)
+    write_exr(copy, layers)
     colours = rgb(layers, "DiffCol") + rgb(layers, "GlossCol") + rgb(layers, "TransCol")
     assert colours.max() > 1.5
     frame = read_frame(copy, build_mapping("cycles", signals="direct-indirect")).frame
@@ -337,6 +342,59 @@ def test_arnold_lobe_aovs_are_radiance_and_its_direct_excludes_emission(tmp_path
     np.testing.assert_array_equal(pair.frame.signal("direct").radiance, layer("direct"))
     np.testing.assert_allclose(pair.frame.total_radiance(),
                                np.stack([planes[c] for c in "RGB"]), rtol=1e-6)
+
+
+# Per preset, the channel names of a small direct/indirect file: (prefix, colour layer or
+# None for bare R, G, B, emission layer, albedo layer, normal, depth, motion channels).
+_DIRECT_INDIRECT_FILES = {
+    "svgf": ("", None, "emission", "albedo", ("N.X", "N.Y", "N.Z"), "Z",
+             ("motion.X", "motion.Y")),
+    "cycles": ("ViewLayer.", "Combined", "Emit", "Denoising Albedo",
+               ("Normal.X", "Normal.Y", "Normal.Z"), "Depth.Z", ("Vector.X", "Vector.Y")),
+    "arnold": ("", None, "emission", "denoise_albedo", ("N.X", "N.Y", "N.Z"), "Z",
+               ("motionvector.R", "motionvector.G")),
+    "karma": ("", "C", "emission", "albedo", ("N.X", "N.Y", "N.Z"), "Pz",
+              ("motionvector.X", "motionvector.Y")),
+}
+
+
+@pytest.mark.parametrize(("preset", "emission_in_direct"),
+                         [("svgf", True), ("cycles", True), ("arnold", False), ("karma", True)])
+def test_the_emission_is_taken_out_of_direct_exactly_where_direct_holds_it(
+    tmp_path: Path, preset: str, emission_in_direct: bool
+) -> None:
+    # `svgf trace`'s `direct` holds the camera-visible emission, and so do Karma's and a
+    # Cycles compositor's direct/indirect layers (built from the light passes); Arnold's
+    # built-in C[DSV]L does not. The emission is filtered apart and added back once: the
+    # frame adds up to the beauty either way.
+    prefix, colour, emit, albedo, normal, depth, motion = _DIRECT_INDIRECT_FILES[preset]
+    rng = np.random.default_rng(6)
+    h, w = 6, 8
+    planes: dict[str, np.ndarray] = {}
+
+    def layer(name: str | None, value: np.ndarray) -> np.ndarray:
+        for i, c in enumerate("RGB"):
+            planes[f"{prefix}{name}.{c}" if name else c] = value[i]
+        return value
+
+    emission = np.zeros((3, h, w), np.float32)
+    emission[:, 1, 2] = 5.0
+    layer(emit, emission)
+    lit = rng.uniform(0.1, 1.0, (3, h, w)).astype(np.float32)
+    direct = layer("direct", lit + emission if emission_in_direct else lit)
+    indirect = layer("indirect", rng.uniform(0.0, 0.5, (3, h, w)).astype(np.float32))
+    beauty = layer(colour, direct + indirect + (0 if emission_in_direct else emission))
+    layer(albedo, np.full((3, h, w), 0.5, np.float32))
+    for name, value in zip(normal, (0.0, 0.0, 1.0), strict=True):
+        planes[prefix + name] = np.full((h, w), value, np.float32)
+    planes[prefix + depth] = np.full((h, w), 3.0, np.float32)
+    for name in motion:
+        planes[prefix + name] = np.zeros((h, w), np.float32)
+    write_exr(tmp_path / "d.exr", planes)
+    pair = read_frame(tmp_path / "d.exr", build_mapping(preset, signals="direct-indirect"))
+    assert pair.plan.set == "direct-indirect"
+    np.testing.assert_allclose(pair.frame.signal("direct").radiance, lit, rtol=1e-6)
+    np.testing.assert_allclose(pair.frame.total_radiance(), beauty, rtol=1e-6)
 
 
 def test_arnold_lobes_need_no_albedo_aovs(tmp_path: Path) -> None:

@@ -127,6 +127,18 @@ def test_stale_temporaries_only_ours_and_only_dead(tmp_path: Path) -> None:
     assert left == {live.name, remote.name, not_ours.name, foreign.name}
 
 
+def test_another_hosts_temporary_is_stale_after_an_hour_untouched(tmp_path: Path) -> None:
+    # docs/robustness.md: a temporary of another host (PIDs not checkable) is removed once it
+    # has been untouched for an hour; a live write touches it continually.
+    outputs = [tmp_path / "o.0001.exr"]
+    remote = tmp_path / ".o.0001.exr.otherhost_4026531836.12.00ff00ff.tmp.exr"
+    remote.write_bytes(b"partial")
+    touched = 1_000_000_000.0
+    os.utime(remote, (touched, touched))
+    assert stale_temporaries(outputs, now=touched + 3599.5) == []
+    assert stale_temporaries(outputs, now=touched + 3600.5) == [remote]
+
+
 def test_a_live_process_of_another_user_keeps_its_temporary(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -235,6 +247,11 @@ def test_a_folder_removed_during_the_write_is_named(tmp_path: Path) -> None:
         f"{gone}: cannot write: folder {gone.parent} does not exist")
     here = tmp_path / "o.exr"
     assert str(output_error(missing, here)) == f"{here}: cannot write: No such file or directory"
+    # A folder that appeared at the output's name is the cause, whatever the system said.
+    taken = tmp_path / "taken.exr"
+    taken.mkdir()
+    busy = OSError(16, "Device or resource busy")
+    assert str(output_error(busy, taken)) == f"{taken}: cannot write: is a directory"
 
 
 def test_alpha_and_passthrough_values_that_are_not_defaults(tmp_path: Path) -> None:

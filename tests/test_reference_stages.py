@@ -188,7 +188,11 @@ def test_history_guard_matches_reference() -> None:
     illumination = rng.gamma(2.0, 0.5, (3, 3, 7, 9)).astype(F32)
     moments = rng.gamma(2.0, 0.5, (3, 2, 7, 9)).astype(F32)
     length = rng.choice([0.0, 1.0, 4.0], size=shape).astype(F32)
+    # one non-finite value in each plane the guard checks, each at its own pixel
+    illumination[0, 0, 5, 1] = np.inf
     illumination[2, 1, 0, 0] = np.nan
+    illumination[1, 2, 4, 7] = -np.inf
+    moments[2, 0, 1, 6] = np.nan
     moments[0, 1, 3, 4] = -np.inf
     length[1, 6, 8] = np.inf
     moments[1, 0, 2, 2] = 3e38  # finite: not the guard's business
@@ -199,7 +203,7 @@ def test_history_guard_matches_reference() -> None:
                           np.ones((7, 9), np.int32))
     want = ref.reset_nonfinite_history(history)
     got = values.reset_nonfinite_history(illumination, moments, length, mode)
-    assert got == want == 3
+    assert got == want == 6
     np.testing.assert_array_equal(illumination, history.illumination)
     np.testing.assert_array_equal(moments, history.moments)
     np.testing.assert_array_equal(length, history.history_length)
@@ -488,6 +492,65 @@ def test_reprojection_fallback_and_rejection_cases() -> None:
     assert np.all(want.path[:, 8, 9] == ref.REJECTED) and np.all(out[2][:, 8, 9] == 0.0)
     assert np.all(want.path[:, 5, 0] == ref.BILINEAR)
     np.testing.assert_allclose(out[2][:, 5, 0], history["length"][:, 5, 0], rtol=1e-6)
+
+
+def _guarded(history: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The history planes as views into buffers with a plane of NaN before and after: a
+    kernel reading outside an array (even with weight 0) turns its output NaN."""
+    guarded = {}
+    for key, array in history.items():
+        guard = array.shape[-2] * array.shape[-1]
+        buffer = np.full(array.size + 2 * guard, np.nan, array.dtype)
+        view = buffer[guard:guard + array.size].reshape(array.shape)
+        view[...] = array
+        guarded[key] = view
+    return guarded
+
+
+def test_reprojection_at_the_image_border_reads_only_inside() -> None:
+    """Positions less than a pixel outside each side (and a corner): the bilinear taps
+    outside get weight 0 and the inside ones are renormalised; the outside taps' memory is
+    never read (the history sits between NaN guard planes)."""
+    height, width = 10, 12
+    prev = _flat(width, height)
+    motion = np.zeros((2, height, width), F32)
+    motion[1, 0, 3] = -0.4  # above the top row
+    motion[1, height - 1, 3] = 0.4  # below the last row
+    motion[0, 3, 0] = -0.4  # left of the first column
+    motion[0, 3, width - 1] = 0.4  # right of the last column
+    motion[:, 0, 0] = -0.4  # the top-left corner
+    motion[:, height - 1, width - 1] = 0.4  # the bottom-right corner
+    cur = _flat(width, height, motion=motion)
+    out, want = _run_reproject(prev, cur, _guarded(_history_for(prev, seed=3)))
+    assert all(np.isfinite(plane).all() for plane in out)
+    _assert_reprojection_matches(out, want)
+    for y, x in ((0, 3), (height - 1, 3), (3, 0), (3, width - 1), (0, 0),
+                 (height - 1, width - 1)):
+        assert np.all(want.path[:, y, x] == ref.BILINEAR)
+
+
+def test_reprojection_from_just_outside_the_image_takes_the_fallback() -> None:
+    """A position up to 1.5 pixels outside the image (both bilinear taps outside) rounds to
+    the row or column next to the image, whose 3x3 box reaches the border pixels: the
+    fallback averages them. Beyond 1.5 pixels the box is all outside: rejected. Each side."""
+    height, width = 10, 12
+    prev = _flat(width, height)
+    motion = np.zeros((2, height, width), F32)
+    motion[1, 0, 3], motion[1, 0, 6] = -1.4, -1.6  # above the top row
+    motion[0, 3, 0], motion[0, 6, 0] = -1.4, -1.6  # left of the first column
+    motion[1, height - 1, 3], motion[1, height - 1, 6] = 1.4, 1.6  # below the last row
+    motion[0, 3, width - 1], motion[0, 6, width - 1] = 1.4, 1.6  # right of the last column
+    cur = _flat(width, height, motion=motion)
+    out, want = _run_reproject(prev, cur, _guarded(_history_for(prev, seed=2)))
+    assert all(np.isfinite(plane).all() for plane in out)
+    _assert_reprojection_matches(out, want)
+    for inside, outside in (((0, 3), (0, 6)), ((3, 0), (6, 0)),
+                            ((height - 1, 3), (height - 1, 6)),
+                            ((3, width - 1), (6, width - 1))):
+        assert np.all(want.path[(slice(None), *inside)] == ref.FALLBACK)
+        assert np.all(out[2][(slice(None), *inside)] > 0)
+        assert np.all(want.path[(slice(None), *outside)] == ref.REJECTED)
+        assert np.all(out[2][(slice(None), *outside)] == 0)
 
 
 def test_resampled_history_length_keeps_whole_counts() -> None:

@@ -77,9 +77,14 @@ FILTER_TESTS = (
     "tests/test_filters_antilag.py",
     "tests/test_filters_denoiser.py",
     "tests/test_filters_determinism_flags.py",
+    "tests/test_filters_glossy.py",
+    "tests/test_filters_bidirectional.py",
 )
+# The bidirectional kernels' own tests first (the rest of FILTER_TESTS never calls them).
+_BIDIRECTIONAL_TESTS = ("tests/test_filters_bidirectional.py", *FILTER_TESTS[:-1])
 _READ_TESTS = (
     "tests/test_io_source.py",
+    "tests/test_io_signals.py",
     "tests/test_io_header.py",
     "tests/test_io_exr.py",
     "tests/test_io_layers.py",
@@ -108,6 +113,11 @@ _WRITE_TESTS = (
 )
 # Which tests exercise a module, fastest first (a killed mutant stops at its first failure).
 MODULE_TESTS: dict[str, tuple[str, ...]] = {
+    "svgf_cli/filters/params.py": ("tests/test_filters_params.py", *FILTER_TESTS),
+    "svgf_cli/filters/bidirectional.py": _BIDIRECTIONAL_TESTS,
+    "svgf_cli/filters/two_pass.py": _BIDIRECTIONAL_TESTS,
+    "svgf_cli/filters/invert_motion.py": ("tests/test_filters_bidirectional.py",
+                                          "tests/test_motion_next.py", *FILTER_TESTS[:-1]),
     "svgf_cli/io/colour.py": ("tests/test_io_colour.py", "tests/test_io_exr.py",
                               "tests/test_io_passthrough.py", "tests/test_cli_denoise.py"),
     "svgf_cli/io/patterns.py": ("tests/test_io_patterns.py", "tests/test_farm_plan.py",
@@ -288,6 +298,99 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/filters/denoiser.py", "process", "core/NumberReplacer",
                "history_length.fill(0.0)",
                "0 -> -1: accumulation reuses history only where h_prev > 0; both give h = 1"),
+    Equivalent("svgf_cli/io/source.py", "data_window", "core/NumberReplacer",
+               "return (int(low[0]), int(low[1]), int(high[0] - low[0] + 1), int(high[1] - "
+               "low[1] + 1))",
+               "an index of the x or y origin: SourcePart.data_window's one reader (exr.py's "
+               "shape check) unpacks only width and height (a width/height mutant fails "
+               "that check on every read)"),
+    Equivalent("svgf_cli/filters/variance.py", "spatial_variance",
+               "core/ReplaceComparisonOperator_Lt_GtE",
+               "while x < width and x - last <= RUN_GAP:",
+               "run merging off: every needed pixel becomes its own run, and the run kernel "
+               "sums each pixel's taps in the same order: bit-identical values (checked on "
+               "the reference test's inputs), more calls"),
+    Equivalent("svgf_cli/io/signals.py", "__init__", "core/NumberReplacer",
+               "uses[role] = uses.get(role, 0) + 1",
+               "a count off by one either way: a role plane is let go later, never, or early "
+               "and gathered again (as the +1 -> -1 entry): same values, other memory"),
+    Equivalent("svgf_cli/io/signals.py", "_gradient_channels", "core/NumberReplacer",
+               'prefix = mask[0][: -len("gradient.mask")]',
+               "[0] -> [-1]: match_channels of one wanted name returns one channel"),
+    Equivalent("svgf_cli/io/exr.py", "fetch", "core/NumberReplacer",
+               "changed = _clean_depth(data[0], path, warnings)",
+               "[0] -> [-1]: the depth role is one plane (1, H, W), first and last are the same"),
+    Equivalent("svgf_cli/io/patterns.py", None, "core/ReplaceTrueWithFalse",
+               "@dataclass(frozen=True)",
+               "frozen off: only attribute assignment and hashing differ; no code assigns to "
+               "or hashes a SequencePattern (either would fail loudly, killed)"),
+    Equivalent("svgf_cli/runner.py", "close", "core/ReplaceTrueWithFalse",
+               "self._executor.shutdown(wait=True, cancel_futures=True)",
+               "the read-ahead holds at most one prefetch, usually already running (then "
+               "cancel cannot stop it either); its result is dropped unread either way"),
+    Equivalent("svgf_cli/runner.py", "save_history", "core/ReplaceOrWithAnd",
+               "if self.size is None or self._stats.last_frame is None:",
+               "or -> and: the same frame sets both (admit, then process) and save_history runs "
+               "only after the loop: both are None or both are set"),
+    Equivalent("svgf_cli/io/layers.py", "_match_tuple", "core/ReplaceComparisonOperator_Gt_GtE",
+               "if len(hits) > 1:",
+               "> 1 -> >= 1: len(hits) == 1 has returned just above, so both read len >= 2"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "mask = np.where(finite & (gradient.mask > 0), F32(1.0), F32(0.0))",
+               "the mask's one reader (_gradient_row_sums) tests only mask > 0: any positive "
+               "value for a sample, 0 (or below) for none"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_before_accumulation",
+               "core/ReplaceFalseWithTrue",
+               "for s, glossy in enumerate(temporal.glossy or (False,) * len(temporal.names)):",
+               "fallback never taken: the one caller passes one glossy flag per signal, and a "
+               "frame has at least one signal"),
+    Equivalent("svgf_cli/filters/variance.py", "spatial_variance",
+               "core/ReplaceComparisonOperator_Lt_LtE", "while x < width:",
+               "< -> <=: at x == width the skip loop does nothing and `if x >= width: break` "
+               "leaves, as the loop test would have"),
+    Equivalent("svgf_cli/io/signals.py", "_sum", "core/NumberReplacer", "return planes[0]",
+               "[0] -> [-1]: read only when len(planes) == 1"),
+    Equivalent("svgf_cli/io/signals.py", "per_lobe", "core/ReplaceComparisonOperator_Eq_NotEq",
+               "elif lobe == specular[0]:",
+               "the merged specular signal is built from the list, not the lobe, and put at "
+               "the second glossy lobe instead of the first: glossy and transmission are "
+               "adjacent in LOBES (the order of lobes.present), so the order is the same"),
+    Equivalent("svgf_cli/io/output.py", "write_output", "core/NumberReplacer", "threads: int = 0,",
+               "a default never used: write_output's one caller (runner.frame_writer) passes "
+               "threads="),
+    Equivalent("svgf_cli/io/signals.py", "compose_signals", "core/AddNot", "if fresh:",
+               "not fresh (both sites): the next term is added, or the emission subtracted, "
+               "in the first term's role plane instead of a new array: the same values; every "
+               "plan reads each light role once and lets the plane go after it, so nothing "
+               "reads the changed plane (a fallback plan gathers it again)"),
+    Equivalent("svgf_cli/io/signals.py", "__call__", "core/NumberReplacer",
+               "self._uses[role] -= 1",
+               "a use count that does not fall (or falls by two): the role plane is let go "
+               "never, or early and gathered again: same values, other memory"),
+    Equivalent("svgf_cli/io/colour.py", "rgb_to_xyz_matrix",
+               "core/ReplaceComparisonOperator_Lt_LtE", "if abs(np.linalg.det(primaries)) < 1e-9:",
+               "< -> <= at the degeneracy tolerance: primaries whose determinant is exactly "
+               "1e-9 are degenerate either way (a tolerance boundary, not observable)"),
+    Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
+               "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
+               "2 -> 3: a third scratch slice that is never written or read (the row kernel "
+               "always filters two signals, t in range(2), and reads back sums[s] for s < 2)"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "samples.append((mask, np.where(finite, gradient.previous, F32(0.0)),",
+               "the stand-in for a non-finite sample only needs to be finite: its mask is 0 and "
+               "_gradient_row_sums, the only reader, multiplies every term by the mask"),
+    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "np.where(finite, gradient.current, F32(0.0))))",
+               "the stand-in for a non-finite sample only needs to be finite: its mask is 0 and "
+               "_gradient_row_sums, the only reader, multiplies every term by the mask"),
+    Equivalent("svgf_cli/filters/variance.py", "_needed_row", "core/NumberReplacer",
+               "largest = np.uint8(0)",
+               "0 -> 1: every row is then scanned for runs of needed pixels, and a row with "
+               "none yields no run: same pixels written, more time"),
+    Equivalent("svgf_cli/filters/variance.py", "_spatial_variance_run", "core/NumberReplacer",
+               "if count <= 0:",
+               "<= 0 -> <= -1: a tap column with count 0 then runs loops of range(0) over "
+               "empty slices: nothing is added"),
 )
 
 
