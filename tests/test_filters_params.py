@@ -46,7 +46,7 @@ def _documented() -> tuple[dict[str, dict[str, object]], dict[str, object]]:
                          re.S)
     assert sentence is not None
     changes = {}
-    for option, value in re.findall(r"`(--[a-z-]+)` \((\w+)\)", sentence.group(1)):
+    for option, value in re.findall(r"`(--[a-z-]+)`\s+\(([\w.]+)\)", sentence.group(1)):
         field = _field(option)
         changes[field.name] = _value(value, field)
     return columns, changes
