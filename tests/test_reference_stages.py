@@ -319,6 +319,12 @@ def test_despike_matches_reference(weights: tuple) -> None:
     radiance_mode[0, 1, 1] = False
     illumination[0, :, 1, 1] *= 50.0
     illumination[1, :, 5, 2] = -illumination[1, :, 5, 2]  # a negative neighbour luminance
+    height, width = depth.shape
+    illumination[0, :, 3, 0] *= 30.0  # spikes in the first and last columns
+    illumination[0, :, 6, width - 1] *= 30.0
+    illumination[1, :, 6:9, 3:6] = 0.0  # a lit pixel among black neighbours: bound 0
+    illumination[1, :, 7, 4] = 0.3
+    radiance_mode[1, 6:9, 3:6] = False
     got = illumination.copy()
     clamped = np.zeros((depth.shape[0], 2), dtype=np.int64)
     scratch = np.empty(depth.shape, dtype=F32)
@@ -328,6 +334,8 @@ def test_despike_matches_reference(weights: tuple) -> None:
     assert clamped.sum(axis=0).tolist() == changed
     moved = np.any(want != illumination, axis=1)
     assert moved[0, 4, 4] and moved[1, 0, 7]  # the planted fireflies
+    assert moved[0, 3, 0] and moved[0, 6, width - 1]
+    assert moved[1, 7, 4] and not got[1, :, 7, 4].any()
     assert not moved[0, 1, 1]  # no same-mode neighbour
     assert 0 < moved.sum() < 0.2 * moved.size  # spikes only, not the noise
 

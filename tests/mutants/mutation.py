@@ -158,6 +158,10 @@ class Equivalent:
 # Survivors that no test can kill: the mutant computes the same thing. Keyed by text, not
 # by line number, so the list survives edits elsewhere in the file.
 EQUIVALENT: tuple[Equivalent, ...] = (
+    Equivalent("svgf_cli/filters/despike.py", "despike", "core/ReplaceBinaryOperator_Add_Sub",
+               "yy = y + dy",
+               "y - dy over dy in -1..1 with every dx visits the same 8 neighbours (the offset "
+               "set is symmetric) and takes their maximum: the same bound"),
     Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer",
                'depth = values["depth"][0]',
                "[0] -> [-1]: the depth role is one plane (1, H, W), first and last are the same"),
