@@ -9,10 +9,12 @@ Reuses the runner's parts (`ReadAhead`, `FrameFilter`, `WriteBehind`, the output
    layers (nothing is written in this pass).
 2. **Reverse pass**, from the chunk's last frame (its reverse warm-up) down to the first
    output frame (``filters.two_pass.ReversePass``): at each output frame the forward state
-   is read back (one frame ahead, by its own reader thread, its file deleted once read),
-   combined with the reverse history, filtered and written like a causal run's output.
+   is read back (by its own reader thread, while the frame before is written; its file
+   deleted once read), unpacked into the reverse pass's combination buffers, combined in
+   place with the reverse history, filtered and written like a causal run's output.
 
-Memory: one Denoiser, the frames in flight and two packed states, whatever the length; disk:
+Memory: one Denoiser (the forward state is unpacked into its combination buffers), the
+frames in flight and one packed state, whatever the length; disk:
 one packed state per output frame between the passes (about 35 MB per 1080p frame with two
 signals). The scratch folder is removed however the run ends (success, error, SIGINT or
 SIGTERM: the runner's stop flag ends a pass between frames). Resume with ``--skip-existing``
@@ -77,6 +79,44 @@ class _SpillWrites:
                 self._pending.exception()  # wait; the error being unwound is the one to report
         finally:
             self._executor.shutdown(wait=True)
+
+
+class _StateReads:
+    """Packed forward states read back by one thread, one read in flight. The read of the
+    next output frame's state starts when :meth:`prefetch` is called (after the frame before
+    it is filtered), never while a frame is combined and filtered: at most one packed state
+    is held at the memory peak, none beside an unpacked one."""
+
+    def __init__(self, scratch: ScratchFolder, frames: Sequence[int]) -> None:
+        self._scratch = scratch
+        self._frames = list(frames)
+        self._position = 0
+        self._executor = ThreadPoolExecutor(
+            1, thread_name_prefix="svgf-state", initializer=_block_signals
+        )
+        self._pending: Future[tuple[dict[str, Any], dict[str, float]]] | None = None
+
+    def prefetch(self) -> None:
+        """Start reading the next state, if any and not started yet."""
+        if self._pending is None and self._position < len(self._frames):
+            self._pending = self._executor.submit(self._scratch.read,
+                                                  self._frames[self._position])
+
+    def take(self, frame: int) -> tuple[dict[str, Any], dict[str, float]]:
+        """Frame ``frame``'s state (the next one in order), waiting for its read."""
+        assert self._frames[self._position] == frame, (frame, self._frames[self._position])
+        self.prefetch()
+        assert self._pending is not None
+        pending, self._pending = self._pending, None
+        self._position += 1
+        return pending.result()
+
+    def __enter__(self) -> _StateReads:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._pending = None
+        self._executor.shutdown(wait=True, cancel_futures=True)
 
 
 def _reverse_tasks(tasks: Sequence[FrameTask], first_output: int) -> list[FrameTask]:
@@ -168,29 +208,31 @@ def _reverse_pass(
     read: Callable[..., Any],
 ) -> None:
     frames = FrameFilter(config, progress, stats, _make_reverse_pass)
-    written = [t for t in tasks if t.output is not None]
-
-    def read_state(task: FrameTask) -> Any:
-        return scratch.read(task.frame)
-
+    written = [t.frame for t in tasks if t.output is not None]
     with (
         ReadAhead(tasks, frame_reader(config, read), stats) as reads,
-        ReadAhead(written, read_state, RunStats()) as states,
+        _StateReads(scratch, written) as states,
         WriteBehind(frame_writer(config), progress, stats) as writes,
     ):
+        states.prefetch()  # the first output frame's, while the reverse warm-up runs
         frame_started = time.perf_counter()
-        buffers = None  # the unpacked forward state: one set of buffers for the whole pass
         for task, result, _ in reads:
             frames.admit(task, result)
             writes.poll()
             forward = None
             if task.output is not None:
-                _, packed, _ = next(states)
-                forward = buffers = unpack_history(result.frame.names, *packed, out=buffers)
-                packed = None  # the unpacked copy is all the combination needs
+                # Unpacked straight into the reverse pass's combination buffers, where it
+                # is combined in place: no other copy of the state is held.
+                frame = result.frame
+                into = frames.denoiser.forward_buffers(len(frame.names), frame.height,
+                                                       frame.width)
+                forward = unpack_history(frame.names, *states.take(task.frame), out=into)
+                frame = into = None
             denoised, _ = frames.process(
                 task, result, lambda f, h=forward: frames.denoiser.process(f, h))
             forward = None
+            # The next state is read while this frame is written and the next one read.
+            states.prefetch()
             if task.output is None:
                 warmup.frame_done(task.frame)
             else:

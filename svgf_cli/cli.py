@@ -9,6 +9,7 @@ import click
 
 from svgf_cli import __version__
 from svgf_cli.errors import EXIT_RUNTIME, SvgfError
+from svgf_cli.heap import map_large_blocks
 
 # Subcommand name -> module defining a click command named `command`. Imported lazily so
 # `svgf --help` does not pay for numba or OpenImageIO.
@@ -40,6 +41,8 @@ def cli() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: one-line `ERROR:` messages and published exit codes."""
+    # Before any frame is read: blocks already in a heap arena would stay there.
+    map_large_blocks()
     try:
         cli.main(args=argv, prog_name="svgf", standalone_mode=False)
     except click.exceptions.Abort:

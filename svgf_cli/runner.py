@@ -34,6 +34,7 @@ import numpy as np
 from svgf_cli import __version__
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, SvgfError, UsageError
 from svgf_cli.filters.params import SVGFParams
+from svgf_cli.heap import map_large_blocks
 from svgf_cli.progress import Progress
 
 # Prefix of the debug channels (--debug-aovs): a layer name no renderer writes, so they
@@ -733,6 +734,9 @@ def run_sequence(
     before it are written, nothing for it), UsageError for a history file from other
     parameters, Interrupted after a SIGINT/SIGTERM once the frame in flight is written.
     """
+    # Frame-sized arrays go back to the system when freed: without this the peak memory
+    # grows with the frames run (svgf_cli.heap).
+    map_large_blocks()
     if config.params.bidirectional:
         from svgf_cli.bidir import run_bidirectional
 

@@ -64,10 +64,10 @@ def test_combine_histories_matches_the_reference() -> None:
     current = rng.exponential(2.0, (shape[0], 3, *shape[1:])).astype(F32)
     depth = np.where(rng.random(shape[1:]) < 0.15, 0.0, 4.0).astype(F32)
     params = resolve_params("falcor")  # alpha 0.05, moments alpha 0.2: the two tables differ
-    out = (np.zeros_like(current), np.zeros_like(forward.moments),
-           np.zeros_like(forward.length))
-    combine_histories(current, forward.colour, forward.moments, forward.length, reverse.colour,
-                      reverse.moments, reverse.length, depth, effective_counts(params.alpha, 32),
+    # in place: the forward history's buffers receive the combination
+    out = (forward.colour.copy(), forward.moments.copy(), forward.length.copy())
+    combine_histories(current, reverse.colour, reverse.moments, reverse.length, depth,
+                      effective_counts(params.alpha, 32),
                       effective_counts(params.moments_alpha, 32),
                       float32_weights(ACESCG_LUMINANCE),
                       effective_counts(params.moments_alpha, 32)[-1], *out)

@@ -88,9 +88,6 @@ def _count(table: np.ndarray, h: np.float32) -> np.float32:
 @njit(parallel=True, **_JIT)
 def combine_histories(
     current: np.ndarray,
-    forward_colour: np.ndarray,
-    forward_moments: np.ndarray,
-    forward_length: np.ndarray,
     reverse_colour: np.ndarray,
     reverse_moments: np.ndarray,
     reverse_length: np.ndarray,
@@ -99,16 +96,17 @@ def combine_histories(
     moment_counts: np.ndarray,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
     reference_count: np.float32,
-    out_colour: np.ndarray,
-    out_moments: np.ndarray,
-    out_length: np.ndarray,
+    colour: np.ndarray,
+    moments: np.ndarray,
+    length: np.ndarray,
 ) -> None:
-    """The combined accumulation of frame ``t`` (module docstring).
+    """The combined accumulation of frame ``t`` (module docstring), in place.
 
-    ``current`` is this frame's demodulated illumination (S, 3, H, W); the forward and
-    reverse histories are :class:`SideHistory` planes; ``colour_counts`` and
-    ``moment_counts`` are :func:`effective_counts` tables for ``alpha`` and
-    ``moments_alpha``, ``reference_count`` is ``n_ref``. Writes
+    ``current`` is this frame's demodulated illumination (S, 3, H, W); ``colour``,
+    ``moments`` and ``length`` hold the forward history (:class:`SideHistory` planes) and
+    receive the combination (a run keeps no second copy); the reverse history is given as
+    its three planes. ``colour_counts`` and ``moment_counts`` are :func:`effective_counts`
+    tables for ``alpha`` and ``moments_alpha``, ``reference_count`` is ``n_ref``. Writes
     ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` per colour channel and moment, the
     moments' variance scaled by ``min(1, n_ref / N)``, and the length ``1 + h_f + h_r``;
     background: the current values and length 0.
@@ -120,12 +118,15 @@ def combine_histories(
         wf = np.empty(width, dtype=np.float32)
         wr = np.empty(width, dtype=np.float32)
         wx = np.empty(width, dtype=np.float32)
+        mf = np.empty(width, dtype=np.float32)
+        mr = np.empty(width, dtype=np.float32)
+        mx = np.empty(width, dtype=np.float32)
         for s in range(num_signals):
-            hf_row = forward_length[s, y]
+            # Both weight sets first: the forward length is overwritten by the combined one.
+            h_row = length[s, y]
             hr_row = reverse_length[s, y]
-            h_out = out_length[s, y]
             for x in range(width):
-                hf = hf_row[x]
+                hf = h_row[x]
                 hr = hr_row[x]
                 surface = z[x] > _ZERO
                 nf = _count(colour_counts, hf) if surface else _ZERO
@@ -134,36 +135,32 @@ def combine_histories(
                 wf[x] = nf * inv
                 wr[x] = nr * inv
                 wx[x] = inv
-                h_out[x] = (_ONE + max(hf, _ZERO) + max(hr, _ZERO)) if surface else _ZERO
+                nf = _count(moment_counts, hf) if surface else _ZERO
+                nr = _count(moment_counts, hr) if surface else _ZERO
+                inv = _ONE / (_ONE + nf + nr)
+                mf[x] = nf * inv
+                mr[x] = nr * inv
+                mx[x] = inv
+                h_row[x] = (_ONE + max(hf, _ZERO) + max(hr, _ZERO)) if surface else _ZERO
             for c in range(3):
                 x_row = current[s, c, y]
-                f_row = forward_colour[s, c, y]
                 r_row = reverse_colour[s, c, y]
-                out = out_colour[s, c, y]
+                out = colour[s, c, y]
                 for x in range(width):
-                    out[x] = wx[x] * x_row[x] + wf[x] * f_row[x] + wr[x] * r_row[x]
-            for x in range(width):
-                surface = z[x] > _ZERO
-                nf = _count(moment_counts, hf_row[x]) if surface else _ZERO
-                nr = _count(moment_counts, hr_row[x]) if surface else _ZERO
-                inv = _ONE / (_ONE + nf + nr)
-                wf[x] = nf * inv
-                wr[x] = nr * inv
-                wx[x] = inv
+                    out[x] = wx[x] * x_row[x] + wf[x] * out[x] + wr[x] * r_row[x]
             r = current[s, 0, y]
             g = current[s, 1, y]
             b = current[s, 2, y]
-            m1 = out_moments[s, 0, y]
-            m2 = out_moments[s, 1, y]
-            f1, f2 = forward_moments[s, 0, y], forward_moments[s, 1, y]
+            m1 = moments[s, 0, y]
+            m2 = moments[s, 1, y]
             r1, r2 = reverse_moments[s, 0, y], reverse_moments[s, 1, y]
             for x in range(width):
                 lum = luminance(r[x], g[x], b[x], luminance_weights)
-                mean = wx[x] * lum + wf[x] * f1[x] + wr[x] * r1[x]
-                second = wx[x] * (lum * lum) + wf[x] * f2[x] + wr[x] * r2[x]
+                mean = mx[x] * lum + mf[x] * m1[x] + mr[x] * r1[x]
+                second = mx[x] * (lum * lum) + mf[x] * m2[x] + mr[x] * r2[x]
                 # The a-trous stops at the variance relative to a long causal history's
                 # count: more samples than that make a cleaner colour, filtered less.
-                shrink = min(_ONE, reference_count * wx[x])
+                shrink = min(_ONE, reference_count * mx[x])
                 m1[x] = mean
                 m2[x] = mean * mean + shrink * max(second - mean * mean, _ZERO)
 

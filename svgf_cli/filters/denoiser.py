@@ -554,30 +554,50 @@ class Denoiser:
         self._frames_processed += 1
         return kept[0]
 
+    def forward_buffers(self, num_signals: int, height: int, width: int) -> SideHistory:
+        """The buffers :meth:`reverse_step` combines in. A forward history written into them
+        (a file run unpacks the spilled state there) is combined in place; any other is
+        copied in first. Their contents do not outlive the next :meth:`reverse_step`."""
+        work = self._workspace(height, width, num_signals)
+        return SideHistory(work[self._combined_name()], work["combined_moments"],
+                           work["combined_length"])
+
+    def _combined_name(self) -> str:
+        # A spare buffer that is neither the pass's own accumulation nor the demodulated
+        # frame (which the firefly clamp puts in spare_a).
+        return "spare_b" if self.params.firefly_clamp > 0.0 else "spare_a"
+
     def reverse_step(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
         """The reverse pass of a bidirectional run: ``frame.motion`` points to the frame
         processed before (the next one in time). Temporal accumulation and feedback
         filtering of its own history, as :meth:`forward_step`; with ``forward`` (the
-        forward pass's :meth:`forward_step` history at the same frame) also the
-        combination of both histories with this frame (``filters.bidirectional``),
-        filtered spatially and composed into the output. None without ``forward``
-        (a warm-up frame of the reverse pass)."""
+        forward pass's :meth:`forward_step` history at the same frame, best given in
+        :meth:`forward_buffers`) also the combination of both histories with this frame
+        (``filters.bidirectional``), filtered spatially and composed into the output.
+        None without ``forward`` (a warm-up frame of the reverse pass)."""
         if self.params.taa:
             raise ValueError("TAA filters the output causally; it cannot run bidirectionally")
         run = self._start_frame(frame)
         work = run.work
-        # The combined colour takes a spare buffer that is neither the pass's own
-        # accumulation nor the demodulated frame (which the firefly clamp puts in spare_a).
-        combined = "spare_b" if self.params.firefly_clamp > 0.0 else "spare_a"
+        combined = self._combined_name()
         combine = None
         if forward is not None:
+            into = self.forward_buffers(len(run.names), frame.height, frame.width)
+            for given, buffer in ((forward.colour, into.colour),
+                                  (forward.moments, into.moments),
+                                  (forward.length, into.length)):
+                if given is not buffer:
+                    if given.shape != buffer.shape:
+                        raise ValueError(f"forward history of shape {given.shape}, expected "
+                                         f"{buffer.shape}")
+                    np.copyto(buffer, given)
+
             def combine(temporal: TemporalState) -> None:
                 combine_histories(
-                    temporal.current, forward.colour, forward.moments, forward.length,
-                    temporal.history_illumination, temporal.history_moments,
+                    temporal.current, temporal.history_illumination, temporal.history_moments,
                     temporal.history_length, temporal.depth, self._colour_counts,
                     self._moment_counts, run.weights, self._moment_counts[-1],
-                    work[combined], work["combined_moments"], work["combined_length"],
+                    into.colour, into.moments, into.length,
                 )
 
         self._accumulate_temporally(run, combine)

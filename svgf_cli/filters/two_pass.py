@@ -36,35 +36,43 @@ class ReversePass:
 
     def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
         self.denoiser = Denoiser(params, debug_layers=debug_layers)
-        self._later: tuple[np.ndarray, np.ndarray] | None = None  # motion, depth of t + 1
         self.derived_holes = 0  # holes of the last derived motion (information)
-        # The derived motion and the inversion's scratch, reused frame after frame (the
-        # Denoiser keeps no reference to a frame's motion).
+        # The motion to the next frame derived for the frame processed next (from the
+        # frame just processed, so none of its planes is kept): reused frame after frame
+        # (the Denoiser keeps no reference to a motion). The inversion's scratch is
+        # allocated per frame, so it is not held while the frame is filtered.
         self._derived: np.ndarray | None = None
-        self._scratch: np.ndarray | None = None
+        self._derived_ready = False
 
     def reset(self) -> None:
         """Drop the history (a gap in the sequence): the next frame starts cold."""
         self.denoiser.reset()
-        self._later = None
+        self._derived_ready = False
+
+    def forward_buffers(self, num_signals: int, height: int, width: int) -> SideHistory:
+        """Where to put the forward history of the next output frame
+        (:meth:`Denoiser.forward_buffers`: combined in place, no copy)."""
+        return self.denoiser.forward_buffers(num_signals, height, width)
 
     def motion_to_next(self, frame: Frame) -> np.ndarray:
-        """``frame.motion_next``, else the inverse of the later frame's backward motion,
-        else (the last frame of the sequence) no motion anywhere."""
+        """``frame.motion_next``, else the inverse of the later frame's backward motion
+        (derived when that frame was processed, if it had no ``motion_next`` either: a
+        renderer writes it on every frame or on none), else (the last frame of the
+        sequence) no motion anywhere."""
         if frame.motion_next is not None:
             return frame.motion_next
-        shape = (2, frame.height, frame.width)
-        if self._derived is None or self._derived.shape != shape:
-            self._derived = np.empty(shape, dtype=F32)
-            self._scratch = np.empty(shape, dtype=F32)
-        motion = self._derived
-        if self._later is None or self._later[1].shape != frame.depth.shape:
+        motion = self._motion_buffer(frame.height, frame.width)
+        if not self._derived_ready:
             motion.fill(NO_MOTION)
             self.derived_holes = frame.height * frame.width
-        else:
-            self.derived_holes = invert_motion(self._later[0], self._later[1], motion,
-                                               scratch=self._scratch)
         return motion
+
+    def _motion_buffer(self, height: int, width: int) -> np.ndarray:
+        shape = (2, height, width)
+        if self._derived is None or self._derived.shape != shape:
+            self._derived = np.empty(shape, dtype=F32)
+            self._derived_ready = False
+        return self._derived
 
     def process(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
         """The next frame (going backwards in time); the output when ``forward`` is given."""
@@ -75,8 +83,15 @@ class ReversePass:
             # Gradient samples describe the change from the previous frame: not this pass's.
             signals=[dataclasses.replace(s, gradient=None) for s in frame.signals],
         )
-        self._later = (_finite(frame.motion, NO_MOTION), _finite(frame.depth, F32(0.0)))
-        return self.denoiser.reverse_step(reverse, forward)
+        result = self.denoiser.reverse_step(reverse, forward)
+        # The frame before this one (processed next) gets its motion to this one now.
+        self._derived_ready = False
+        if frame.motion_next is None:
+            motion = self._motion_buffer(frame.height, frame.width)
+            self.derived_holes = invert_motion(
+                _finite(frame.motion, NO_MOTION), _finite(frame.depth, F32(0.0)), motion)
+            self._derived_ready = True
+        return result
 
 
 def denoise_bidirectional(
