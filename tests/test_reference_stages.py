@@ -325,6 +325,8 @@ def test_despike_matches_reference(weights: tuple) -> None:
     illumination[1, :, 6:9, 3:6] = 0.0  # a lit pixel among black neighbours: bound 0
     illumination[1, :, 7, 4] = 0.3
     radiance_mode[1, 6:9, 3:6] = False
+    illumination[1, :, 3:6, 6:9] = 0.0  # black among black: left alone (no 0/0)
+    radiance_mode[1, 3:6, 6:9] = False
     got = illumination.copy()
     clamped = np.zeros((depth.shape[0], 2), dtype=np.int64)
     scratch = np.empty(depth.shape, dtype=F32)
@@ -336,6 +338,7 @@ def test_despike_matches_reference(weights: tuple) -> None:
     assert moved[0, 4, 4] and moved[1, 0, 7]  # the planted fireflies
     assert moved[0, 3, 0] and moved[0, 6, width - 1]
     assert moved[1, 7, 4] and not got[1, :, 7, 4].any()
+    assert np.all(np.isfinite(got)) and not got[1, :, 4, 7].any()
     assert not moved[0, 1, 1]  # no same-mode neighbour
     assert 0 < moved.sum() < 0.2 * moved.size  # spikes only, not the noise
 
