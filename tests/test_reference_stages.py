@@ -322,6 +322,13 @@ def test_despike_matches_reference(weights: tuple) -> None:
     height, width = depth.shape
     illumination[0, :, 3, 0] *= 30.0  # spikes in the first and last columns
     illumination[0, :, 6, width - 1] *= 30.0
+    illumination[0, :, 5:8, 0] *= 20.0  # bright, but not the last column's neighbours
+    radiance_mode[0, 5:8, 0] = True  # (the same mode as that spike)
+    # Around the first row's spike (1, 0, 7): its brightest neighbour in its own row, and a
+    # bright last row that is not its neighbour.
+    illumination[1, :, 0, 6] *= 6.0
+    illumination[1, :, height - 1, 6:9] *= 20.0
+    radiance_mode[1, 0:2, 6:9] = radiance_mode[1, height - 1, 6:9] = False
     illumination[1, :, 6:9, 3:6] = 0.0  # a lit pixel among black neighbours: bound 0
     illumination[1, :, 7, 4] = 0.3
     radiance_mode[1, 6:9, 3:6] = False
