@@ -158,6 +158,10 @@ class Equivalent:
 # Survivors that no test can kill: the mutant computes the same thing. Keyed by text, not
 # by line number, so the list survives edits elsewhere in the file.
 EQUIVALENT: tuple[Equivalent, ...] = (
+    Equivalent("svgf_cli/filters/despike.py", "despike", "core/ReplaceComparisonOperator_Gt_GtE",
+               "if d[x] > _ZERO and neighbour_max[x] >= _ZERO and lum[x] > bound:",
+               "d > 0 -> d >= 0: a background pixel's luminance is -inf in the plane (pass 1), "
+               "never above a bound, so it is left alone either way"),
     Equivalent("svgf_cli/filters/despike.py", "despike", "core/ReplaceBinaryOperator_Add_Sub",
                "yy = y + dy",
                "y - dy over dy in -1..1 with every dx visits the same 8 neighbours (the offset "
