@@ -387,40 +387,15 @@ def _neighbours(y: int, x: int, height: int, width: int,
             yield yy, xx
 
 
-def firefly_clamp(illumination: np.ndarray, depth: np.ndarray, k: float,
-                  weights: Sequence[float] = REC709) -> np.ndarray:
-    """Clamp each surface pixel's luminance to ``mean + k sigma`` (population sigma) of its
-    in-image surface neighbours, the centre left out; the rgb is scaled (hue kept).
-
-    A limit below 0 counts as 0; a pixel without such neighbours is left alone.
-    """
-    c = np.asarray(illumination, dtype=F64)
-    z = np.asarray(depth, dtype=F64)
-    out = c.copy()
-    lum = luminance(c, weights)
-    num_signals, _, height, width = c.shape
-    for s in range(num_signals):
-        for y in range(height):
-            for x in range(width):
-                if z[y, x] <= 0.0:
-                    continue
-                values = [lum[s, yy, xx] for yy, xx in _neighbours(y, x, height, width, False)
-                          if z[yy, xx] > 0.0]
-                if not values:
-                    continue
-                limit = max(float(np.mean(values) + k * np.std(values)), 0.0)
-                if lum[s, y, x] > limit:
-                    out[s, :, y, x] *= limit / lum[s, y, x]
-    return out
-
-
-def despike(illumination: np.ndarray, radiance_mode: np.ndarray, depth: np.ndarray,
-            ratio: float, weights: Sequence[float] = REC709) -> tuple[np.ndarray, list[int]]:
-    """Per signal, bring a surface pixel whose luminance exceeds ``ratio`` times the largest
-    luminance among its in-image 8 neighbours that are surface pixels of the same mode down
-    to that bound (rgb scaled, hue kept). A pixel without such neighbours, or whose largest
-    neighbour luminance is negative, is left alone. Returns the result and the number of
-    pixels changed per signal."""
+def _scale_to_neighbour_bound(
+    illumination: np.ndarray, depth: np.ndarray, weights: Sequence[float],
+    counts: Callable[[int, int, int, int, int], bool],
+    bound: Callable[[list[float]], float | None],
+) -> tuple[np.ndarray, list[int]]:
+    """Per signal ``s`` and surface pixel ``p = (y, x)``: the luminances of its in-image
+    surface neighbours ``q`` with ``counts(s, y, x, yy, xx)``; where there are some,
+    ``bound(values)`` is not None and ``l(p)`` exceeds it, the rgb of ``p`` is scaled down
+    to it (hue kept). Returns the result and the number of pixels changed per signal."""
     c = np.asarray(illumination, dtype=F64)
     z = np.asarray(depth, dtype=F64)
     out = c.copy()
@@ -433,14 +408,38 @@ def despike(illumination: np.ndarray, radiance_mode: np.ndarray, depth: np.ndarr
                 if z[y, x] <= 0.0:
                     continue
                 values = [lum[s, yy, xx] for yy, xx in _neighbours(y, x, height, width, False)
-                          if z[yy, xx] > 0.0 and radiance_mode[s, yy, xx] == radiance_mode[s, y, x]]
-                if not values or max(values) < 0.0:
-                    continue
-                bound = ratio * max(values)
-                if lum[s, y, x] > bound:
-                    out[s, :, y, x] *= bound / lum[s, y, x]
+                          if z[yy, xx] > 0.0 and counts(s, y, x, yy, xx)]
+                limit = bound(values) if values else None
+                if limit is not None and lum[s, y, x] > limit:
+                    out[s, :, y, x] *= limit / lum[s, y, x]
                     changed[s] += 1
     return out, changed
+
+
+def firefly_clamp(illumination: np.ndarray, depth: np.ndarray, k: float,
+                  weights: Sequence[float] = REC709) -> np.ndarray:
+    """Clamp each surface pixel's luminance to ``mean + k sigma`` (population sigma) of its
+    in-image surface neighbours, the centre left out; the rgb is scaled (hue kept).
+
+    A limit below 0 counts as 0; a pixel without such neighbours is left alone.
+    """
+    out, _ = _scale_to_neighbour_bound(
+        illumination, depth, weights, lambda *_: True,
+        lambda values: max(float(np.mean(values) + k * np.std(values)), 0.0))
+    return out
+
+
+def despike(illumination: np.ndarray, radiance_mode: np.ndarray, depth: np.ndarray,
+            ratio: float, weights: Sequence[float] = REC709) -> tuple[np.ndarray, list[int]]:
+    """Per signal, bring a surface pixel whose luminance exceeds ``ratio`` times the largest
+    luminance among its in-image 8 neighbours that are surface pixels of the same mode down
+    to that bound (rgb scaled, hue kept). A pixel without such neighbours, or whose largest
+    neighbour luminance is negative, is left alone. Returns the result and the number of
+    pixels changed per signal."""
+    return _scale_to_neighbour_bound(
+        illumination, depth, weights,
+        lambda s, y, x, yy, xx: bool(radiance_mode[s, yy, xx] == radiance_mode[s, y, x]),
+        lambda values: None if max(values) < 0.0 else ratio * max(values))
 
 
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
