@@ -149,9 +149,12 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "variance-w", "filters", "w instead of w^2 in variance propagation",
         "svgf_cli/filters/atrous.py",
-        (("fma(w0 * w0, variance[0, uq, qx], acc[4])", "fma(w0, variance[0, uq, qx], acc[4])"),
-         ("fma(w1 * w1, variance[second, uq, qx], acc[9])",
-          "fma(w1, variance[second, uq, qx], acc[9])")),
+        # The pair's second signal and the triple's second and third (the first signal's line
+        # is the same text in both row functions).
+        (("fma(w1 * w1, variance[second, uq, qx], acc[9])",
+          "fma(w1, variance[second, uq, qx], acc[9])"),
+         ("fma(w1 * w1, variance[1, uq, qx], acc[9])", "fma(w1, variance[1, uq, qx], acc[9])"),
+         ("fma(w2 * w2, variance[2, uq, qx], acc[14])", "fma(w2, variance[2, uq, qx], acc[14])")),
         FILTER_TESTS,
     ),
     Mutant(
@@ -241,8 +244,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "glossy-no-clamp", "filters", "glossy signals' history not clamped",
         "svgf_cli/filters/denoiser.py",
-        (("            k = glossy_k if glossy else p.history_clamp",
-          "            k = p.history_clamp"),),
+        (("        ks = [glossy_k if glossy else p.history_clamp",
+          "        ks = [p.history_clamp"),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -305,8 +308,13 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "atrous-mode-blind", "filters", "a-trous ignores the mode (guide sign)",
         "svgf_cli/filters/atrous.py",
+        # In the pair's tap and in the triple's (whose third line makes the text unique).
         (("    w0 = w0 if (guide0 < _ZERO) == (lum0 < _ZERO) else _ZERO\n"
-          "    w1 = w1 if (guide1 < _ZERO) == (lum1 < _ZERO) else _ZERO\n", ""),),
+          "    w1 = w1 if (guide1 < _ZERO) == (lum1 < _ZERO) else _ZERO\n    return",
+          "    return"),
+         ("    w0 = w0 if (guide0 < _ZERO) == (lum0 < _ZERO) else _ZERO\n"
+          "    w1 = w1 if (guide1 < _ZERO) == (lum1 < _ZERO) else _ZERO\n"
+          "    w2 = w2 if (guide2 < _ZERO) == (lum2 < _ZERO) else _ZERO\n", "")),
         FILTER_TESTS,
     ),
     Mutant(
