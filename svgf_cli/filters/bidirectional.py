@@ -85,6 +85,17 @@ def _count(table: np.ndarray, h: np.float32) -> np.float32:
     return table[below] + frac * (table[upper] - table[below])
 
 
+@njit(inline="always", **_JIT)
+def _side_weights(
+    table: np.ndarray, hf: np.float32, hr: np.float32, surface: bool,
+) -> tuple[np.float32, np.float32, np.float32]:
+    """``(n_f, n_r, 1) / (1 + n_f + n_r)`` with ``n = n(h)`` of ``table`` (0 off surfaces)."""
+    nf = _count(table, hf) if surface else _ZERO
+    nr = _count(table, hr) if surface else _ZERO
+    inv = _ONE / (_ONE + nf + nr)
+    return nf * inv, nr * inv, inv
+
+
 @njit(parallel=True, **_JIT)
 def combine_histories(
     current: np.ndarray,
@@ -129,18 +140,8 @@ def combine_histories(
                 hf = h_row[x]
                 hr = hr_row[x]
                 surface = z[x] > _ZERO
-                nf = _count(colour_counts, hf) if surface else _ZERO
-                nr = _count(colour_counts, hr) if surface else _ZERO
-                inv = _ONE / (_ONE + nf + nr)
-                wf[x] = nf * inv
-                wr[x] = nr * inv
-                wx[x] = inv
-                nf = _count(moment_counts, hf) if surface else _ZERO
-                nr = _count(moment_counts, hr) if surface else _ZERO
-                inv = _ONE / (_ONE + nf + nr)
-                mf[x] = nf * inv
-                mr[x] = nr * inv
-                mx[x] = inv
+                wf[x], wr[x], wx[x] = _side_weights(colour_counts, hf, hr, surface)
+                mf[x], mr[x], mx[x] = _side_weights(moment_counts, hf, hr, surface)
                 h_row[x] = (_ONE + max(hf, _ZERO) + max(hr, _ZERO)) if surface else _ZERO
             for c in range(3):
                 x_row = current[s, c, y]
