@@ -154,13 +154,11 @@ PRESETS: dict[str, SVGFParams] = {
     # Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128, sigma_z 1, 5 iterations,
     # first iteration fed back as history.
     "paper": SVGFParams(),
-    # The recommended set: the paper's filter plus anti-lag, a loose history clamp against
-    # outliers (k = 3), the glossy rules and the firefly guards (measured in
-    # docs/results.md).
-    # The spatial variance (short history) uses a tighter relative luminance stop (0.5), so
-    # fireflies and lit/shadowed neighbours do not inflate it into an over-blur, and the
-    # output is despiked (ratio 2). Signals demodulated by the G-buffer albedo are only
-    # demodulated where it is at least 0.1.
+    # The recommended set (measured in docs/results.md): the paper's filter plus anti-lag, a
+    # loose history clamp against outliers (k = 3), the glossy rules, a tighter luminance
+    # stop for the short-history spatial variance (0.5: fireflies and lit/shadowed
+    # neighbours no longer inflate it into an over-blur), despike (ratio 2), and
+    # demodulation by the G-buffer albedo only where it is at least 0.1.
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
                           glossy_sigma_luminance=1.0, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, guide_albedo_floor=0.1),
