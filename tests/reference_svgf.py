@@ -741,6 +741,15 @@ def estimate_variance(illumination: np.ndarray, moments: np.ndarray,
 
 
 # --------------------------------------------------------------------------- 4 a-trous
+def iteration_count(requested: int, height: int, width: int) -> int:
+    """The a-trous iteration count: ``requested``, or for -1 (auto) one more per doubling of
+    the shorter image side from 3 below 160 pixels up to 5 at 320 and beyond."""
+    if requested != -1:
+        return requested
+    side = min(height, width)
+    return 3 if side < 160 else 4 if side < 320 else 5
+
+
 def atrous_steps(iterations: int) -> list[int]:
     """The a-trous step schedule: iteration i filters at step 2^i (1, 2, 4, 8, 16, ...)."""
     return [2**i for i in range(iterations)]
@@ -1118,9 +1127,10 @@ class ReferenceDenoiser:
         p = self.params
         variance, colour = estimate_variance(colour, moments, length, radiance_mode, geom, p)
         variance_before_atrous = variance
-        feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
+        iterations = iteration_count(p.atrous_iterations, *geom.depth.shape)
+        feedback = min(p.feedback_iteration, iterations - 1)
         colour_history = colour
-        for iteration, step in enumerate(atrous_steps(p.atrous_iterations)):
+        for iteration, step in enumerate(atrous_steps(iterations)):
             sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
                       else p.sigma_luminance for glossy in clean.glossy]
             guides = luminance_stop_guides(colour, variance, geom.depth, sigmas,

@@ -429,3 +429,28 @@ def test_bundled_sequence_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     err_denoised = np.mean((denoised.rgb() - ref) ** 2)
     err_noisy = np.mean((noisy.rgb() - ref) ** 2)
     assert err_denoised < 0.5 * err_noisy  # the filter removes most of the 1-spp noise
+
+
+def test_atrous_iterations_take_a_count_or_auto(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``auto`` (the default preset's value, -1 in ``svgf/params``) and counts 0-12 are
+    accepted and logged as given; anything else, or a feedback index auto cannot reach on
+    every image, is refused with exit 2."""
+    first = [sequence / "in.0001.exr", "--frames", "1"]
+    code, stdout, err = run_cli(
+        ["denoise", *first, "-o", tmp_path / "a.exr", "--preset", "paper",
+         "--atrous-iterations", "auto", "--feedback-iteration", "2"], capsys)
+    assert code == 0, err
+    assert json.loads(read_exr(tmp_path / "a.exr").header["svgf/params"])[
+        "atrous_iterations"] == -1
+    assert "atrous_iterations=auto" in stdout
+    for bad, message in [("seven", "'seven': expected a number of iterations or 'auto'"),
+                         ("13", "13: must lie in 0..12 or be 'auto'")]:
+        code, _, err = run_cli(["denoise", *first, "-o", tmp_path / "b.exr",
+                                "--atrous-iterations", bad], capsys)
+        assert code == 2 and message in err
+    code, _, err = run_cli(["denoise", *first, "-o", tmp_path / "c.exr",
+                            "--feedback-iteration", "3"], capsys)
+    assert code == 2 and "below --atrous-iterations (3)" in err
+    assert not (tmp_path / "b.exr").exists() and not (tmp_path / "c.exr").exists()

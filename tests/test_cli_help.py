@@ -35,7 +35,8 @@ def test_denoise_help_sections_in_order_and_fits_100_columns() -> None:
     # everyday options before the first filter parameter; ranges from click's range types
     assert text.index("--frames") < text.index("--warmup") < text.index("--alpha")
     assert text.index("--preset-aovs") < text.index(FILTER_SECTION)
-    assert "[0.0<x<=1.0]" in text and "[0<=x<=12]" in text and "[x>=1]" in text
+    assert "[0.0<x<=1.0]" in text and "[1<=x<=16]" in text and "[x>=1]" in text
+    assert "--atrous-iterations N|AUTO" in text and "default: auto" in text
     assert max(len(line) for line in text.splitlines()) <= 100
 
 

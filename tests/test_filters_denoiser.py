@@ -14,7 +14,7 @@ from synthetic import (
 )
 
 from svgf_cli.filters.denoiser import Denoiser
-from svgf_cli.filters.params import SVGFParams, resolve_params
+from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, resolve_params
 
 F32 = np.float32
 
@@ -349,7 +349,7 @@ def test_feedback_iteration_output_becomes_the_history() -> None:
 # Each parameter at the edge of its range (accepted) and just past it (refused with its own
 # message): a library caller gets no Denoiser that would divide by zero or never converge.
 _EDGES = {
-    "atrous_iterations": (0, -1, ">= 0"), "alpha": (1.0, 0.0, "alpha and moments_alpha"),
+    "atrous_iterations": (-1, -2, ">= 0"), "alpha": (1.0, 0.0, "alpha and moments_alpha"),
     "moments_alpha": (1.0, 1.5, "alpha and moments_alpha"), "history_cap": (1, 0, "history_cap"),
     "sigma_normal": (1e-3, 0.0, "sigma_normal"), "sigma_luminance": (1e-3, 0.0, "sigma_normal"),
     "sigma_depth": (1e-3, 0.0, "sigma_normal"),
@@ -371,3 +371,20 @@ def test_atrous_iterations_stop_at_twelve() -> None:
     Denoiser(resolve_params("paper", atrous_iterations=12))
     with pytest.raises(ValueError, match="<= 12"):
         Denoiser(resolve_params("paper", atrous_iterations=13))
+
+
+def test_auto_iterations_filter_like_the_count_the_image_size_gives() -> None:
+    """``atrous_iterations`` auto runs exactly the count ``atrous_iterations_for`` picks for
+    the frame (3 on a small image), in every frame and in the colour history."""
+    frames = static_sequence(3, 24, 16, noise=0.3, split=False)
+    auto = resolve_params("default")
+    assert auto.atrous_iterations == AUTO_ITERATIONS
+    runs = {name: Denoiser(params) for name, params in {
+        "auto": auto, "three": auto.replace(atrous_iterations=3),
+        "five": auto.replace(atrous_iterations=5)}.items()}
+    for frame in frames:
+        out = {name: d.process(frame).color for name, d in runs.items()}
+        np.testing.assert_array_equal(out["auto"], out["three"])
+        assert np.any(out["auto"] != out["five"])
+    np.testing.assert_array_equal(runs["auto"].state()["history_illumination"],
+                                  runs["three"].state()["history_illumination"])

@@ -12,7 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS, SVGFParams
+from svgf_cli.filters.params import (
+    AUTO_ITERATIONS,
+    DEFAULT_PRESET,
+    PRESETS,
+    SVGFParams,
+    atrous_iterations_for,
+)
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "denoise.md"
 
@@ -20,6 +26,8 @@ DOC = Path(__file__).resolve().parent.parent / "docs" / "denoise.md"
 def _value(text: str, field: dataclasses.Field) -> object:
     if text in ("on", "off"):
         return text == "on"
+    if text == "auto":
+        return AUTO_ITERATIONS
     return int(text) if field.type in ("int", int) else float(text)
 
 
@@ -70,3 +78,20 @@ def test_default_preset_is_paper_with_the_documented_changes() -> None:
     assert DEFAULT_PRESET == "default"
     assert dataclasses.asdict(PRESETS["default"]) == {**columns["paper"], **changes}
     assert set(PRESETS) == {"default", "paper", "falcor"}
+
+
+@pytest.mark.parametrize(("height", "width", "count"), [
+    (72, 128, 3), (159, 4000, 3), (160, 160, 4), (1920, 319, 4), (320, 320, 5),
+    (1080, 1920, 5), (2160, 4096, 5),
+])
+def test_auto_iterations_grow_with_the_shorter_side(height: int, width: int, count: int) -> None:
+    auto = PRESETS["default"]
+    assert auto.atrous_iterations == AUTO_ITERATIONS
+    assert atrous_iterations_for(auto, height, width) == count
+
+
+@pytest.mark.parametrize("explicit", [0, 1, 5, 12])
+def test_an_explicit_iteration_count_is_kept(explicit: int) -> None:
+    params = PRESETS["default"].replace(atrous_iterations=explicit)
+    assert atrous_iterations_for(params, 72, 128) == explicit
+    assert atrous_iterations_for(params, 2160, 4096) == explicit

@@ -15,9 +15,45 @@ from typing import Any, TypeVar
 import click
 
 from svgf_cli.errors import UsageError
-from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS, SVGFParams, resolve_params
+from svgf_cli.filters.params import (
+    AUTO_ITERATIONS,
+    DEFAULT_PRESET,
+    PRESETS,
+    SVGFParams,
+    atrous_iterations_for,
+    resolve_params,
+)
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+
+class IterationsType(click.ParamType):
+    """``N`` (0 to 12 a-trous iterations; step 4096 at most) or ``auto`` (AUTO_ITERATIONS:
+    from the image size)."""
+
+    name = "N|auto"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if value is None or isinstance(value, int):
+            return value
+        text = str(value).strip().lower()
+        if text == "auto":
+            return AUTO_ITERATIONS
+        try:
+            count = int(text)
+        except ValueError:
+            self.fail(f"{value!r}: expected a number of iterations or 'auto'", param, ctx)
+        if not 0 <= count <= 12:
+            self.fail(f"{count}: must lie in 0..12 or be 'auto'", param, ctx)
+        return count
+
+
+def param_label(name: str, value: Any) -> str:
+    """A parameter value as the user writes it (``auto`` for the automatic a-trous count)."""
+    if name == "atrous_iterations" and value == AUTO_ITERATIONS:
+        return "auto"
+    return str(value)
+
 
 _CLICK_TYPES: dict[str, click.ParamType] = {"float": click.FLOAT, "int": click.INT}
 
@@ -33,7 +69,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "variance_history_threshold": click.IntRange(min=0),
     "spatial_variance_radius": click.IntRange(min=0),
     "spatial_variance_sigma_luminance": click.FloatRange(min=0.0, min_open=True),
-    "atrous_iterations": click.IntRange(0, 12),  # step 4096 at most
+    "atrous_iterations": IterationsType(),
     "feedback_iteration": click.IntRange(min=-1),
     "sigma_luminance": click.FloatRange(min=0.0, min_open=True),
     "sigma_normal": click.FloatRange(min=0.0, min_open=True),
@@ -149,7 +185,8 @@ def _field_type_name(f: dataclasses.Field[Any]) -> str:
 
 def _param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
     help_text = f.metadata.get("help", "")
-    defaults = ", ".join(f"{name}: {getattr(p, f.name)}" for name, p in PRESETS.items())
+    defaults = ", ".join(f"{name}: {param_label(f.name, getattr(p, f.name))}"
+                         for name, p in PRESETS.items())
     help_text = f"{help_text} [{defaults}]"
     type_name = _field_type_name(f)
     flag = option_name(f.name)
@@ -159,9 +196,9 @@ def _param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
     click_type = PARAM_RANGES.get(f.name, _CLICK_TYPES.get(type_name))
     if click_type is None:
         raise TypeError(f"SVGFParams.{f.name}: unsupported type {type_name}")
-    return click.option(
-        flag, f.name, type=click_type, default=None, metavar=type_name.upper(), help=help_text
-    )
+    metavar = click_type.name.upper() if isinstance(click_type, IterationsType) else None
+    return click.option(flag, f.name, type=click_type, default=None,
+                        metavar=metavar or type_name.upper(), help=help_text)
 
 
 def svgf_param_options(func: F) -> F:
@@ -207,13 +244,16 @@ def _check_ranges(params: SVGFParams) -> None:
     if params.bidirectional and params.taa:
         raise UsageError("--taa filters the output causally; it cannot be combined with "
                          "--bidirectional")
-    if not -1 <= params.feedback_iteration < max(params.atrous_iterations, 1):
+    # With auto, the smallest count any image gets (that of a 1x1 image) bounds the index.
+    iterations = atrous_iterations_for(params, 1, 1)
+    if not -1 <= params.feedback_iteration < max(iterations, 1):
         raise UsageError(
             f"--feedback-iteration {params.feedback_iteration}: must be -1 or an iteration "
-            f"index below --atrous-iterations ({params.atrous_iterations})"
+            f"index below --atrous-iterations ({param_label('atrous_iterations', iterations)})"
         )
 
 
 def describe_params(params: SVGFParams) -> str:
     """One line of every resolved parameter, for the start-up log."""
-    return " ".join(f"{f.name}={getattr(params, f.name)}" for f in param_fields())
+    return " ".join(f"{f.name}={param_label(f.name, getattr(params, f.name))}"
+                    for f in param_fields())

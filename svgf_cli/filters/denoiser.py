@@ -43,7 +43,7 @@ from svgf_cli.filters.despike import despike
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, atrous_iterations_for
 from svgf_cli.filters.reproject import accumulate_in_place, reproject
 from svgf_cli.filters.taa import taa_resolve
 from svgf_cli.filters.variance import estimate_variance
@@ -170,6 +170,7 @@ class _FrameRun:
     names: tuple[str, ...]
     work: _Workspace
     weights: tuple[np.float32, np.float32, np.float32]
+    iterations: int  # a-trous iterations at this frame's size (atrous_iterations_for)
     counts: dict[str, int] = field(
         default_factory=lambda: {"nonfinite": 0, "extreme": 0, "history_resets": 0})
     depth: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
@@ -299,7 +300,7 @@ class Denoiser:
         self._accumulate_temporally(run)
         work = run.work
         filtered = self._filter_spatially(run, "accumulated", work["moments"],
-                                          work["history_length"], self.params.atrous_iterations)
+                                          work["history_length"], run.iterations)
         # Hand this frame's buffers to the history by swapping (no copies); the workspace
         # takes the stale history arrays and overwrites them next frame.
         self._store_history(run, filtered.history_name)
@@ -320,7 +321,8 @@ class Denoiser:
             )
         work = self._workspace(frame.height, frame.width, len(names))
         self._signal_names = names
-        return _FrameRun(frame, names, work, float32_weights(frame.luminance_weights))
+        return _FrameRun(frame, names, work, float32_weights(frame.luminance_weights),
+                         atrous_iterations_for(self.params, frame.height, frame.width))
 
     def _accumulate_temporally(
         self, run: _FrameRun, before_blend: Callable[[TemporalState], None] | None = None,
@@ -442,7 +444,7 @@ class Denoiser:
         # The colour history: the unfiltered accumulation unless an iteration feeds back.
         # That iteration's output is protected so later iterations cannot overwrite it.
         # The last iteration's propagated variance is never read, so it is not computed.
-        feedback = min(p.feedback_iteration, p.atrous_iterations - 1) if feeds_back else -1
+        feedback = min(p.feedback_iteration, run.iterations - 1) if feeds_back else -1
         history_name = filtered_name
         filtered_name_now = filtered_name
         filtered = run.plane(filtered_name)
@@ -606,7 +608,7 @@ class Denoiser:
         if forward is not None:
             filtered = self._filter_spatially(
                 run, combined, work["combined_moments"], work["combined_length"],
-                self.params.atrous_iterations, protected=(own.history_name,), feeds_back=False,
+                run.iterations, protected=(own.history_name,), feeds_back=False,
             )
         self._store_history(run, own.history_name)
         run.lap("history")
@@ -618,8 +620,7 @@ class Denoiser:
     def _feedback_filtering(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> _Filtered:
         """The spatial phase of a pass's own accumulation up to its feedback iteration (what
         its colour history needs, nothing more)."""
-        p = self.params
-        feedback = min(p.feedback_iteration, p.atrous_iterations - 1)
+        feedback = min(self.params.feedback_iteration, run.iterations - 1)
         work = run.work
         return self._filter_spatially(run, "accumulated", work["moments"],
                                       work["history_length"], feedback + 1, protected)
@@ -947,8 +948,8 @@ def _writable(frame: Frame) -> Frame:
 
 
 def _check_params(p: SVGFParams) -> None:
-    if p.atrous_iterations < 0:
-        raise ValueError("atrous_iterations must be >= 0")
+    if p.atrous_iterations < 0 and p.atrous_iterations != AUTO_ITERATIONS:
+        raise ValueError(f"atrous_iterations must be >= 0 or {AUTO_ITERATIONS} (auto)")
     if p.atrous_iterations > 12:
         raise ValueError("atrous_iterations must be <= 12 (step 4096)")
     if not 0.0 < p.alpha <= 1.0 or not 0.0 < p.moments_alpha <= 1.0:
