@@ -431,15 +431,20 @@ def firefly_clamp(illumination: np.ndarray, depth: np.ndarray, k: float,
 
 def despike(illumination: np.ndarray, radiance_mode: np.ndarray, depth: np.ndarray,
             ratio: float, weights: Sequence[float] = REC709) -> tuple[np.ndarray, list[int]]:
-    """Per signal, bring a surface pixel whose luminance exceeds ``ratio`` times the largest
-    luminance among its in-image 8 neighbours that are surface pixels of the same mode down
-    to that bound (rgb scaled, hue kept). A pixel without such neighbours, or whose largest
-    neighbour luminance is negative, is left alone. Returns the result and the number of
-    pixels changed per signal."""
+    """Per signal, bring a surface pixel whose luminance exceeds ``ratio`` times the
+    second-largest luminance among its in-image 8 neighbours that are surface pixels of the
+    same mode (the only one's, where there is one) down to that bound (rgb scaled, hue
+    kept). A pixel without such neighbours, or whose reference luminance is negative, is
+    left alone. Returns the result and the number of pixels changed per signal."""
+
+    def bound(values: list[float]) -> float | None:
+        reference = sorted(values)[-2] if len(values) > 1 else values[0]
+        return None if reference < 0.0 else ratio * reference
+
     return _scale_to_neighbour_bound(
         illumination, depth, weights,
         lambda s, y, x, yy, xx: bool(radiance_mode[s, yy, xx] == radiance_mode[s, y, x]),
-        lambda values: None if max(values) < 0.0 else ratio * max(values))
+        bound)
 
 
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,

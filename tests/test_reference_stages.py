@@ -350,6 +350,29 @@ def test_despike_matches_reference(weights: tuple) -> None:
     assert 0 < moved.sum() < 0.2 * moved.size  # spikes only, not the noise
 
 
+def test_despike_takes_pairs_and_keeps_lines() -> None:
+    """A pair of spikes (a reprojected firefly) is brought down to twice the surroundings,
+    side by side or diagonal; a line keeps every pixel but its two ends, which have one
+    bright neighbour each."""
+    height, width = 12, 12
+    illumination = np.ones((1, 3, height, width), dtype=F32)
+    bright = [(3, 3), (3, 4), (9, 2), (10, 3)] + [(y, 8) for y in range(2, 9)]
+    for y, x in bright:
+        illumination[0, :, y, x] = 10.0
+    depth = np.full((height, width), 5.0, F32)
+    radiance_mode = np.zeros((1, height, width), dtype=bool)
+    got = illumination.copy()
+    clamped = np.zeros((height, 1), dtype=np.int64)
+    despike(got, mode_mask(radiance_mode), depth, F32(2.0), REC709,
+            np.empty(depth.shape, dtype=F32), clamped)
+    want, changed = ref.despike(illumination, radiance_mode, depth, 2.0)
+    _close(got, want, 2e-6, "despike")
+    lowered = {(y, x) for y, x in bright if want[0, 1, y, x] < 9.0}
+    assert lowered == {(3, 3), (3, 4), (9, 2), (10, 3), (2, 8), (8, 8)}
+    np.testing.assert_allclose(want[0, :, 3, 3], 2.0)
+    assert clamped.sum() == changed[0] == len(lowered)  # and nothing else moved
+
+
 def test_history_clamp_matches_reference() -> None:
     current, depth = _spiky_illumination(2)
     rng = np.random.default_rng(3)
