@@ -400,6 +400,32 @@ def test_history_clamp_matches_reference() -> None:
     assert np.any((length[0] <= 0) & (length[1] > 0) & np.any(want[1] != history[1], axis=0))
 
 
+def test_history_clamp_raised_from_near_black_keeps_finite_moments() -> None:
+    """A history almost black where the frame is lit (a light came on) is raised to the
+    frame's band: its moments shift, the variance kept, instead of scaling by (l'/l)^2,
+    which overflowed to inf (and NaN variance) from l ~ 1e-30."""
+    height, width = 5, 5
+    current = np.full((1, 3, height, width), 2.0, dtype=F32)
+    current[0, :, ::2, ::2] = 3.0
+    history = np.full_like(current, 1e-30)
+    moments = np.stack([np.full((height, width), 1e-30), np.full((height, width), 0.25)])
+    moments = moments[None].astype(F32)
+    length = np.full((1, height, width), 4.0, dtype=F32)
+    depth = np.ones((height, width), dtype=F32)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    got_history, got_moments = history.copy(), moments.copy()
+    history_clamp(got_history, got_moments, length, current, depth, 1.0, weights)
+    want_history, want_moments = ref.history_clamp(history, moments, length, current, depth,
+                                                   1.0, weights)
+    assert np.all(np.isfinite(got_moments))
+    _close(got_history, want_history, 1e-6, "history")
+    _close(got_moments, want_moments, 1e-5, "moments")
+    raised = got_history[0, 1] > 1.0
+    assert raised.all()
+    variance = got_moments[0, 1] - got_moments[0, 0] ** 2
+    np.testing.assert_allclose(variance, 0.25, rtol=1e-4)
+
+
 # --------------------------------------------------------------------------- 2 reprojection
 def _history_for(prev: Frame, seed: int) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
