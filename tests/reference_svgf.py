@@ -454,8 +454,8 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
     included) ``mean +- k sigma``; where anything changed, the moments follow the history
     luminance ``l -> l'``: scaled, ``m1 l'/l``, ``m2 (l'/l)^2``, where ``0 < l' <= l``;
     otherwise, where ``l > 0``, shifted with the variance kept, ``m1 + l' - l``; ``l'``,
-    ``l'^2`` where ``l <= 0``. A signal's pixels without history (its ``h <= 0``) and background are left
-    alone. Returns the clamped history and moments."""
+    ``l'^2`` where ``l <= 0``. A signal's pixels without history (its ``h <= 0``) and
+    background are left alone. Returns the clamped history and moments."""
     hist = np.array(history, dtype=F64)
     mom = np.array(moments, dtype=F64)
     cur = np.asarray(current, dtype=F64)
