@@ -196,8 +196,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "rec709-weights", "filters", "luminance weights ignored (Rec.709 constants used)",
         "svgf_cli/filters/denoiser.py",
-        (("float32_weights(frame.luminance_weights))",
-          "float32_weights((0.2126, 0.7152, 0.0722)))"),),
+        (("float32_weights(frame.luminance_weights),",
+          "float32_weights((0.2126, 0.7152, 0.0722)),"),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -282,6 +282,29 @@ MUTANTS: tuple[Mutant, ...] = (
         "svgf_cli/filters/denoiser.py",
         (("        if filtered.name == filtered.history_name:\n            illumination = "
           "illumination.copy()\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "despike-brightest-only", "filters",
+        "despike bounds by the brightest neighbour, so a pair of spikes shelters itself",
+        "svgf_cli/filters/despike.py",
+        (("                reference = second[x] if second[x] > _NONE else brightest[x]",
+          "                reference = brightest[x]"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "clamp-scales-raised-moments", "filters",
+        "a history raised from near black scales its moments by (l'/l)^2 (overflow)",
+        "svgf_cli/filters/clamp.py",
+        (("                    if _ZERO < after <= before[x]:",
+          "                    if _ZERO < after and before[x] > _ZERO:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "auto-iterations-fixed", "filters", "auto a-trous iterations always run the paper's 5",
+        "svgf_cli/filters/params.py",
+        (("    return next(count for smallest, count in _ITERATION_SIDES if side >= smallest)",
+          "    return 5"),),
         FILTER_TESTS,
     ),
     Mutant(
