@@ -236,48 +236,51 @@ def consistent_lengths(
     num_signals = current.shape[0]
     height, width = depth.shape
     two = F32(2.0)
+    tiny = F32(1e-30)
     for y in prange(height):
         z = depth[y]
+        nf = np.empty(width, dtype=np.float32)
+        nr = np.empty(width, dtype=np.float32)
         keep = np.empty(width, dtype=np.float32)
-        forward_side = np.empty(width, dtype=np.bool_)
+        # the log-likelihood ratio's sign: < 0 where the forward side is the less likely
+        ratio = np.empty(width, dtype=np.float32)
         for s in range(num_signals):
             hf_row = forward_length[s, y]
             hr_row = reverse_length[s, y]
             f1, f2 = forward_moments[s, 0, y], forward_moments[s, 1, y]
             r1, r2 = reverse_moments[s, 0, y], reverse_moments[s, 1, y]
             red, green, blue = current[s, 0, y], current[s, 1, y], current[s, 2, y]
+            for x in range(width):  # table look-ups apart: the loop below vectorizes
+                nf[x] = _count(counts, hf_row[x])
+                nr[x] = _count(counts, hr_row[x])
+            for x in range(width):
+                both = (z[x] > _ZERO) & (nf[x] > _ZERO) & (nr[x] > _ZERO)
+                var = max(max(f2[x] - f1[x] * f1[x], r2[x] - r1[x] * r1[x]), _ZERO)
+                gap = f1[x] - r1[x]
+                d2 = gap * gap
+                allowed = sigma * sigma * var * (_ONE / max(nf[x], _ONE) + _ONE / max(nr[x], _ONE))
+                strength = max(d2 - allowed, _ZERO) / max(d2, tiny)
+                lum = luminance(red[x], green[x], blue[x], luminance_weights)
+                to_f = (lum - f1[x]) * (lum - f1[x])
+                to_r = (lum - r1[x]) * (lum - r1[x])
+                llr = (to_r - to_f) / (two * max(var, tiny))
+                # |2 P_f - 1| = tanh(|L| / 2), from exp(-|L|) (fast_exp takes x <= 0)
+                odds = fast_exp(-abs(llr))
+                confidence = (_ONE - odds) / (_ONE + odds)
+                keep[x] = _ONE - strength * confidence if both else _ONE
+                ratio[x] = llr
             fo = forward_out[s, y]
             ro = reverse_out[s, y]
             for x in range(width):
                 hf = hf_row[x]
                 hr = hr_row[x]
+                if keep[x] < _ONE:  # rare: only where the sides disagree
+                    if ratio[x] < _ZERO:
+                        hf = min(hf, _length_of_count(counts, keep[x] * nf[x]))
+                    else:
+                        hr = min(hr, _length_of_count(counts, keep[x] * nr[x]))
                 fo[x] = hf
                 ro[x] = hr
-                nf = _count(counts, hf)
-                nr = _count(counts, hr)
-                both = (z[x] > _ZERO) & (hf > _ZERO) & (hr > _ZERO)
-                var = max(max(f2[x] - f1[x] * f1[x], r2[x] - r1[x] * r1[x]), _ZERO)
-                gap = f1[x] - r1[x]
-                d2 = gap * gap
-                allowed = sigma * sigma * var * (_ONE / max(nf, _ONE) + _ONE / max(nr, _ONE))
-                strength = max(d2 - allowed, _ZERO) / max(d2, F32(1e-30))
-                lum = luminance(red[x], green[x], blue[x], luminance_weights)
-                to_f = (lum - f1[x]) * (lum - f1[x])
-                to_r = (lum - r1[x]) * (lum - r1[x])
-                ratio = (to_r - to_f) / (two * max(var, F32(1e-30)))
-                # |2 P_f - 1| = tanh(|L| / 2), from exp(-|L|) (fast_exp takes x <= 0)
-                odds = fast_exp(-abs(ratio))
-                confidence = (_ONE - odds) / (_ONE + odds)
-                keep[x] = _ONE - strength * confidence if both else _ONE
-                forward_side[x] = ratio < _ZERO
-            for x in range(width):  # rare: only where the sides disagree
-                if keep[x] < _ONE:
-                    if forward_side[x]:
-                        n = _count(counts, fo[x])
-                        fo[x] = min(fo[x], _length_of_count(counts, keep[x] * n))
-                    else:
-                        n = _count(counts, ro[x])
-                        ro[x] = min(ro[x], _length_of_count(counts, keep[x] * n))
 
 
 # ----------------------------------------------------------------------------- spill format

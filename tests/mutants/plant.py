@@ -296,8 +296,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "consistency-drops-agreeing-side", "filters",
         "the consistency test shortens the side the current frame agrees with",
         "svgf_cli/filters/bidirectional.py",
-        (("                forward_side[x] = ratio < _ZERO",
-          "                forward_side[x] = ratio > _ZERO"),),
+        (("                    if ratio[x] < _ZERO:",
+          "                    if ratio[x] > _ZERO:"),),
         FILTER_TESTS,
     ),
     Mutant(
