@@ -7,7 +7,7 @@ modes and anti-lag, which shortens a side's history where it disagrees with fram
 Each pass keeps its accumulation unfiltered as its colour history (a causal run keeps the
 output of its feedback a-trous iteration): the combination below weighs a side as an average
 of its effective samples, which a spatially filtered history is not, and the feedback blur
-would compound in both passes (measured on the bundled sequences: relMSE 0.70-0.90x of
+would compound in both passes (measured on the bundled sequences: relMSE 0.70-1.01x of
 forward-only with unfiltered histories against 0.79-1.16x with filtered ones).
 
 Before either pass blends frame ``t`` in, the two resampled histories go through a
