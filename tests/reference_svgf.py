@@ -54,6 +54,7 @@ touching the others.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -61,6 +62,7 @@ from typing import Any
 
 import numpy as np
 
+from svgf_cli.filters.bidirectional import CONSISTENCY_SIGMA
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame, Signal
 
@@ -1239,6 +1241,60 @@ def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reproj
     return colour, moments, length
 
 
+def count_to_length(n: float, alpha: float, history_cap: int = 32) -> float:
+    """The inverse of :func:`effective_count` on [0, history_cap]: the length ``h`` with
+    ``n(h) = n`` (linear between whole counts)."""
+    if n <= 0.0:
+        return 0.0
+    for k in range(history_cap):
+        low, high = effective_count(k, alpha), effective_count(k + 1, alpha)
+        if n < high:
+            return k + (n - low) / (high - low)
+    return float(history_cap)
+
+
+def consistent_lengths(current: np.ndarray, forward: Reprojected, reverse: Reprojected,
+                       depth: np.ndarray, alpha: float, sigma: float,
+                       weights: Sequence[float] = REC709, history_cap: int = 32,
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The consistency test between the two sides (``docs/bidirectional.md``): where both
+    sides have history and their first moments differ by more than ``sigma`` standard
+    errors, ``D^2 = (m_f - m_r)^2 > sigma^2 v (1/n_f + 1/n_r)`` with the per-sample
+    variance ``v = max`` of the sides' ``m2 - m1^2`` and counts ``n(h)`` (``alpha``), the
+    current luminance ``l`` weighs the two: ``P_f = 1 / (1 + exp(-L))``,
+    ``L = ((l - m_r)^2 - (l - m_f)^2) / (2 v)``; the less likely side keeps
+    ``1 - t |2 P_f - 1|`` of its count, ``t = 1 - sigma^2 v (1/n_f + 1/n_r) / D^2``.
+    Returns the two sides' lengths."""
+    lum = luminance(np.asarray(current, dtype=F64), weights)
+    hf_out = np.array(forward.history_length, dtype=F64)
+    hr_out = np.array(reverse.history_length, dtype=F64)
+    num_signals, height, width = hf_out.shape
+    for s in range(num_signals):
+        for y in range(height):
+            for px in range(width):
+                hf, hr = hf_out[s, y, px], hr_out[s, y, px]
+                if depth[y, px] <= 0.0 or hf <= 0.0 or hr <= 0.0:
+                    continue
+                mf, mr = float(forward.moments[s, 0, y, px]), float(reverse.moments[s, 0, y, px])
+                var = max(float(forward.moments[s, 1, y, px]) - mf * mf,
+                          float(reverse.moments[s, 1, y, px]) - mr * mr, 0.0)
+                nf, nr = effective_count(hf, alpha), effective_count(hr, alpha)
+                allowed = sigma**2 * var * (1.0 / max(nf, 1.0) + 1.0 / max(nr, 1.0))
+                d2 = (mf - mr) ** 2
+                if d2 <= allowed:
+                    continue
+                strength = 1.0 - allowed / d2
+                l_ = float(lum[s, y, px])
+                ratio = ((l_ - mr) ** 2 - (l_ - mf) ** 2) / (2.0 * max(var, 1e-30))
+                pf = 1.0 / (1.0 + math.exp(-min(max(ratio, -30.0), 30.0)))
+                keep = 1.0 - strength * abs(2.0 * pf - 1.0)
+                if pf < 0.5:
+                    hf_out[s, y, px] = min(hf, count_to_length(keep * nf, alpha, history_cap))
+                else:
+                    hr_out[s, y, px] = min(hr, count_to_length(keep * nr, alpha, history_cap))
+    return hf_out, hr_out
+
+
 NO_MOTION = 1e9  # a derived motion's hole: leads far outside the image (no history)
 
 
@@ -1288,18 +1344,22 @@ class _Capturing(ReferenceDenoiser):
 def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
                             ) -> list[ReferenceOutput]:
     """Both passes of a bidirectional run, in float64: the forward pass is the causal
-    reference; the reverse pass runs the same over the frames last to first with each
-    frame's motion to the next frame (``frame.motion_next``, else :func:`invert_motion` of
-    the later frame's), without gradient samples; at every frame the two resampled
-    histories are combined with the frame (:func:`combine_histories`), filtered spatially
-    and composed. Returns the outputs in frame order."""
-    forward = _Capturing(params)
+    reference keeping its unfiltered accumulation as history (``feedback_iteration`` -1);
+    the reverse pass runs the same over the frames last to first with each frame's motion
+    to the next frame (``frame.motion_next``, else :func:`invert_motion` of the later
+    frame's), without gradient samples; at every frame the two resampled histories go
+    through the consistency test (:func:`consistent_lengths`) and are combined with the
+    frame (:func:`combine_histories`), filtered spatially and composed. Returns the outputs
+    in frame order."""
+    # Each pass keeps its accumulation unfiltered as its history (feedback_iteration -1).
+    passes = params.replace(feedback_iteration=-1)
+    forward = _Capturing(passes)
     kept = []
     for frame in frames:
         forward.process(frame)
         assert forward.state is not None
         kept.append(forward.state.history)
-    reverse = _Capturing(params)
+    reverse = _Capturing(passes)
     outputs: list[ReferenceOutput] = []
     later: Frame | None = None
     for frame, forward_history in zip(reversed(frames), reversed(kept), strict=True):
@@ -1320,9 +1380,15 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
         own = reverse.process(reversed_frame)
         state = reverse.state
         assert state is not None
-        colour, moments, length = combine_histories(
+        forward_length, reverse_length = consistent_lengths(
             state.illumination, forward_history, state.history, state.geom.depth,
-            params.alpha, params.moments_alpha, state.clean.weights, params.history_cap)
+            params.alpha, CONSISTENCY_SIGMA, state.clean.weights, params.history_cap)
+        colour, moments, length = combine_histories(
+            state.illumination,
+            dataclasses.replace(forward_history, history_length=forward_length),
+            dataclasses.replace(state.history, history_length=reverse_length),
+            state.geom.depth, params.alpha, params.moments_alpha, state.clean.weights,
+            params.history_cap)
         filtered, variance, _ = reverse.filter_spatially(
             state.clean, state.geom, colour, moments, length, state.radiance_mode)
         outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,

@@ -11,8 +11,10 @@ import reference_svgf as ref
 from moving_scene import ACESCG_LUMINANCE, scene_sequence
 
 from svgf_cli.filters.bidirectional import (
+    CONSISTENCY_SIGMA,
     SideHistory,
     combine_histories,
+    consistent_lengths,
     effective_counts,
     pack_history,
     unpack_history,
@@ -87,6 +89,83 @@ def test_combine_histories_matches_the_reference() -> None:
     assert np.all(out[2][:, depth <= 0] == 0)
 
 
+def _disagreeing_sides(rng: np.random.Generator, shape: tuple[int, int, int]
+                       ) -> tuple[SideHistory, SideHistory, np.ndarray]:
+    """Two sides with per-sample variance ``v`` and a current frame: on a third of the
+    pixels the reverse side is off by 2-12 standard errors, the frame near either side."""
+    choices = np.array([0.0, 0.6, 1.0, 2.5, 4.0, 7.25, 32.0])
+    forward = _random_side(rng, rng.choice(choices, shape))
+    reverse = _random_side(rng, rng.choice(choices, shape))
+    var = rng.uniform(0.05, 0.5, shape).astype(F32)
+    m1f = rng.uniform(0.5, 2.0, shape).astype(F32)
+    offset = np.where(rng.random(shape) < 0.33, rng.uniform(2.0, 12.0, shape), 0.3)
+    m1r = (m1f + offset * np.sqrt(var) * rng.choice([-1.0, 1.0], shape)).astype(F32)
+    m1r = np.abs(m1r)
+    for side, m1 in ((forward, m1f), (reverse, m1r)):
+        side.moments[:, 0] = m1
+        side.moments[:, 1] = m1 * m1 + var
+    # the frame's luminance near the forward side, the reverse side or between them
+    share = rng.choice([0.0, 0.15, 0.5, 0.85, 1.0], shape)
+    lum = (1.0 - share) * m1f + share * m1r + rng.normal(0, 0.1, shape) * np.sqrt(var)
+    current = np.repeat(np.maximum(lum, 0.0)[:, None], 3, axis=1).astype(F32)
+    return forward, reverse, current
+
+
+def test_consistent_lengths_matches_the_reference() -> None:
+    rng = np.random.default_rng(7)
+    shape = (2, 10, 13)
+    forward, reverse, current = _disagreeing_sides(rng, shape)
+    depth = np.where(rng.random(shape[1:]) < 0.1, 0.0, 3.0).astype(F32)
+    alpha = 0.2
+    counts = effective_counts(alpha, 32)
+    # in place for the forward side, as a run calls it
+    hf, hr = forward.length.copy(), np.empty_like(reverse.length)
+    consistent_lengths(current, forward.moments, hf, reverse.moments, reverse.length, depth,
+                       counts, float32_weights(ref.REC709), F32(CONSISTENCY_SIGMA), hf, hr)
+
+    def side(s: SideHistory) -> ref.Reprojected:
+        return ref.Reprojected(s.colour, s.moments, s.length, np.zeros(s.length.shape))
+
+    want_f, want_r = ref.consistent_lengths(current, side(forward), side(reverse), depth,
+                                            alpha, CONSISTENCY_SIGMA)
+    np.testing.assert_allclose(hf, want_f, rtol=1e-4, atol=1e-4, err_msg="forward")
+    np.testing.assert_allclose(hr, want_r, rtol=1e-4, atol=1e-4, err_msg="reverse")
+    # lengths only ever shrink, and somewhere each side did
+    assert np.all(hf <= forward.length) and np.all(hr <= reverse.length)
+    assert np.any(hf < forward.length - 0.5) and np.any(hr < reverse.length - 0.5)
+
+
+@pytest.mark.parametrize("frame_at", ["forward", "reverse", "between"])
+def test_consistency_drops_the_side_the_frame_disagrees_with(frame_at: str) -> None:
+    """Sides 20 per-sample standard deviations apart: the frame decides; between them it
+    cannot, and within the noise nothing changes."""
+    shape = (1, 1, 3)
+    length = np.full(shape, 8.0, F32)
+    var = F32(0.04)  # standard deviation 0.2 per sample
+    m1f = np.array([[[1.0, 1.0, 1.0]]], F32)
+    # pixel 0 and 1: 4 apart (far beyond the noise); pixel 2: 0.1 apart (within it)
+    m1r = np.array([[[5.0, 5.0, 1.1]]], F32)
+    lum = {"forward": 1.0, "reverse": 5.0, "between": 3.0}[frame_at]
+    current = np.full((1, 3, 1, 3), lum, F32)
+    current[..., 2] = 1.05
+
+    def moments(m1: np.ndarray) -> np.ndarray:
+        return np.stack([m1, m1 * m1 + var], axis=1).astype(F32)
+
+    hf, hr = np.empty_like(length), np.empty_like(length)
+    consistent_lengths(current, moments(m1f), length, moments(m1r), length,
+                       np.ones(shape[1:], F32), effective_counts(0.2, 32),
+                       float32_weights(ref.REC709), F32(CONSISTENCY_SIGMA), hf, hr)
+    assert hf[0, 0, 2] == hr[0, 0, 2] == 8.0  # within the noise: both kept
+    if frame_at == "between":
+        np.testing.assert_array_equal(hf, length)
+        np.testing.assert_array_equal(hr, length)
+        return
+    kept, dropped = (hf, hr) if frame_at == "forward" else (hr, hf)
+    assert np.all(kept == 8.0)
+    assert np.all(dropped[0, 0, :2] < 0.3)  # of 8 frames
+
+
 def _two_layer_motion(rng: np.random.Generator, height: int = 14, width: int = 20
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Backward motion and depth of a frame: a near block moving by a sub-pixel amount over a
@@ -141,17 +220,24 @@ def test_pack_history_error_is_half_rounding_at_any_exposure() -> None:
     np.testing.assert_allclose(back.moments[:, 1], side.moments[:, 1], rtol=1e-5)
 
 
-def test_forward_step_keeps_the_causal_history() -> None:
-    """The forward pass continues exactly as a causal run: its stored history is the same."""
-    params = resolve_params("default")
+@pytest.mark.parametrize("preset", ["default", "falcor"])
+def test_forward_step_keeps_the_unfiltered_history(preset: str) -> None:
+    """The forward pass runs as a causal run that feeds back its unfiltered accumulation
+    (``feedback_iteration`` -1; with falcor's colour blur, the colour entering the a-trous):
+    its stored history is that run's, bit for bit, and not the filtered one a causal run
+    with the preset's own feedback iteration keeps."""
+    params = resolve_params(preset)
     frames = scene_sequence(4)
-    causal, forward = Denoiser(params), Denoiser(params)
+    causal = Denoiser(params.replace(feedback_iteration=-1))
+    forward, filtered = Denoiser(params), Denoiser(params)
     for frame in frames:
         causal.process(frame)
         forward.forward_step(frame)
+        filtered.process(frame)
     a, b = causal.state(), forward.state()
     for key in ("history_illumination", "history_moments", "history_length", "history_mode"):
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    assert not np.array_equal(a["history_illumination"], filtered.state()["history_illumination"])
 
 
 CASES = {

@@ -37,7 +37,13 @@ import numpy as np
 from svgf_cli.filters import modulate, values
 from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
-from svgf_cli.filters.bidirectional import SideHistory, combine_histories, effective_counts
+from svgf_cli.filters.bidirectional import (
+    CONSISTENCY_SIGMA,
+    SideHistory,
+    combine_histories,
+    consistent_lengths,
+    effective_counts,
+)
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.despike import despike
 from svgf_cli.filters.edges import normal_squarings
@@ -536,8 +542,9 @@ class Denoiser:
     def forward_step(self, frame: Frame,
                      keep: Callable[[SideHistory], Kept] | None = None) -> Kept | SideHistory:
         """The forward pass of a bidirectional run (``filters.two_pass``): the next frame's
-        temporal accumulation and feedback filtering, its history stored as by
-        :meth:`process` (so the pass continues bit-identically to a causal run), no output.
+        temporal accumulation, its unfiltered accumulation stored as the history
+        (:meth:`_pass_history`: the pass continues bit-identically to a causal run with
+        ``feedback_iteration`` -1), no output.
         Returns ``keep`` applied to the history it resampled (after anti-lag, before the
         blend; views of this Denoiser's buffers, valid only during the call), by default a
         copy."""
@@ -551,8 +558,7 @@ class Denoiser:
                 side.colour.copy(), side.moments.copy(), side.length.copy()))
 
         self._accumulate_temporally(run, capture)
-        own = self._feedback_filtering(run)
-        self._store_history(run, own.history_name)
+        self._store_history(run, self._pass_history(run))
         self._frames_processed += 1
         return kept[0]
 
@@ -571,10 +577,10 @@ class Denoiser:
 
     def reverse_step(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
         """The reverse pass of a bidirectional run: ``frame.motion`` points to the frame
-        processed before (the next one in time). Temporal accumulation and feedback
-        filtering of its own history, as :meth:`forward_step`; with ``forward`` (the
-        forward pass's :meth:`forward_step` history at the same frame, best given in
-        :meth:`forward_buffers`) also the combination of both histories with this frame
+        processed before (the next one in time). Temporal accumulation of its own history,
+        as :meth:`forward_step`; with ``forward`` (the forward pass's :meth:`forward_step`
+        history at the same frame, best given in :meth:`forward_buffers`) also the
+        consistency test between both histories and their combination with this frame
         (``filters.bidirectional``), filtered spatially and composed into the output.
         None without ``forward`` (a warm-up frame of the reverse pass)."""
         if self.params.taa:
@@ -595,35 +601,49 @@ class Denoiser:
                     np.copyto(buffer, given)
 
             def combine(temporal: TemporalState) -> None:
+                # The reverse pass blends with its own length, so its shortened one goes to
+                # scratch (the variance planes are dead until the variance is estimated).
+                reverse_length = work["variance_b"]
+                consistent_lengths(
+                    temporal.current, into.moments, into.length, temporal.history_moments,
+                    temporal.history_length, temporal.depth, self._colour_counts,
+                    run.weights, F32(CONSISTENCY_SIGMA), into.length, reverse_length,
+                )
                 combine_histories(
                     temporal.current, temporal.history_illumination, temporal.history_moments,
-                    temporal.history_length, temporal.depth, self._colour_counts,
+                    reverse_length, temporal.depth, self._colour_counts,
                     self._moment_counts, run.weights, self._moment_counts[-1],
                     into.colour, into.moments, into.length,
                 )
 
         self._accumulate_temporally(run, combine)
-        own = self._feedback_filtering(run, protected=(combined,) if forward else ())
+        own_history = self._pass_history(run, protected=(combined,) if forward else ())
         filtered = None
         if forward is not None:
             filtered = self._filter_spatially(
                 run, combined, work["combined_moments"], work["combined_length"],
-                run.iterations, protected=(own.history_name,), feeds_back=False,
+                run.iterations, protected=(own_history,), feeds_back=False,
             )
-        self._store_history(run, own.history_name)
+        self._store_history(run, own_history)
         run.lap("history")
         if filtered is None:
             self._frames_processed += 1
             return None
         return self._finish_frame(run, filtered)
 
-    def _feedback_filtering(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> _Filtered:
-        """The spatial phase of a pass's own accumulation up to its feedback iteration (what
-        its colour history needs, nothing more)."""
-        feedback = min(self.params.feedback_iteration, run.iterations - 1)
+    def _pass_history(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> str:
+        """The colour history a pass of a bidirectional run keeps (the workspace buffer's
+        name): its accumulation as blended, unfiltered, where a causal run keeps the output
+        of its feedback iteration. The combination weighs each side as an average of its
+        effective samples; a spatially filtered history is a blurred one, and the blur would
+        compound in both passes (``docs/bidirectional.md``). With the variance stage's
+        colour blur (``spatial_variance_blur_color``) the colour entering the a-trous, as a
+        causal run with ``feedback_iteration`` -1 keeps."""
+        if not self.params.spatial_variance_blur_color:
+            return "accumulated"
         work = run.work
         return self._filter_spatially(run, "accumulated", work["moments"],
-                                      work["history_length"], feedback + 1, protected)
+                                      work["history_length"], 0, protected).history_name
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""

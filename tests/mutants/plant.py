@@ -316,6 +316,22 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "consistency-drops-agreeing-side", "filters",
+        "the consistency test shortens the side the current frame agrees with",
+        "svgf_cli/filters/bidirectional.py",
+        (("                    if ratio[x] < _ZERO:",
+          "                    if ratio[x] > _ZERO:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "consistency-skipped", "filters",
+        "a bidirectional run combines without the consistency test",
+        "svgf_cli/filters/denoiser.py",
+        (("                    reverse_length, temporal.depth, self._colour_counts,",
+          "                    temporal.history_length, temporal.depth, self._colour_counts,"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
         "svgf_cli/filters/denoiser.py",
         (("        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance",

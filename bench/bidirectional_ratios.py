@@ -1,0 +1,117 @@
+"""Forward-only against bidirectional SVGF on the bundled sequences, in memory (fast).
+
+For every sequence the causal Denoiser (``Denoiser.process`` frame by frame) and
+``two_pass.denoise_bidirectional`` with the same parameters (the default preset) over the
+frames read as ``svgf denoise`` reads them; references ``ref.####.exr`` next to the inputs.
+Prints per sequence the mean over frames of trimmed relMSE, FLIP and temporal error for
+both and their ratio (bidirectional / forward), the ratios of RMSE and untrimmed relMSE,
+the PSNR and SSIM differences, which metrics are worse than forward-only, and the worst of
+the first four frames' trimmed relMSE over the sequence mean (forward / bidirectional).
+``bench/bidirectional_eval.py`` measures the same through the CLI (slower).
+
+Run: ``.venv/bin/python bench/bidirectional_ratios.py [--consistency-sigma K] [SEQUENCE ...]``
+(``--consistency-sigma`` overrides the consistency test's threshold, e.g. 1e9 to measure the
+run without it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from svgf_cli.evaluate.metrics import (  # noqa: E402
+    flip,
+    psnr,
+    relmse,
+    relmse_trimmed,
+    rmse,
+    ssim,
+    temporal_error,
+    tone_map,
+)
+from svgf_cli.filters import denoiser as denoiser_module  # noqa: E402
+from svgf_cli.filters.denoiser import Denoiser  # noqa: E402
+from svgf_cli.filters.params import resolve_params  # noqa: E402
+from svgf_cli.filters.two_pass import denoise_bidirectional  # noqa: E402
+from svgf_cli.io.exr import read_frame  # noqa: E402
+from svgf_cli.io.layers import build_mapping  # noqa: E402
+
+SEQUENCES = {
+    "seq": "svgf", "lag/camera": "svgf", "lag/shadow": "svgf", "lag/light_step": "svgf",
+    "lag/light_slide_dim": "svgf", "lag/glossy": "svgf", "cycles/roll": "cycles",
+    "cycles/metal": "cycles",
+}
+LOWER_IS_BETTER = ("relmse_trimmed", "flip", "temporal", "rmse", "relmse")
+
+
+def read_sequence(name: str, aovs: str) -> tuple[list, list[np.ndarray]]:
+    folder = REPO / "testdata" / name
+    mapping = build_mapping(aovs, None, None, "auto")
+    frames, references = [], []
+    index = 1
+    while (folder / f"in.{index:04d}.exr").exists():
+        frames.append(read_frame(folder / f"in.{index:04d}.exr", mapping).frame)
+        pixels = oiio.ImageBuf(str(folder / f"ref.{index:04d}.exr")).get_pixels(oiio.FLOAT)
+        references.append(np.ascontiguousarray(pixels[..., :3].transpose(2, 0, 1)))
+        index += 1
+    return frames, references
+
+
+def metrics(outputs: list[np.ndarray], references: list[np.ndarray]) -> dict[str, float]:
+    per: dict[str, list[float]] = {k: [] for k in (*LOWER_IS_BETTER, "psnr", "ssim")}
+    previous = None
+    for x, r in zip(outputs, references, strict=True):
+        per["relmse_trimmed"].append(relmse_trimmed(x, r))
+        per["relmse"].append(relmse(x, r))
+        per["rmse"].append(rmse(x, r))
+        xd, rd = tone_map(x), tone_map(r)
+        per["flip"].append(flip(xd, rd)[0])
+        per["psnr"].append(psnr(xd, rd))
+        per["ssim"].append(ssim(xd, rd))
+        if previous is not None:
+            per["temporal"].append(temporal_error(xd, previous[0], rd, previous[1]))
+        previous = (xd, rd)
+    means = {k: float(np.mean(v)) for k, v in per.items()}
+    means["first4"] = max(per["relmse_trimmed"][:4]) / means["relmse_trimmed"]
+    return means
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("sequences", nargs="*", default=list(SEQUENCES))
+    parser.add_argument("--consistency-sigma", type=float, default=None)
+    args = parser.parse_args()
+    if args.consistency_sigma is not None:
+        denoiser_module.CONSISTENCY_SIGMA = args.consistency_sigma
+    params = resolve_params("default")
+    print("| sequence | relMSE (trimmed) fwd / bidir (ratio) | FLIP | temporal | RMSE ratio "
+          "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in args.sequences:
+        frames, references = read_sequence(name, SEQUENCES[name])
+        causal = Denoiser(params)
+        forward = metrics([np.ascontiguousarray(causal.process(f).color[:3]) for f in frames],
+                          references)
+        both = metrics([np.ascontiguousarray(o.color[:3])
+                        for o in denoise_bidirectional(frames, params)], references)
+        ratio = {k: both[k] / forward[k] for k in LOWER_IS_BETTER}
+        worse = [k for k in LOWER_IS_BETTER if both[k] > forward[k]]
+        worse += [k for k in ("psnr", "ssim") if both[k] < forward[k]]
+        cells = [f"{forward[k]:.4g} / {both[k]:.4g} ({ratio[k]:.2f})"
+                 for k in ("relmse_trimmed", "flip", "temporal")]
+        print(f"| `{name}` | " + " | ".join(cells)
+              + f" | {ratio['rmse']:.2f} | {ratio['relmse']:.2f}"
+              + f" | {both['psnr'] - forward['psnr']:+.2f} | {both['ssim'] - forward['ssim']:+.4f}"
+              + f" | {', '.join(worse) or '-'}"
+              + f" | {forward['first4']:.2f} / {both['first4']:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
