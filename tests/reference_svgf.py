@@ -453,10 +453,9 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
                   current: np.ndarray, depth: np.ndarray, k: float,
                   weights: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Clamp each history channel to the current 3x3 (in-image surface pixels, centre
-    included) ``mean +- k sigma``; where anything changed, the moments follow the history
-    luminance ``l -> l'``: scaled, ``m1 l'/l``, ``m2 (l'/l)^2``, where ``0 < l' <= l``;
-    otherwise, where ``l > 0``, shifted with the variance kept, ``m1 + l' - l``; ``l'``,
-    ``l'^2`` where ``l <= 0``. A signal's pixels without history (its ``h <= 0``) and
+    included) ``mean +- k sigma``; where anything changed, scale the moments with the
+    history luminance ``l -> l'``: ``m1 l'/l``, ``m2 (l'/l)^2`` (``l'``, ``l'^2`` where
+    ``l <= 0`` or ``l' > 1e6 l``). A signal's pixels without history (its ``h <= 0``) and
     background are left alone. Returns the clamped history and moments."""
     hist = np.array(history, dtype=F64)
     mom = np.array(moments, dtype=F64)
@@ -483,14 +482,10 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
                 after = float(w @ hist[s, :, y, x])
                 if np.array_equal(hist[s, :, y, x], np.asarray(history, dtype=F64)[s, :, y, x]):
                     continue
-                if 0.0 < after <= before:  # lowered: the spread shrinks with the value
+                if before > 0.0 and after <= 1e6 * before:
                     mom[s, 0, y, x] *= after / before
                     mom[s, 1, y, x] *= (after / before) ** 2
-                elif before > 0.0:  # raised: the spread is kept
-                    m1 = mom[s, 0, y, x] + (after - before)
-                    mom[s, 1, y, x] += m1 * m1 - mom[s, 0, y, x] ** 2
-                    mom[s, 0, y, x] = m1
-                else:
+                else:  # from black, or raised more than a millionfold
                     mom[s, :, y, x] = after, after * after
     return hist, mom
 

@@ -402,8 +402,8 @@ def test_history_clamp_matches_reference() -> None:
 
 def test_history_clamp_raised_from_near_black_keeps_finite_moments() -> None:
     """A history almost black where the frame is lit (a light came on) is raised to the
-    frame's band: its moments shift, the variance kept, instead of scaling by (l'/l)^2,
-    which overflowed to inf (and NaN variance) from l ~ 1e-30."""
+    frame's band: scaling its moments by (l'/l)^2 overflowed to inf (and NaN variance) from
+    l ~ 1e-30; raised more than a millionfold it counts as black (m2 = m1^2 = l'^2)."""
     height, width = 5, 5
     current = np.full((1, 3, height, width), 2.0, dtype=F32)
     current[0, :, ::2, ::2] = 3.0
@@ -422,8 +422,9 @@ def test_history_clamp_raised_from_near_black_keeps_finite_moments() -> None:
     _close(got_moments, want_moments, 1e-5, "moments")
     raised = got_history[0, 1] > 1.0
     assert raised.all()
-    variance = got_moments[0, 1] - got_moments[0, 0] ** 2
-    np.testing.assert_allclose(variance, 0.25, rtol=1e-4)
+    lum = np.einsum("c,cyx->yx", np.array(weights, dtype=np.float64), got_history[0])
+    np.testing.assert_allclose(got_moments[0, 0], lum, rtol=1e-6)
+    np.testing.assert_allclose(got_moments[0, 1], lum * lum, rtol=1e-5)
 
 
 # --------------------------------------------------------------------------- 2 reprojection

@@ -23,6 +23,8 @@ from svgf_cli.filters.fastmath import FASTMATH, luminance
 F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
+# The largest factor the history clamp scales the moments by (m2 by its square).
+MAX_RAISE = F32(1e6)
 
 
 @njit(
@@ -105,10 +107,10 @@ def history_clamp(
     luminance_weights: tuple[np.float32, np.float32, np.float32],
 ) -> None:
     """In place: clamp each history channel to the current 3x3 mean +- k*sigma, and let the
-    luminance moments follow the history luminance ``l -> l'``: where it was lowered
-    (``0 < l' <= l``) ``m1 *= l'/l`` and ``m2 *= (l'/l)^2``; otherwise, where ``l > 0``,
-    they shift by ``l' - l`` with ``m2 - m1^2`` kept; ``m1 = l'``, ``m2 = l'^2`` where
-    ``l <= 0``.
+    luminance moments follow the history luminance ``l -> l'``: ``m1 *= l'/l`` and
+    ``m2 *= (l'/l)^2`` (the relative spread kept), except ``m1 = l'``, ``m2 = l'^2`` where
+    ``l <= 0`` or ``l' > MAX_RAISE l`` (a history raised from near black, whose scaled
+    ``m2`` could overflow).
 
     Without the moments a clamped outlier would keep its variance, and with it a wide
     luminance stop that spreads the outlier's energy in the a-trous (hot pixels around
@@ -192,16 +194,12 @@ def _history_clamp_rows(
             for x in range(width):
                 if moved[x]:
                     after = wr * hr[x] + wg * hg[x] + wb * hb[x]
-                    if _ZERO < after <= before[x]:
+                    # Raised more than MAX_RAISE-fold, (l'/l)^2 could overflow m2 to inf:
+                    # such a history counts as black.
+                    if before[x] > _ZERO and after <= MAX_RAISE * before[x]:
                         ratio = after / before[x]
                         m1[x] *= ratio
                         m2[x] *= ratio * ratio
-                    elif before[x] > _ZERO:
-                        # Raised (e.g. a light came on): scaling the spread by (l'/l)^2 would
-                        # overflow where l was ~0, so the spread is kept.
-                        shifted = m1[x] + (after - before[x])
-                        m2[x] += shifted * shifted - m1[x] * m1[x]
-                        m1[x] = shifted
                     else:
                         m1[x] = after
                         m2[x] = after * after

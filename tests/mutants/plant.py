@@ -296,8 +296,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "clamp-scales-raised-moments", "filters",
         "a history raised from near black scales its moments by (l'/l)^2 (overflow)",
         "svgf_cli/filters/clamp.py",
-        (("                    if _ZERO < after <= before[x]:",
-          "                    if _ZERO < after and before[x] > _ZERO:"),),
+        (("                    if before[x] > _ZERO and after <= MAX_RAISE * before[x]:",
+          "                    if before[x] > _ZERO:"),),
         FILTER_TESTS,
     ),
     Mutant(
