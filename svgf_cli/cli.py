@@ -10,6 +10,7 @@ import click
 from svgf_cli import __version__
 from svgf_cli.errors import EXIT_RUNTIME, SvgfError
 from svgf_cli.heap import map_large_blocks
+from svgf_cli.openmp import wait_passively
 
 # Subcommand name -> module defining a click command named `command`. Imported lazily so
 # `svgf --help` does not pay for numba or OpenImageIO.
@@ -43,6 +44,8 @@ def main(argv: list[str] | None = None) -> None:
     """Console entry point: one-line `ERROR:` messages and published exit codes."""
     # Before any frame is read: blocks already in a heap arena would stay there.
     map_large_blocks()
+    # Before the first parallel kernel loads the OpenMP runtime (it reads this once).
+    wait_passively()
     try:
         cli.main(args=argv, prog_name="svgf", standalone_mode=False)
     except click.exceptions.Abort:

@@ -438,3 +438,20 @@ def test_decoding_is_single_threaded_until_threads_are_set() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     assert done.stdout.split() == ["0", "True"]
+
+
+@pytest.mark.parametrize("scale", [3.0, 1e7, 2.1e9, 3e9])
+@pytest.mark.parametrize("broken", [None, np.nan, np.inf, -np.inf])
+def test_mesh_ids_match_a_float64_rounding(scale: float, broken: float | None) -> None:
+    rng = np.random.default_rng(7)
+    raw = (rng.standard_normal((9, 11)) * scale).astype(np.float32)
+    edge = float(np.nextafter(np.float32(2**31), np.float32(0)))  # largest float32 < 2^31
+    raw.ravel()[:7] = [0.5, 1.5, 2.5, -0.5, -2.5, edge, -edge]
+    if broken is not None:
+        raw[4, 4] = broken
+    finite = np.isfinite(raw)
+    rounded = np.rint(raw.astype(np.float64))
+    expected = np.where(finite, np.clip(np.nan_to_num(rounded), -(2**31 - 1), 2**31 - 1), -1)
+    ids = exr.mesh_ids(raw)
+    assert ids.dtype == np.int32
+    assert np.array_equal(ids, expected.astype(np.int32))

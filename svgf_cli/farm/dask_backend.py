@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from svgf_cli.errors import UsageError
+from svgf_cli.openmp import wait_passively
 from svgf_cli.progress import Progress
 from svgf_cli.runner import FrameTask, RunConfig, RunStats, pending_tasks, run_sequence, trim_tail
 
@@ -34,6 +35,8 @@ def _import_distributed() -> Any:
 
 def set_compute_threads(threads: int | None) -> None:
     """Threads for numba kernels and OpenImageIO in this process (None/0: leave as is)."""
+    # Before numba starts its threads (a Dask worker's first task): idle threads sleep.
+    wait_passively()
     if not threads:
         return
     import numba

@@ -654,6 +654,26 @@ def _keep_colour_part_only(
     source.parts = [p if p is part else SourcePart(p.index, p.name, p.header) for p in source.parts]
 
 
+# The largest float32 below 2^31: float32 values up to it round to an int32 as they are.
+_INT32_SAFE_FLOAT = float(np.nextafter(np.float32(2**31), np.float32(0)))
+
+
+def mesh_ids(raw_id: np.ndarray) -> np.ndarray:
+    """Mesh ids from a float32 id plane: rounded to the nearest integer (ties to even),
+    clipped to the int32 range, NaN/Inf -> -1."""
+    low, high = float(raw_id.min()), float(raw_id.max())  # NaN propagates: slow path
+    if low >= -_INT32_SAFE_FLOAT and high <= _INT32_SAFE_FLOAT:
+        # The common case in two passes; rounding a float32 is exact in float32.
+        return np.rint(raw_id).astype(np.int32)
+    finite = np.isfinite(raw_id)
+    limit = float(np.iinfo(np.int32).max)
+    mesh_id = np.full(raw_id.shape, -1, dtype=np.int32)
+    # In float64: float32 rounds the int32 limit up to 2^31, which wraps negative.
+    rounded = np.rint(raw_id[finite].astype(np.float64))
+    mesh_id[finite] = np.clip(rounded, -limit, limit).astype(np.int32)
+    return mesh_id
+
+
 def _renormalise(normal: np.ndarray) -> int:
     """In place: non-zero normals to unit length. Normals already unit to 1e-5 (what
     renderers store) are left as stored, so their bits can be shared with the output.
@@ -791,13 +811,7 @@ def read_frame(
     motion = to_backward_pixels(values["motion"], convention)
 
     if "id" in values:
-        raw_id = values["id"][0]
-        finite = np.isfinite(raw_id)
-        limit = float(np.iinfo(np.int32).max)
-        mesh_id = np.full((height, width), -1, dtype=np.int32)
-        # In float64: float32 rounds the int32 limit up to 2^31, which wraps negative.
-        rounded = np.rint(raw_id[finite].astype(np.float64))
-        mesh_id[finite] = np.clip(rounded, -limit, limit).astype(np.int32)
+        mesh_id = mesh_ids(values["id"][0])
     else:
         mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
 
