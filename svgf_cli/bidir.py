@@ -15,7 +15,7 @@ Reuses the runner's parts (`ReadAhead`, `FrameFilter`, `WriteBehind`, the output
 
 Memory: one Denoiser (the forward state is unpacked into its combination buffers), the
 frames in flight and one packed state, whatever the length; disk:
-one packed state per output frame between the passes (about 55 MB per 1080p frame with two
+one packed state per output frame between the passes (about 35 MB per 1080p frame with two
 signals). The scratch folder is removed however the run ends (success, error, SIGINT or
 SIGTERM: the runner's stop flag ends a pass between frames). Resume with ``--skip-existing``
 as a causal run: outputs are only written by the reverse pass, atomically, last to first.

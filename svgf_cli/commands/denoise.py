@@ -171,7 +171,7 @@ SECTIONS = [
     default=None,
     metavar="DIR",
     help="Where --bidirectional keeps the forward pass's state between the passes (about "
-    "55 MB per 1080p output frame; removed when the run ends) [default: the system's "
+    "35 MB per 1080p output frame; removed when the run ends) [default: the system's "
     "temporary folder].",
 )
 @click.option(
