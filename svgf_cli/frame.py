@@ -279,7 +279,10 @@ COUNT_KEYS = {
     "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
     " matched them (information, not a problem)",
     "despiked.<signal>": "output pixels brought down to the despike ratio times their"
-    " brightest neighbour (fireflies the spatial filter kept; information, not a problem)",
+    " second-brightest neighbour (fireflies the spatial filter kept; information, not a"
+    " problem)",
+    "despiked_lone": "output pixels whose filtering mode no neighbour shares, brought down"
+    " to the despike ratio times their second-brightest output neighbour",
 }
 
 

@@ -449,6 +449,46 @@ def despike(illumination: np.ndarray, radiance_mode: np.ndarray, depth: np.ndarr
         bound)
 
 
+def despike_lone(output: np.ndarray, emission: np.ndarray | None, radiance_mode: np.ndarray,
+                 depth: np.ndarray, ratio: float, weights: Sequence[float] = REC709
+                 ) -> tuple[np.ndarray, int]:
+    """On the composed output (3, H, W): a surface pixel whose mode in some signal differs
+    from that of every in-image surface neighbour has its reflected luminance (its
+    luminance less the emission's) brought down to ``ratio`` times the second-largest
+    output luminance among those neighbours (the only one's, where there is one; left alone
+    where it is negative or there is none), the reflected rgb scaled. Returns the result
+    and the number of pixels changed."""
+    out = np.array(output, dtype=F64)
+    glow = np.zeros_like(out) if emission is None else np.asarray(emission, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    w = np.asarray(weights, dtype=F64)
+    lum = np.einsum("c,cyx->yx", w, out)
+    glow_lum = np.einsum("c,cyx->yx", w, glow)
+    modes = np.asarray(radiance_mode, dtype=bool)
+    height, width = z.shape
+    result = out.copy()
+    changed = 0
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0.0:
+                continue
+            near = [(yy, xx) for yy, xx in _neighbours(y, x, height, width, False)
+                    if z[yy, xx] > 0.0]
+            lone = any(all(modes[s, yy, xx] != modes[s, y, x] for yy, xx in near)
+                       for s in range(modes.shape[0]))
+            values = sorted(lum[yy, xx] for yy, xx in near)
+            if not lone or not values:
+                continue
+            reference = values[-2] if len(values) > 1 else values[0]
+            reflected = lum[y, x] - glow_lum[y, x]
+            if reference < 0.0 or reflected <= ratio * reference:
+                continue
+            scale = ratio * reference / reflected
+            result[:, y, x] = glow[:, y, x] + (out[:, y, x] - glow[:, y, x]) * scale
+            changed += 1
+    return result, changed
+
+
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
                   current: np.ndarray, depth: np.ndarray, k: float,
                   weights: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -1170,6 +1210,9 @@ class ReferenceDenoiser:
         output = sum(per_signal.values())
         if clean.emission is not None:
             output = output + clean.emission
+        if p.despike > 0.0:
+            output, counts["despiked_lone"] = despike_lone(
+                output, clean.emission, radiance_mode, geom.depth, p.despike, clean.weights)
         if p.taa:
             if self.taa_previous is not None:
                 output = taa_resolve(output, self.taa_previous, clean.motion, p.taa_alpha)

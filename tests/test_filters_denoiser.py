@@ -388,3 +388,22 @@ def test_auto_iterations_filter_like_the_count_the_image_size_gives() -> None:
         assert np.any(out["auto"] != out["five"])
     np.testing.assert_array_equal(runs["auto"].state()["history_illumination"],
                                   runs["three"].state()["history_illumination"])
+
+
+def test_despike_bounds_a_firefly_filtered_alone_as_radiance() -> None:
+    """A specular firefly whose G-buffer albedo is no reflectance is filtered as radiance;
+    with no neighbour in that mode neither the a-trous nor the per-signal despike touch it,
+    so the output guard compares it with its output neighbours and brings it down."""
+    frames = static_sequence(2, 16, 16, noise=0.3, split=False)
+    signal = frames[1].signal("color")
+    signal.albedo[:, 8, 8] = 25.0
+    signal.radiance[:, 8, 8] = 1000.0
+    plain = Denoiser(resolve_params("paper"))
+    guarded = Denoiser(resolve_params("paper", despike=2.0))
+    for frame in frames:
+        kept, out = plain.process(frame), guarded.process(frame)
+    assert kept.counts["implausible_albedo.color"] >= 1
+    neighbours = np.sort(np.delete(out.color[1, 7:10, 7:10].ravel(), 4))
+    assert kept.color[1, 8, 8] > 100.0  # the sample, unfiltered
+    assert out.color[1, 8, 8] <= 2.0 * neighbours[-2] * 1.5
+    assert out.counts["despiked_lone"] >= 1

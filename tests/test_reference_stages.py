@@ -26,7 +26,7 @@ from moving_scene import ACESCG_LUMINANCE, plant_extremes, scene_frame
 from svgf_cli.filters import values
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
-from svgf_cli.filters.despike import despike
+from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import REC709, float32_weights
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
@@ -371,6 +371,49 @@ def test_despike_takes_pairs_and_keeps_lines() -> None:
     assert lowered == {(3, 3), (3, 4), (9, 2), (10, 3), (2, 8), (8, 8)}
     np.testing.assert_allclose(want[0, :, 3, 3], 2.0)
     assert clamped.sum() == changed[0] == len(lowered)  # and nothing else moved
+
+
+@pytest.mark.parametrize("with_emission", [True, False])
+def test_despike_lone_matches_reference(with_emission: bool) -> None:
+    """Pixels whose mode no surface neighbour shares, in either signal, are bounded in the
+    output against their output neighbours; the emission is kept; a pair of same-mode
+    pixels, a bright pixel that shares its mode and a lone pixel among black neighbours
+    (bound 0) behave as the reference says."""
+    height, width = 10, 12
+    rng = np.random.default_rng(11)
+    output = rng.uniform(0.5, 1.5, (3, height, width)).astype(F32)
+    depth = np.full((height, width), 4.0, F32)
+    depth[0, :3] = 0.0  # background: not a neighbour, never changed
+    modes = np.zeros((2, height, width), dtype=bool)
+    modes[0, 2, 2] = True  # lone in signal 0 (radiance among demodulated): a firefly
+    output[:, 2, 2] = 40.0
+    modes[1, 6:9, 6:9] = True  # lone in signal 1 (demodulated among radiance)
+    modes[1, 7, 7] = False
+    output[:, 7, 7] = 12.0
+    modes[0, 4, 8:10] = True  # a same-mode pair: not lone
+    output[:, 4, 8:10] = 30.0
+    output[:, 8, 2] = 25.0  # bright, mode shared with all: not lone
+    modes[0, 1, 10] = True  # lone, an emitter: only its reflected part counts
+    output[:, 1, 10] = 50.0
+    modes[0, 9, 0] = True  # lone at the corner among black neighbours
+    output[:, 8:10, 0:2] = 0.0
+    output[:, 9, 0] = 0.5
+    emission = np.zeros_like(output)
+    emission[:, 1, 10] = 49.5
+    got = output.copy()
+    clamped = np.zeros(height, dtype=np.int64)
+    despike_lone(got, emission if with_emission else got, with_emission, mode_mask(modes),
+                 depth, 2, F32(2.0), REC709, np.empty(depth.shape, F32), clamped)
+    want, changed = ref.despike_lone(output, emission if with_emission else None, modes,
+                                     depth, 2.0)
+    _close(got, want, 2e-6, "despike_lone")
+    assert clamped.sum() == changed
+    moved = np.any(want != output, axis=0)
+    assert moved[2, 2] and moved[7, 7] and moved[9, 0]
+    assert not moved[4, 8] and not moved[4, 9] and not moved[8, 2]
+    assert moved[1, 10] != with_emission  # 50 = 49.5 emitted + 0.5 reflected: kept
+    assert not got[:, 9, 0].any()
+    assert not moved[0, :3].any()
 
 
 def test_history_clamp_matches_reference() -> None:

@@ -45,7 +45,7 @@ from svgf_cli.filters.bidirectional import (
     effective_counts,
 )
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
-from svgf_cli.filters.despike import despike
+from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
@@ -508,6 +508,9 @@ class Denoiser:
                                        filtered.history_length, run.mode, run.depth,
                                        run.counts)
         run.lap("modulate")
+        if p.despike > 0.0:
+            self._despike_lone(run, output)
+            run.lap("despike")
 
         if p.taa:
             if self._taa_previous is None:
@@ -537,6 +540,17 @@ class Denoiser:
         for name, total in zip(run.names, clamped.sum(axis=0), strict=True):
             run.counts[f"despiked.{name}"] = int(total)
         return illumination
+
+    def _despike_lone(self, run: _FrameRun, output: np.ndarray) -> None:
+        """The composed output's pixels whose mode no neighbour shares, despiked against
+        their output neighbours (``filters.despike.despike_lone``), counted."""
+        emission = run.frame.emission
+        clamped = np.zeros(run.depth.shape[0], dtype=np.int64)
+        despike_lone(output, emission if emission is not None else output,
+                     emission is not None, run.mode, run.depth, len(run.names),
+                     F32(self.params.despike), run.weights, run.work["despike_luminance"],
+                     clamped)
+        run.counts["despiked_lone"] = int(clamped.sum())
 
     # ----------------------------------------------------------------- bidirectional
     def forward_step(self, frame: Frame,

@@ -111,3 +111,93 @@ def despike(
                     b[x] *= scale
                     count += 1
             clamped[y, s] = count
+
+
+@njit(
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def despike_lone(
+    radiance: np.ndarray,
+    emission: np.ndarray,
+    has_emission: bool,
+    mode: np.ndarray,
+    depth: np.ndarray,
+    num_signals: int,
+    ratio: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    luminance: np.ndarray,
+    clamped: np.ndarray,
+) -> None:
+    """In place, on the composed output ``radiance`` (3, H, W): a surface pixel ``p`` that is
+    *lone* in some signal ``s`` (bit ``s`` of ``mode`` differs from that of every surface
+    neighbour) has its reflected part ``l(p) - e(p)`` (``e`` the emission's luminance, 0
+    without ``has_emission``) brought down to ``ratio * M`` (rgb of ``radiance - emission``
+    scaled), with ``M`` the second-largest output luminance ``l(q)`` over its 8 surface
+    neighbours (the largest where there is only one), where ``M >= 0``.
+
+    :func:`despike` compares a pixel only with neighbours filtered in the same mode, and the
+    a-trous never mixes modes, so a pixel whose mode no neighbour shares is neither filtered
+    nor guarded: a specular sample whose G-buffer "albedo" is no reflectance (filtered as
+    radiance among demodulated neighbours), or the one plausible albedo in a patch below the
+    guide floor. Its output is its own sample, up to 12x the converged image's local
+    maximum on the rolling-ball render. In the output the modes share one scale, so the
+    neighbours are compared there. ``luminance`` is an (H, W) float32 scratch; ``clamped``
+    (H,) int64 receives the number of pixels changed per row.
+    """
+    height, width = depth.shape
+    wr, wg, wb = luminance_weights
+    all_bits = np.uint16((1 << num_signals) - 1)
+    for y in prange(height):
+        d = depth[y]
+        lum = luminance[y]
+        r, g, b = radiance[0, y], radiance[1, y], radiance[2, y]
+        for x in range(width):
+            value = wr * r[x] + wg * g[x] + wb * b[x]
+            lum[x] = value if d[x] > _ZERO else _NONE
+    for y in prange(height):
+        brightest = np.full(width, _NONE, dtype=F32)
+        second = np.full(width, _NONE, dtype=F32)
+        # Bits in which some surface neighbour agrees with the centre.
+        agreeing = np.zeros(width, dtype=np.uint16)
+        centre_mode = mode[y]
+        for dy in range(-1, 2):
+            yy = y + dy
+            if yy < 0 or yy >= height:
+                continue
+            lum_row = luminance[yy]
+            mode_row = mode[yy]
+            depth_row = depth[yy]
+            for dx in range(-1, 2):
+                if dy == 0 and dx == 0:
+                    continue
+                first = max(0, -dx)
+                last = width - max(0, dx)
+                for x in range(first, last):
+                    q = x + dx
+                    surface = depth_row[q] > _ZERO
+                    same = np.uint16(~(mode_row[q] ^ centre_mode[x]) & all_bits)
+                    agreeing[x] |= same if surface else np.uint16(0)
+                    candidate = lum_row[q]
+                    second[x] = max(second[x], min(brightest[x], candidate))
+                    brightest[x] = max(brightest[x], candidate)
+        d = depth[y]
+        lum = luminance[y]
+        count = 0
+        for x in range(width):
+            lone = (agreeing[x] & all_bits) != all_bits
+            reference = second[x] if second[x] > _NONE else brightest[x]
+            if not (d[x] > _ZERO and lone and reference >= _ZERO):
+                continue
+            glow = _ZERO
+            if has_emission:
+                glow = (wr * emission[0, y, x] + wg * emission[1, y, x]
+                        + wb * emission[2, y, x])
+            reflected = lum[x] - glow
+            bound = ratio * reference
+            if reflected > bound:
+                scale = bound / reflected
+                for c in range(3):
+                    own = emission[c, y, x] if has_emission else _ZERO
+                    radiance[c, y, x] = own + (radiance[c, y, x] - own) * scale
+                count += 1
+        clamped[y] = count

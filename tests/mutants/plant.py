@@ -308,6 +308,20 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "despike-lone-skipped", "filters",
+        "a pixel filtered alone in its mode is never compared with its output neighbours",
+        "svgf_cli/filters/denoiser.py",
+        (("            self._despike_lone(run, output)\n", ""),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "despike-lone-everywhere", "filters", "the output guard bounds every pixel, lone or not",
+        "svgf_cli/filters/despike.py",
+        (("            lone = (agreeing[x] & all_bits) != all_bits",
+          "            lone = True"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "reverse-pass-drops-glossy", "filters", "the reverse pass forgets which signals are glossy",
         "svgf_cli/filters/two_pass.py",
         (("signals=[dataclasses.replace(s, gradient=None) for s in frame.signals],",
