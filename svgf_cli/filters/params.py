@@ -75,7 +75,7 @@ class SVGFParams:
         2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels)."
     )
     antilag_sigma: float = _p(
-        3.0,
+        3.5,
         "Anti-lag significance: the history is stale where it differs from the frame by more"
         " than this many standard errors of the window's noise.",
     )
