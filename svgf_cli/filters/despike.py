@@ -34,6 +34,45 @@ _ZERO = F32(0.0)
 _NONE = F32(-np.finfo(np.float32).max)
 
 
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _neighbours(
+    luminance: np.ndarray, mode: np.ndarray, depth: np.ndarray, y: int, bit: np.uint16,
+    bits: np.uint16,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Over the 8 neighbours ``q`` of each pixel ``p`` of row ``y``: the largest and the
+    second-largest ``luminance[q]`` among those whose ``mode`` agrees with ``p``'s in
+    ``bit`` (0: all of them; background pixels hold ``_NONE``), and the bits of ``bits`` in
+    which some surface neighbour's ``mode`` agrees with ``p``'s."""
+    height, width = luminance.shape
+    brightest = np.full(width, _NONE, dtype=F32)
+    second = np.full(width, _NONE, dtype=F32)
+    agreeing = np.zeros(width, dtype=np.uint16)
+    centre_mode = mode[y]
+    for dy in range(-1, 2):
+        yy = y + dy
+        if yy < 0 or yy >= height:
+            continue
+        lum_row = luminance[yy]
+        mode_row = mode[yy]
+        depth_row = depth[yy]
+        for dx in range(-1, 2):
+            if dy == 0 and dx == 0:
+                continue
+            # x + dx stays inside the row for x in [first, last).
+            first = max(0, -dx)
+            last = width - max(0, dx)
+            for x in range(first, last):
+                q = x + dx
+                differing = mode_row[q] ^ centre_mode[x]
+                candidate = lum_row[q] if (differing & bit) == 0 else _NONE
+                second[x] = max(second[x], min(brightest[x], candidate))
+                brightest[x] = max(brightest[x], candidate)
+                agree = np.uint16(~differing & bits)
+                agreeing[x] |= agree if depth_row[q] > _ZERO else np.uint16(0)
+    return brightest, second, agreeing
+
+
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
@@ -73,27 +112,7 @@ def despike(
                 lum[x] = value if d[x] > _ZERO else _NONE
         # Pass 2: the two brightest same-mode neighbours, then the bound.
         for y in prange(height):
-            brightest = np.full(width, _NONE, dtype=F32)
-            second = np.full(width, _NONE, dtype=F32)
-            centre_mode = mode[y]
-            for dy in range(-1, 2):
-                yy = y + dy
-                if yy < 0 or yy >= height:
-                    continue
-                lum_row = luminance[yy]
-                mode_row = mode[yy]
-                for dx in range(-1, 2):
-                    if dy == 0 and dx == 0:
-                        continue
-                    # x + dx stays inside the row for x in [first, last).
-                    first = max(0, -dx)
-                    last = width - max(0, dx)
-                    for x in range(first, last):
-                        q = x + dx
-                        same = (mode_row[q] & bit) == (centre_mode[x] & bit)
-                        candidate = lum_row[q] if same else _NONE
-                        second[x] = max(second[x], min(brightest[x], candidate))
-                        brightest[x] = max(brightest[x], candidate)
+            brightest, second, _ = _neighbours(luminance, mode, depth, y, bit, np.uint16(0))
             d = depth[y]
             lum = luminance[y]
             r = illumination[s, 0, y]
@@ -155,31 +174,8 @@ def despike_lone(
             value = wr * r[x] + wg * g[x] + wb * b[x]
             lum[x] = value if d[x] > _ZERO else _NONE
     for y in prange(height):
-        brightest = np.full(width, _NONE, dtype=F32)
-        second = np.full(width, _NONE, dtype=F32)
-        # Bits in which some surface neighbour agrees with the centre.
-        agreeing = np.zeros(width, dtype=np.uint16)
-        centre_mode = mode[y]
-        for dy in range(-1, 2):
-            yy = y + dy
-            if yy < 0 or yy >= height:
-                continue
-            lum_row = luminance[yy]
-            mode_row = mode[yy]
-            depth_row = depth[yy]
-            for dx in range(-1, 2):
-                if dy == 0 and dx == 0:
-                    continue
-                first = max(0, -dx)
-                last = width - max(0, dx)
-                for x in range(first, last):
-                    q = x + dx
-                    surface = depth_row[q] > _ZERO
-                    same = np.uint16(~(mode_row[q] ^ centre_mode[x]) & all_bits)
-                    agreeing[x] |= same if surface else np.uint16(0)
-                    candidate = lum_row[q]
-                    second[x] = max(second[x], min(brightest[x], candidate))
-                    brightest[x] = max(brightest[x], candidate)
+        brightest, second, agreeing = _neighbours(luminance, mode, depth, y, np.uint16(0),
+                                                  all_bits)
         d = depth[y]
         lum = luminance[y]
         count = 0

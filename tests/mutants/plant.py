@@ -273,8 +273,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "despike-ignores-modes", "filters", "despike compares neighbours of the other mode",
         "svgf_cli/filters/despike.py",
-        (("                        candidate = lum_row[q] if same else _NONE",
-          "                        candidate = lum_row[q]"),),
+        (("                candidate = lum_row[q] if (differing & bit) == 0 else _NONE",
+          "                candidate = lum_row[q]"),),
         FILTER_TESTS,
     ),
     Mutant(
