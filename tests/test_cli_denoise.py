@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -445,6 +446,7 @@ def test_atrous_iterations_take_a_count_or_auto(
     assert json.loads(read_exr(tmp_path / "a.exr").header["svgf/params"])[
         "atrous_iterations"] == -1
     assert "atrous_iterations=auto" in stdout
+    assert re.search(r"A-trous: 3 iterations \(auto, for \d+x\d+\)", stdout)
     for bad, message in [("seven", "'seven': expected a number of iterations or 'auto'"),
                          ("13", "13: must lie in 0..12 or be 'auto'")]:
         code, _, err = run_cli(["denoise", *first, "-o", tmp_path / "b.exr",

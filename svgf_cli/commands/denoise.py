@@ -23,6 +23,7 @@ from svgf_cli.commands.options import (
 )
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
+from svgf_cli.filters.params import AUTO_ITERATIONS, atrous_iterations_for
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS, SIGNAL_CHOICES
 from svgf_cli.progress import PROGRESS_MODES, Progress
 
@@ -287,6 +288,9 @@ def command(**options: Any) -> None:
     progress.info(f"Threads: {threads}")
     progress.info(f"Preset: {options['preset']}")
     progress.info(f"Parameters: {describe_params(params)}")
+    if params.atrous_iterations == AUTO_ITERATIONS:
+        count = atrous_iterations_for(params, info.height, info.width)
+        progress.info(f"A-trous: {count} iterations (auto, for {info.width}x{info.height})")
     progress.info(
         f"Layers ({options['preset_aovs']} AOVs, motion {mapping.motion_convention}, "
         f"from {first_input}):\n{resolved.describe()}\n  {info.luminance_weights.describe()}"
