@@ -144,8 +144,9 @@ class SVGFParams:
     )
     despike: float = _p(
         0.0,
-        "Output guard: a filtered pixel brighter than this many times every same-mode"
-        " neighbour is brought down to that bound (fireflies the a-trous kept; 0 = off).",
+        "Output guard: a filtered pixel brighter than this many times its second-brightest"
+        " same-mode neighbour (any neighbour, in the output, for a pixel whose mode none"
+        " shares) is brought down to that bound (fireflies the a-trous kept; 0 = off).",
     )
     taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
     taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
