@@ -494,9 +494,9 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
                   weights: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Clamp each history channel to the current 3x3 (in-image surface pixels, centre
     included) ``mean +- k sigma``; where anything changed, scale the moments with the
-    history luminance ``l -> l'``: ``m1 l'/l``, ``m2 (l'/l)^2`` (``l'``, ``l'^2`` where
-    ``l <= 0`` or ``l' > 1e6 l``). A signal's pixels without history (its ``h <= 0``) and
-    background are left alone. Returns the clamped history and moments."""
+    history luminance ``l -> l'``: ``m1 l'/l``, ``min(m2 (l'/l)^2, 1e36)`` (``l'``,
+    ``l'^2`` where ``l <= 0`` or ``l' > 1e6 l``). A signal's pixels without history (its
+    ``h <= 0``) and background are left alone. Returns the clamped history and moments."""
     hist = np.array(history, dtype=F64)
     mom = np.array(moments, dtype=F64)
     cur = np.asarray(current, dtype=F64)
@@ -524,7 +524,7 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
                     continue
                 if before > 0.0 and after <= 1e6 * before:
                     mom[s, 0, y, x] *= after / before
-                    mom[s, 1, y, x] *= (after / before) ** 2
+                    mom[s, 1, y, x] = min(mom[s, 1, y, x] * (after / before) ** 2, 1e36)
                 else:  # from black, or raised more than a millionfold
                     mom[s, :, y, x] = after, after * after
     return hist, mom

@@ -470,6 +470,24 @@ def test_history_clamp_raised_from_near_black_keeps_finite_moments() -> None:
     np.testing.assert_allclose(got_moments[0, 1], lum * lum, rtol=1e-5)
 
 
+
+def test_history_clamp_keeps_a_firefly_spread_finite() -> None:
+    """A dim history whose moments hold a huge spread (a firefly of 1e15 once passed) is
+    raised a hundred-thousandfold: the scaled second moment stays finite (capped at 1e36),
+    so the variance does too."""
+    current = np.full((1, 3, 3, 3), 100.0, dtype=F32)
+    history = np.full_like(current, 1e-3)
+    moments = np.stack([np.full((3, 3), 1e-3), np.full((3, 3), 1e30)])[None].astype(F32)
+    length = np.full((1, 3, 3), 4.0, dtype=F32)
+    depth = np.ones((3, 3), dtype=F32)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    got_history, got_moments = history.copy(), moments.copy()
+    history_clamp(got_history, got_moments, length, current, depth, 1.0, weights)
+    _, want_moments = ref.history_clamp(history, moments, length, current, depth, 1.0, weights)
+    assert np.all(np.isfinite(got_moments))
+    assert np.all(np.isfinite(got_moments[0, 1] - got_moments[0, 0] ** 2))
+    _close(got_moments, want_moments, 1e-5, "moments")
+
 # --------------------------------------------------------------------------- 2 reprojection
 def _history_for(prev: Frame, seed: int) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)

@@ -23,8 +23,10 @@ from svgf_cli.filters.fastmath import FASTMATH, luminance
 F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
-# The largest factor the history clamp scales the moments by (m2 by its square).
+# The largest factor the history clamp scales the moments by (m2 by its square), and the
+# largest second moment it leaves (finite whatever spread a firefly left in the history).
 MAX_RAISE = F32(1e6)
+MAX_SECOND_MOMENT = F32(1e36)
 
 
 @njit(
@@ -108,9 +110,9 @@ def history_clamp(
 ) -> None:
     """In place: clamp each history channel to the current 3x3 mean +- k*sigma, and let the
     luminance moments follow the history luminance ``l -> l'``: ``m1 *= l'/l`` and
-    ``m2 *= (l'/l)^2`` (the relative spread kept), except ``m1 = l'``, ``m2 = l'^2`` where
-    ``l <= 0`` or ``l' > MAX_RAISE l`` (a history raised from near black, whose scaled
-    ``m2`` could overflow).
+    ``m2 *= (l'/l)^2`` (the relative spread kept; at most ``MAX_SECOND_MOMENT``), except
+    ``m1 = l'``, ``m2 = l'^2`` where ``l <= 0`` or ``l' > MAX_RAISE l`` (a history raised
+    from near black, whose scaled ``m2`` could overflow).
 
     Without the moments a clamped outlier would keep its variance, and with it a wide
     luminance stop that spreads the outlier's energy in the a-trous (hot pixels around
@@ -199,7 +201,7 @@ def _history_clamp_rows(
                     if before[x] > _ZERO and after <= MAX_RAISE * before[x]:
                         ratio = after / before[x]
                         m1[x] *= ratio
-                        m2[x] *= ratio * ratio
+                        m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)
                     else:
                         m1[x] = after
                         m2[x] = after * after

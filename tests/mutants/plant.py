@@ -301,6 +301,14 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "clamp-second-moment-uncapped", "filters",
+        "the history clamp's scaled second moment overflows to inf",
+        "svgf_cli/filters/clamp.py",
+        (("                        m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)",
+          "                        m2[x] = m2[x] * (ratio * ratio)"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "auto-iterations-fixed", "filters", "auto a-trous iterations always run the paper's 5",
         "svgf_cli/filters/params.py",
         (("    return next(count for smallest, count in _ITERATION_SIDES if side >= smallest)",
