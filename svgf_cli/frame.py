@@ -278,6 +278,9 @@ COUNT_KEYS = {
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
     "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
     " matched them (information, not a problem)",
+    "fireflies_spread.<signal>": "current samples above their history's m1 + k sigma and 4x"
+    " their second-brightest neighbour, bounded with the excess shared over the surface"
+    " around them (information, not a problem)",
     "despiked.<signal>": "output pixels brought down to the despike ratio times their"
     " second-brightest neighbour (fireflies the spatial filter kept; information, not a"
     " problem)",

@@ -26,6 +26,7 @@ values                  :func:`apply_value_policy` (:func:`clean_value`,        
 + anti-lag hook         :meth:`ReferenceDenoiser.before_accumulation`            denoiser
 + history clamp         :func:`history_clamp`                                    clamp
 + anti-lag              :func:`antilag` (:func:`antilag_gradient_change`)         antilag
++ firefly spreading     :func:`spread_fireflies`                                 fireflies
 2 accumulation          :func:`accumulate` (paper eq. 6, 1/h ramp per signal)    reproject
 3 variance              :func:`temporal_variance`, :func:`spatial_variance`,     variance
                         :func:`boost_short_history`, :func:`estimate_variance`
@@ -487,6 +488,56 @@ def despike_lone(output: np.ndarray, emission: np.ndarray | None, radiance_mode:
             result[:, y, x] = glow[:, y, x] + (out[:, y, x] - glow[:, y, x]) * scale
             changed += 1
     return result, changed
+
+
+def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np.ndarray,
+                     depth: np.ndarray, spread: Sequence[bool], k: float,
+                     weights: Sequence[float] = REC709, ratio: float = 4.0, radius: int = 4,
+                     depth_tolerance: float = 0.1) -> tuple[np.ndarray, list[int]]:
+    """Per signal ``s`` with ``spread[s]``: a demodulated surface sample whose luminance
+    exceeds ``L = max(m1 + k sqrt(max(m2 - m1^2, 0)), ratio * max(M, 0))`` (``m1``, ``m2``
+    the history's luminance moments; ``M`` the second-largest luminance among its in-image
+    8 neighbours that are demodulated surface pixels, the only one's where there is one, 0
+    where there is none) is a firefly. Every firefly's rgb is scaled to ``L``; then each
+    one's removed rgb is added in equal shares to the demodulated surface pixels of the
+    ``(2 radius + 1)^2`` window around it (itself included) whose depth is within
+    ``depth_tolerance`` of its own, relatively. Returns the result and the number of
+    fireflies per signal."""
+    c = np.array(current, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    m = np.asarray(moments, dtype=F64)
+    lum = luminance(c, weights)
+    num_signals, _, height, width = c.shape
+    counts = [0] * num_signals
+    for s in range(num_signals):
+        if not spread[s]:
+            continue
+        demodulated = (z > 0.0) & ~radiance_mode[s]
+        found = []
+        for y in range(height):
+            for x in range(width):
+                if not demodulated[y, x]:
+                    continue
+                m1, m2 = m[s, 0, y, x], m[s, 1, y, x]
+                values = sorted(lum[s, yy, xx] for yy, xx in _neighbours(y, x, height, width,
+                                                                          False)
+                                if demodulated[yy, xx])
+                reference = values[-2] if len(values) > 1 else (values[0] if values else 0.0)
+                bound = max(m1 + k * math.sqrt(max(m2 - m1 * m1, 0.0)),
+                            ratio * max(reference, 0.0))
+                if lum[s, y, x] > bound:
+                    found.append((y, x, c[s, :, y, x] * (1.0 - bound / lum[s, y, x])))
+        for y, x, excess in found:
+            c[s, :, y, x] -= excess
+        for y, x, excess in found:
+            ys = slice(max(y - radius, 0), y + radius + 1)
+            xs = slice(max(x - radius, 0), x + radius + 1)
+            receives = demodulated[ys, xs] & (np.abs(z[ys, xs] - z[y, x])
+                                              <= depth_tolerance * z[y, x])
+            c[s][:, ys, xs] += np.where(receives, 1.0, 0.0) * (excess / receives.sum())[
+                :, None, None]
+        counts[s] = len(found)
+    return c, counts
 
 
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
@@ -968,6 +1019,8 @@ class TemporalState:
     depth: np.ndarray
     weights: tuple[float, float, float]
     glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
+    counts: dict[str, int] = field(default_factory=dict)  # what the hook's stages counted
+    names: tuple[str, ...] = ()
 
 
 def antilag_gradient_change(mask, previous, current, radius, sigma):
@@ -1087,7 +1140,8 @@ class ReferenceDenoiser:
     def before_accumulation(self, temporal: TemporalState) -> int | None:
         """Adjust the reprojected history before it is blended: the optional history clamp,
         then anti-lag. Lowering ``temporal.history.history_length[s]`` raises signal ``s``'s
-        blend factor there. Returns anti-lag's count (None when it is off)."""
+        blend factor there. Then the current frame's fireflies are spread (in place, counted
+        in ``temporal.counts``). Returns anti-lag's count (None when it is off)."""
         p = self.params
         reprojected = temporal.history
         # The history clamp, one signal at a time: glossy signals at their own k.
@@ -1100,13 +1154,20 @@ class ReferenceDenoiser:
                     reprojected.illumination[one], reprojected.moments[one],
                     reprojected.history_length[one], temporal.current[one], temporal.depth, k,
                     temporal.weights)
-        if not p.antilag:
-            return None
-        _, length, shortened = antilag(
-            temporal.current, reprojected.moments, reprojected.history_length, temporal.depth,
-            temporal.weights, p.antilag_radius, p.antilag_sigma, p.antilag_spatial_samples,
-            p.antilag_tolerance, p.moments_alpha)
-        reprojected.history_length = length
+        shortened = None
+        if p.antilag:
+            _, length, shortened = antilag(
+                temporal.current, reprojected.moments, reprojected.history_length,
+                temporal.depth, temporal.weights, p.antilag_radius, p.antilag_sigma,
+                p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha)
+            reprojected.history_length = length
+        if p.spread_fireflies > 0.0:
+            spread, found = spread_fireflies(
+                temporal.current, temporal.radiance_mode, reprojected.moments, temporal.depth,
+                [not g for g in glossy], p.spread_fireflies, temporal.weights)
+            temporal.current[...] = spread
+            for name, count in zip(temporal.names, found, strict=True):
+                temporal.counts[f"fireflies_spread.{name}"] = count
         return shortened
 
     def process(self, frame: Frame) -> ReferenceOutput:
@@ -1137,11 +1198,12 @@ class ReferenceDenoiser:
             reprojected = reproject(clean.motion, geom, clean.mesh_id, radiance_mode,
                                     self.history, p.depth_tolerance, p.depth_slack,
                                     p.normal_tolerance)
-            shortened = self.before_accumulation(TemporalState(
-                illumination, radiance_mode, reprojected, geom.depth, clean.weights,
-                clean.glossy))
+            temporal = TemporalState(illumination, radiance_mode, reprojected, geom.depth,
+                                     clean.weights, clean.glossy, names=tuple(clean.names))
+            shortened = self.before_accumulation(temporal)
             if shortened is not None:
                 counts["antilag"] = shortened
+            counts.update(temporal.counts)
             self.last_reprojected = reprojected
         else:
             reprojected = Reprojected(np.zeros(shape), np.zeros((shape[0], 2, *shape[2:])),

@@ -29,6 +29,7 @@ from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import REC709, float32_weights
+from svgf_cli.filters.fireflies import spread_fireflies
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
 from svgf_cli.filters.modulate import (
     DEMODULATE_COUNTERS,
@@ -414,6 +415,78 @@ def test_despike_lone_matches_reference(with_emission: bool) -> None:
     assert moved[1, 10] != with_emission  # 50 = 49.5 emitted + 0.5 reflected: kept
     assert not got[:, 9, 0].any()
     assert not moved[0, :3].any()
+
+
+def _firefly_case(seed: int) -> tuple[np.ndarray, ...]:
+    """Three signals over 14x16 with a history (moments of a steady level), fireflies on
+    flat ground, at the border, next to a depth edge and between radiance-mode pixels, a
+    lit block (a lighting change: every pixel above its history), and the third signal
+    glossy (never spread)."""
+    height, width = 14, 16
+    rng = np.random.default_rng(seed)
+    current = rng.gamma(2.0, 0.25, (3, 3, height, width)).astype(F32)
+    level = F32(0.5)
+    moments = np.empty((3, 2, height, width), F32)
+    moments[:, 0] = level
+    moments[:, 1] = level * level * F32(1.4)
+    depth = np.full((height, width), 5.0, F32)
+    depth[:, 11:] = 9.0  # a second surface: no share crosses to it
+    depth[0, 0:3] = 0.0  # background
+    radiance_mode = np.zeros((3, height, width), dtype=bool)
+    radiance_mode[0, 9:12, 2:5] = True
+    radiance_mode[0, 10, 3] = False  # alone among radiance-mode pixels
+    for s, y, x, gain in [(0, 5, 5, 80.0), (0, 0, 7, 60.0), (0, 7, 10, 50.0),
+                          (0, 10, 3, 40.0), (1, 12, 14, 90.0), (2, 5, 5, 80.0)]:
+        current[s, :, y, x] *= gain
+    current[1, :, 2:6, 2:6] *= 12.0  # the lit block
+    return current, moments, mode_mask(radiance_mode), radiance_mode, depth
+
+
+@pytest.mark.parametrize("weights", [REC709, ACESCG], ids=["rec709", "acescg"])
+def test_firefly_spreading_matches_reference(weights: tuple) -> None:
+    current, moments, mask, radiance_mode, depth = _firefly_case(3)
+    got = current.copy()
+    keep = np.empty(depth.shape, F32)
+    counts = spread_fireflies(got, moments, mask, depth, (True, True, False), 10.0, weights,
+                              keep)
+    want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
+                                       [True, True, False], 10.0, weights)
+    _close(got, want, 2e-6, "firefly spreading")
+    assert counts == found
+    lum = ref.luminance(current, weights)
+    after = ref.luminance(want, weights)
+    # The planted fireflies are found and brought down at least fivefold ...
+    for s, y, x in [(0, 5, 5), (0, 0, 7), (0, 7, 10), (0, 10, 3), (1, 12, 14)]:
+        assert after[s, y, x] < lum[s, y, x] / 5, (s, y, x)
+    # ... with their energy kept on their own surface, in their own mode.
+    for s in range(2):
+        np.testing.assert_allclose(np.sum(got[s], axis=(1, 2)), np.sum(current[s], axis=(1, 2)),
+                                   rtol=1e-5)
+    assert np.array_equal(got[0][:, radiance_mode[0]], current[0][:, radiance_mode[0]])
+    np.testing.assert_array_equal(want[0][:, :, 11:], current[0][:, :, 11:])  # edge kept
+    assert np.array_equal(got[2], current[2])  # the glossy signal is left alone
+    assert np.array_equal(got[:, :, depth <= 0], current[:, :, depth <= 0])
+    # Inside the lit block every neighbour rose too: no pixel there is a firefly (they
+    # only gain shares of one nearby).
+    inner = after[1, 3:5, 3:5] / lum[1, 3:5, 3:5]
+    assert inner.min() >= 1.0 - 1e-6
+    assert sum(counts) <= 8  # fireflies, not the noise
+
+
+def test_firefly_spreading_leaves_a_converged_history_alone() -> None:
+    """A sample within k sigma of its history is no firefly however far above its
+    neighbours, and one above every neighbour fourfold but within its history is kept."""
+    current, moments, mask, radiance_mode, depth = _firefly_case(4)
+    moments[:, 0, 5, 5] = 100.0  # the history knows this pixel is bright
+    moments[:, 1, 5, 5] = 100.0 ** 2 * 1.1
+    got = current.copy()
+    counts = spread_fireflies(got, moments, mask, depth, (True, True, False), 10.0, REC709,
+                              np.empty(depth.shape, F32))
+    want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
+                                       [True, True, False], 10.0)
+    _close(got, want, 2e-6, "firefly spreading")
+    assert counts == found
+    assert ref.luminance(want, REC709)[0, 5, 5] >= ref.luminance(current, REC709)[0, 5, 5]
 
 
 def test_history_clamp_matches_reference() -> None:

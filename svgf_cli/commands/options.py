@@ -78,6 +78,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "guide_albedo_floor": click.FloatRange(0.0, 1.0),
     "firefly_clamp": click.FloatRange(min=0.0),
     "history_clamp": click.FloatRange(min=0.0),
+    "spread_fireflies": click.FloatRange(min=0.0),
     "despike": click.FloatRange(min=0.0),
     "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
     "antilag_radius": click.IntRange(1, 16),

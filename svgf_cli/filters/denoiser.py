@@ -5,7 +5,7 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
 1. temporal accumulation (``_accumulate_temporally``): input values (``values``) -> geometry
    gradients -> demodulate every signal, with its per-pixel mode (+ optional firefly clamp)
    -> reproject every signal's history -> the pre-accumulation hook (optional history
-   clamp, anti-lag) -> accumulate;
+   clamp, anti-lag, firefly spreading) -> accumulate;
 2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over groups
    of two or three signals; the ``feedback_iteration`` output becomes next frame's colour
    history (stored by ``_store_history``, with the history guard);
@@ -48,6 +48,7 @@ from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
+from svgf_cli.filters.fireflies import spread_fireflies
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
 from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, atrous_iterations_for
 from svgf_cli.filters.reproject import accumulate_in_place, reproject
@@ -125,6 +126,7 @@ class _Workspace:
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
             "despike_luminance": ((h, w), F32),
+            "firefly_keep": ((h, w), F32),
             "antilag_scratch": (scratch_shape(s, h, w), F32),
             "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
@@ -165,6 +167,8 @@ class TemporalState:
     glossy: tuple[bool, ...] = ()
     # Where anti-lag may keep its statistics (None: a workspace plane of its own).
     antilag_scratch: np.ndarray | None = None
+    # What the hook's stages counted (fireflies spread per signal), for the frame's counts.
+    counts: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -242,7 +246,7 @@ class Denoiser:
     **Anti-lag hook.** After reprojection and before accumulation, :meth:`process` builds a
     :class:`TemporalState` (per signal: the reprojected history illumination, moments and
     length, the current demodulated illumination and its mode) and calls
-    :meth:`_before_accumulation` with it (today: the optional history clamp). Accumulation
+    :meth:`_before_accumulation` with it (history clamp, anti-lag, firefly spreading). Accumulation
     derives each signal's blend factor from that signal's own history length,
     ``alpha = max(alpha, 1/h)`` with ``h = min(cap, h_prev + 1)``, so an anti-lag stage only
     needs to lower ``history_length[s]`` per pixel (and may adjust the history itself).
@@ -392,6 +396,7 @@ class Denoiser:
             shortened = self._before_accumulation(temporal)
             if p.antilag:
                 counts["antilag"] = shortened
+            counts.update(temporal.counts)
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
             history_length.fill(0.0)
@@ -763,7 +768,25 @@ class Denoiser:
 
     def _before_accumulation(self, temporal: TemporalState) -> int:
         """Adjust the reprojected history before it is blended: the optional history clamp,
-        then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
+        then anti-lag; then spread the current frame's fireflies (``filters.fireflies``)
+        against the history anti-lag left. Returns how many (signal, pixel) histories
+        anti-lag shortened."""
+        shortened = self._clamp_and_antilag(temporal)
+        p = self.params
+        if p.spread_fireflies > 0.0:
+            work = self._work
+            assert work is not None
+            glossy = temporal.glossy or (False,) * len(temporal.names)
+            spread = spread_fireflies(
+                temporal.current, temporal.history_moments, temporal.mode, temporal.depth,
+                tuple(not g for g in glossy), p.spread_fireflies, temporal.luminance_weights,
+                work["firefly_keep"])
+            for name, count in zip(temporal.names, spread, strict=True):
+                temporal.counts[f"fireflies_spread.{name}"] = count
+        return shortened
+
+    def _clamp_and_antilag(self, temporal: TemporalState) -> int:
+        """The optional history clamp, then anti-lag; anti-lag's count."""
         p = self.params
         glossy_k = p.glossy_history_clamp or p.history_clamp
         ks = [glossy_k if glossy else p.history_clamp

@@ -137,6 +137,12 @@ class SVGFParams:
         "Clamp input luminance to mean + k*sigma of the 8 neighbours before accumulation"
         " (0 = off).",
     )
+    spread_fireflies: float = _p(
+        0.0,
+        "Before accumulation, a sample above both its history's m1 + k*sigma and 4x its"
+        " second-brightest same-mode neighbour is bounded there and its excess shared over the"
+        " same surface in the 9x9 around it (energy kept; glossy signals excepted; 0 = off).",
+    )
     history_clamp: float = _p(
         0.0,
         "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame,"
@@ -166,12 +172,13 @@ PRESETS: dict[str, SVGFParams] = {
     # The recommended set (measured in docs/results.md): the paper's filter plus anti-lag, a
     # loose history clamp against outliers (k = 3), the glossy rules, a tighter luminance
     # stop for the short-history spatial variance (0.5: fireflies and lit/shadowed
-    # neighbours no longer inflate it into an over-blur), despike (ratio 2),
+    # neighbours no longer inflate it into an over-blur), firefly spreading (k = 10),
+    # despike (ratio 2),
     # demodulation by the G-buffer albedo only where it is at least 0.1, and an a-trous
     # reach that grows with the image (atrous_iterations_for).
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
                           glossy_sigma_luminance=1.0, spatial_variance_sigma_luminance=0.5,
-                          despike=2.0, guide_albedo_floor=0.1,
+                          despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
                           atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(

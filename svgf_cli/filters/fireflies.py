@@ -1,0 +1,197 @@
+"""Firefly spreading: a sample that is an outlier in time *and* in space hands its excess
+energy to the surface around it, before it enters the temporal average.
+
+A 1-spp firefly (a diffuse path that found a caustic or a small bright reflection) carries
+energy the converged image spreads over many pixels; arriving in one pixel it is hundreds
+of times brighter than its surroundings. Accumulated at weight alpha it stays several
+frames, and the first a-trous iterations, which accept it along an edge, smear it into a
+short bright streak that the output despike reads as a line (the tracer's glossy scene: 7x
+the converged image's local maximum). Clamping the sample removes the spike but also its
+energy: on the same scene relMSE rose 11 %, since that energy is part of the answer.
+
+So the sample is bounded and the excess is *redistributed*, not dropped: per signal, a
+surface sample ``p`` in the demodulated mode with luminance ``l(p)`` above
+
+    L(p) = max(m1(p) + k * sqrt(max(m2(p) - m1(p)^2, 0)), ratio * M(p))
+
+(``m1``, ``m2`` the reprojected history's luminance moments after anti-lag, ``M`` the
+second-largest current luminance among its 8 same-mode surface neighbours: outlier against
+its own past *and* against its neighbours; a lighting change raises the neighbours too) is
+scaled down to ``L(p)`` (hue kept), and its excess rgb ``c(p) (1 - L(p) / l(p))`` is shared
+equally among the surface pixels ``q`` of the ``(2 RADIUS + 1)^2`` window around ``p``
+(``p`` included) in the same mode with ``|z(q) - z(p)| <= DEPTH_TOLERANCE z(p)``. The
+signal's energy over the image is unchanged; only where it sits moves by a few pixels, which
+the converged image also spreads it over. Glossy signals are left alone: a small bright
+highlight that moves is the signal there, not an outlier.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import FASTMATH
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_ONE = F32(1.0)
+# The luminance of a background pixel, never a neighbour. Finite: FASTMATH assumes no
+# infinities, so a comparison with -inf may be folded away.
+_BACKGROUND = F32(-np.finfo(np.float32).max)
+# The window the excess is shared over: 9x9, wide enough that a firefly hundreds of times
+# its surroundings ends below 3x their level (7x7 left the glossy scene at 3.4x).
+RADIUS = 4
+# A receiving pixel's depth within this fraction of the firefly's: the same surface.
+DEPTH_TOLERANCE = F32(0.1)
+# How many times its second-brightest same-mode neighbour a sample must be.
+NEIGHBOUR_RATIO = F32(4.0)
+
+
+@njit(
+    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
+)
+def _bounds(
+    illumination: np.ndarray,
+    moments: np.ndarray,
+    mode: np.ndarray,
+    depth: np.ndarray,
+    bit: np.uint16,
+    k: np.float32,
+    ratio: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    keep: np.ndarray,
+    flagged: np.ndarray,
+) -> None:
+    """One signal: ``keep[y, x] = L(p) / l(p)`` where ``p`` is a firefly, else 1; the
+    number of fireflies per row in ``flagged``.
+
+    The temporal test comes first and is cheap; only the few samples that pass it look at
+    their neighbours (every sample does on a frame without history)."""
+    height, width = depth.shape
+    wr, wg, wb = luminance_weights
+    for y in prange(height):
+        d = depth[y]
+        r, g, b = illumination[0, y], illumination[1, y], illumination[2, y]
+        m1 = moments[0, y]
+        m2 = moments[1, y]
+        own = mode[y]
+        out = keep[y]
+        # How far each sample is above its temporal bound (<= 0: not a firefly).
+        for x in range(width):
+            lum = wr * r[x] + wg * g[x] + wb * b[x]
+            margin = lum - (m1[x] + k * np.sqrt(max(m2[x] - m1[x] * m1[x], _ZERO)))
+            out[x] = margin if d[x] > _ZERO and (own[x] & bit) == 0 else -_ONE
+        count = 0
+        for x in range(width):
+            margin = out[x]
+            out[x] = _ONE
+            if margin <= _ZERO:
+                continue
+            first = _BACKGROUND
+            second = _BACKGROUND
+            for yy in range(max(y - 1, 0), min(y + 2, height)):
+                for xx in range(max(x - 1, 0), min(x + 2, width)):
+                    if (yy == y and xx == x) or depth[yy, xx] <= _ZERO or (
+                            mode[yy, xx] & bit) != 0:
+                        continue
+                    value = (wr * illumination[0, yy, xx] + wg * illumination[1, yy, xx]
+                             + wb * illumination[2, yy, xx])
+                    second = max(second, min(first, value))
+                    first = max(first, value)
+            # A lone same-mode neighbour is the only reference there is (as in despike).
+            reference = second if second > _BACKGROUND else first
+            lum = wr * r[x] + wg * g[x] + wb * b[x]
+            bound = max(lum - margin, ratio * max(reference, _ZERO))
+            if lum > bound:
+                out[x] = bound / lum
+                count += 1
+        flagged[y] = count
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
+def _receives(zq: np.float32, z: np.float32, mode_q: np.uint16, bit: np.uint16) -> bool:
+    """Whether a pixel at depth ``zq`` in mode ``mode_q`` shares a firefly at depth ``z``."""
+    return zq > _ZERO and (mode_q & bit) == 0 and abs(zq - z) <= DEPTH_TOLERANCE * z
+
+
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _share(
+    illumination: np.ndarray,
+    mode: np.ndarray,
+    depth: np.ndarray,
+    bit: np.uint16,
+    keep: np.ndarray,
+    flagged: np.ndarray,
+) -> int:
+    """One signal: bound every firefly, then share each one's excess over its window.
+    Serial, in row order (fireflies are rare), so the sums are the same on every run; every
+    excess is taken before any is shared, so the result does not depend on that order."""
+    height, width = depth.shape
+    total = 0
+    for y in range(height):
+        total += flagged[y]
+    ys = np.empty(total, dtype=np.int64)
+    xs = np.empty(total, dtype=np.int64)
+    excess = np.empty((total, 3), dtype=F32)
+    i = 0
+    for y in range(height):
+        if flagged[y] == 0:
+            continue
+        for x in range(width):
+            if keep[y, x] < _ONE:
+                ys[i] = y
+                xs[i] = x
+                for c in range(3):
+                    value = illumination[c, y, x]
+                    kept = value * keep[y, x]
+                    excess[i, c] = value - kept
+                    illumination[c, y, x] = kept
+                i += 1
+    for i in range(total):
+        y, x = ys[i], xs[i]
+        z = depth[y, x]
+        y0, y1 = max(y - RADIUS, 0), min(y + RADIUS + 1, height)
+        x0, x1 = max(x - RADIUS, 0), min(x + RADIUS + 1, width)
+        receivers = 0
+        for yy in range(y0, y1):
+            for xx in range(x0, x1):
+                zq = depth[yy, xx]
+                if _receives(zq, z, mode[yy, xx], bit):
+                    receivers += 1
+        share = _ONE / F32(receivers)  # p itself always receives
+        for yy in range(y0, y1):
+            for xx in range(x0, x1):
+                zq = depth[yy, xx]
+                if _receives(zq, z, mode[yy, xx], bit):
+                    for c in range(3):
+                        illumination[c, yy, xx] += excess[i, c] * share
+    return total
+
+
+def spread_fireflies(
+    illumination: np.ndarray,
+    moments: np.ndarray,
+    mode: np.ndarray,
+    depth: np.ndarray,
+    spread: tuple[bool, ...],
+    k: float,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    keep: np.ndarray,
+) -> list[int]:
+    """In place on the current samples ``illumination`` (S, 3, H, W): per signal ``s`` with
+    ``spread[s]``, bound each firefly to ``L(p)`` and share its excess over its window (the
+    module docstring's rule); ``moments`` (S, 2, H, W) are the reprojected history's,
+    ``mode`` the (H, W) uint16 modes (bit ``s`` set: radiance). ``keep`` is an (H, W)
+    float32 scratch plane. Returns the number of fireflies per signal."""
+    height = depth.shape[0]
+    flagged = np.zeros(height, dtype=np.int64)
+    counts = []
+    for s, wanted in enumerate(spread):
+        if not wanted:
+            counts.append(0)
+            continue
+        bit = np.uint16(1 << s)
+        _bounds(illumination[s], moments[s], mode, depth, bit, F32(k), NEIGHBOUR_RATIO,
+                luminance_weights, keep, flagged)
+        counts.append(int(_share(illumination[s], mode, depth, bit, keep, flagged)))
+    return counts
