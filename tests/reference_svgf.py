@@ -1019,8 +1019,6 @@ class TemporalState:
     depth: np.ndarray
     weights: tuple[float, float, float]
     glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
-    counts: dict[str, int] = field(default_factory=dict)  # what the hook's stages counted
-    names: tuple[str, ...] = ()
 
 
 def antilag_gradient_change(mask, previous, current, radius, sigma):
@@ -1140,8 +1138,7 @@ class ReferenceDenoiser:
     def before_accumulation(self, temporal: TemporalState) -> int | None:
         """Adjust the reprojected history before it is blended: the optional history clamp,
         then anti-lag. Lowering ``temporal.history.history_length[s]`` raises signal ``s``'s
-        blend factor there. Then the current frame's fireflies are spread (in place, counted
-        in ``temporal.counts``). Returns anti-lag's count (None when it is off)."""
+        blend factor there. Returns anti-lag's count (None when it is off)."""
         p = self.params
         reprojected = temporal.history
         # The history clamp, one signal at a time: glossy signals at their own k.
@@ -1161,13 +1158,6 @@ class ReferenceDenoiser:
                 temporal.depth, temporal.weights, p.antilag_radius, p.antilag_sigma,
                 p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha)
             reprojected.history_length = length
-        if p.spread_fireflies > 0.0:
-            spread, found = spread_fireflies(
-                temporal.current, temporal.radiance_mode, reprojected.moments, temporal.depth,
-                [not g for g in glossy], p.spread_fireflies, temporal.weights)
-            temporal.current[...] = spread
-            for name, count in zip(temporal.names, found, strict=True):
-                temporal.counts[f"fireflies_spread.{name}"] = count
         return shortened
 
     def process(self, frame: Frame) -> ReferenceOutput:
@@ -1198,12 +1188,17 @@ class ReferenceDenoiser:
             reprojected = reproject(clean.motion, geom, clean.mesh_id, radiance_mode,
                                     self.history, p.depth_tolerance, p.depth_slack,
                                     p.normal_tolerance)
-            temporal = TemporalState(illumination, radiance_mode, reprojected, geom.depth,
-                                     clean.weights, clean.glossy, names=tuple(clean.names))
-            shortened = self.before_accumulation(temporal)
+            shortened = self.before_accumulation(TemporalState(
+                illumination, radiance_mode, reprojected, geom.depth, clean.weights,
+                clean.glossy))
             if shortened is not None:
                 counts["antilag"] = shortened
-            counts.update(temporal.counts)
+            if p.spread_fireflies > 0.0:  # against the history anti-lag left
+                illumination, found = spread_fireflies(
+                    illumination, radiance_mode, reprojected.moments, geom.depth,
+                    [not g for g in clean.glossy], p.spread_fireflies, clean.weights)
+                counts.update({f"fireflies_spread.{name}": count
+                               for name, count in zip(clean.names, found, strict=True)})
             self.last_reprojected = reprojected
         else:
             reprojected = Reprojected(np.zeros(shape), np.zeros((shape[0], 2, *shape[2:])),

@@ -5,7 +5,7 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
 1. temporal accumulation (``_accumulate_temporally``): input values (``values``) -> geometry
    gradients -> demodulate every signal, with its per-pixel mode (+ optional firefly clamp)
    -> reproject every signal's history -> the pre-accumulation hook (optional history
-   clamp, anti-lag, firefly spreading) -> accumulate;
+   clamp, anti-lag) -> firefly spreading -> accumulate;
 2. spatial filtering (``_filter_spatially``): variance -> a-trous iterations over groups
    of two or three signals; the ``feedback_iteration`` output becomes next frame's colour
    history (stored by ``_store_history``, with the history guard);
@@ -167,8 +167,6 @@ class TemporalState:
     glossy: tuple[bool, ...] = ()
     # Where anti-lag may keep its statistics (None: a workspace plane of its own).
     antilag_scratch: np.ndarray | None = None
-    # What the hook's stages counted (fireflies spread per signal), for the frame's counts.
-    counts: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -246,7 +244,8 @@ class Denoiser:
     **Anti-lag hook.** After reprojection and before accumulation, :meth:`process` builds a
     :class:`TemporalState` (per signal: the reprojected history illumination, moments and
     length, the current demodulated illumination and its mode) and calls
-    :meth:`_before_accumulation` with it (history clamp, anti-lag, firefly spreading). Accumulation
+    :meth:`_before_accumulation` with it (history clamp, anti-lag), then firefly spreading
+    (:meth:`_spread_fireflies`). Accumulation
     derives each signal's blend factor from that signal's own history length,
     ``alpha = max(alpha, 1/h)`` with ``h = min(cap, h_prev + 1)``, so an anti-lag stage only
     needs to lower ``history_length[s]`` per pixel (and may adjust the history itself).
@@ -396,7 +395,8 @@ class Denoiser:
             shortened = self._before_accumulation(temporal)
             if p.antilag:
                 counts["antilag"] = shortened
-            counts.update(temporal.counts)
+            if p.spread_fireflies > 0.0:
+                counts.update(self._spread_fireflies(temporal))
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
             history_length.fill(0.0)
@@ -768,25 +768,7 @@ class Denoiser:
 
     def _before_accumulation(self, temporal: TemporalState) -> int:
         """Adjust the reprojected history before it is blended: the optional history clamp,
-        then anti-lag; then spread the current frame's fireflies (``filters.fireflies``)
-        against the history anti-lag left. Returns how many (signal, pixel) histories
-        anti-lag shortened."""
-        shortened = self._clamp_and_antilag(temporal)
-        p = self.params
-        if p.spread_fireflies > 0.0:
-            work = self._work
-            assert work is not None
-            glossy = temporal.glossy or (False,) * len(temporal.names)
-            spread = spread_fireflies(
-                temporal.current, temporal.history_moments, temporal.mode, temporal.depth,
-                tuple(not g for g in glossy), p.spread_fireflies, temporal.luminance_weights,
-                work["firefly_keep"])
-            for name, count in zip(temporal.names, spread, strict=True):
-                temporal.counts[f"fireflies_spread.{name}"] = count
-        return shortened
-
-    def _clamp_and_antilag(self, temporal: TemporalState) -> int:
-        """The optional history clamp, then anti-lag; anti-lag's count."""
+        then anti-lag. Returns how many (signal, pixel) histories anti-lag shortened."""
         p = self.params
         glossy_k = p.glossy_history_clamp or p.history_clamp
         ks = [glossy_k if glossy else p.history_clamp
@@ -808,6 +790,21 @@ class Denoiser:
             p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
             scratch, work["antilag_lambda"], temporal.gradients,
         )
+
+    def _spread_fireflies(self, temporal: TemporalState) -> dict[str, int]:
+        """Bound the current samples that are fireflies against the history anti-lag left
+        and share their excess over their surface (``filters.fireflies``); glossy signals
+        are left alone. Not on a frame without history: a single frame cannot tell a small
+        highlight in a combined colour from a firefly. Returns the count per signal."""
+        work = self._work
+        assert work is not None
+        glossy = temporal.glossy or (False,) * len(temporal.names)
+        spread = spread_fireflies(
+            temporal.current, temporal.history_moments, temporal.mode, temporal.depth,
+            tuple(not g for g in glossy), self.params.spread_fireflies,
+            temporal.luminance_weights, work["firefly_keep"])
+        return {f"fireflies_spread.{name}": count
+                for name, count in zip(temporal.names, spread, strict=True)}
 
     def _compose(
         self, frame: Frame, filtered: np.ndarray, variance: np.ndarray,

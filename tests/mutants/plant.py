@@ -304,8 +304,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "fireflies-spread-glossy", "filters",
         "firefly spreading also runs on glossy signals (a moving highlight is spread)",
         "svgf_cli/filters/denoiser.py",
-        (("                tuple(not g for g in glossy), p.spread_fireflies,",
-          "                tuple(True for g in glossy), p.spread_fireflies,"),),
+        (("            tuple(not g for g in glossy), self.params.spread_fireflies,",
+          "            tuple(True for g in glossy), self.params.spread_fireflies,"),),
         FILTER_TESTS,
     ),
     Mutant(
