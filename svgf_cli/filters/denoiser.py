@@ -125,8 +125,9 @@ class _Workspace:
             "guide_luminance": ((s, h, w), F32),
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
+            # despike's luminance scratch, and firefly spreading's before it (the two never
+            # overlap: one runs before the accumulation, the other after the a-trous)
             "despike_luminance": ((h, w), F32),
-            "firefly_keep": ((h, w), F32),
             "antilag_scratch": (scratch_shape(s, h, w), F32),
             "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
@@ -802,7 +803,7 @@ class Denoiser:
         spread = spread_fireflies(
             temporal.current, temporal.history_moments, temporal.mode, temporal.depth,
             tuple(not g for g in glossy), self.params.spread_fireflies,
-            temporal.luminance_weights, work["firefly_keep"])
+            temporal.luminance_weights, work["despike_luminance"])
         return {f"fireflies_spread.{name}": count
                 for name, count in zip(temporal.names, spread, strict=True)}
 
