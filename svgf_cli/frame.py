@@ -81,6 +81,10 @@ class Signal:
     over a dark diffuse base that albedo stays dark where glossy light arrives, so dividing
     by it amplifies that light; such signals get a higher demodulation floor
     (``SVGFParams.guide_albedo_floor``).
+    ``mixed`` marks a signal that holds direct and indirect light together (a combined colour,
+    or one lobe's whole light): its variance is mostly the indirect light's, far above the
+    direct light's, so against it the spatial filter would blur the direct light's shadows
+    and shapes; it stops at smaller luminance differences (``SVGFParams.mixed_sigma_luminance``).
     """
 
     name: str
@@ -89,6 +93,7 @@ class Signal:
     gradient: TemporalGradient | None = None
     glossy: bool = False
     guide_albedo: bool = False
+    mixed: bool = False
 
 
 @dataclass(kw_only=True)
@@ -148,7 +153,8 @@ class Frame:
         """One combined signal named ``color``, demodulated by ``albedo``. ``emission``
         (when given) is part of ``color``; it is taken out and added back after filtering."""
         return cls(
-            signals=[Signal("color", _without(color, emission), albedo, guide_albedo=True)],
+            signals=[Signal("color", _without(color, emission), albedo, guide_albedo=True,
+                            mixed=True)],
             albedo=albedo, normal=normal, depth=depth, motion=motion, mesh_id=mesh_id,
             emission=emission, luminance_weights=luminance_weights,
         )

@@ -158,6 +158,7 @@ class CleanFrame:
     counts: dict[str, int] = field(default_factory=dict)
     glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
     guide: list[bool] = field(default_factory=list)  # per signal: Signal.guide_albedo
+    mixed: list[bool] = field(default_factory=list)  # per signal: Signal.mixed
 
 
 def _count(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
@@ -202,6 +203,7 @@ def apply_value_policy(frame: Frame) -> CleanFrame:
         weights=(weights[0], weights[1], weights[2]), counts=counts,
         glossy=[s.glossy for s in frame.signals],
         guide=[s.guide_albedo for s in frame.signals],
+        mixed=[s.mixed for s in frame.signals],
     )
 
 
@@ -1235,8 +1237,11 @@ class ReferenceDenoiser:
         feedback = min(p.feedback_iteration, iterations - 1)
         colour_history = colour
         for iteration, step in enumerate(atrous_steps(iterations)):
+            # Glossy signals stop at their own sigma_l; then those mixing direct and indirect.
             sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
-                      else p.sigma_luminance for glossy in clean.glossy]
+                      else (p.mixed_sigma_luminance or p.sigma_luminance) if mixed
+                      else p.sigma_luminance
+                      for glossy, mixed in zip(clean.glossy, clean.mixed, strict=True)]
             guides = luminance_stop_guides(colour, variance, geom.depth, sigmas,
                                            clean.weights)
             colour, variance = atrous_iteration(colour, variance, guides[0], radiance_mode,
@@ -1466,7 +1471,7 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
             motion = np.full((2, *frame.depth.shape), NO_MOTION)
         reversed_frame = Frame(
             signals=[Signal(s.name, s.radiance, s.albedo, glossy=s.glossy,
-                            guide_albedo=s.guide_albedo)
+                            guide_albedo=s.guide_albedo, mixed=s.mixed)
                      for s in frame.signals],
             normal=frame.normal, depth=frame.depth,
             motion=np.ascontiguousarray(motion, dtype=np.float32), mesh_id=frame.mesh_id,

@@ -96,6 +96,8 @@ def test_cycles_sets_build_their_signals_exactly_from_the_light_passes(frame: Pa
     np.testing.assert_array_equal(lobes.signal("specular").albedo,
                                   rgb(layers, "GlossCol") + rgb(layers, "TransCol"))
     assert lobes.signal("specular").glossy and not lobes.signal("diffuse").glossy
+    # Each lobe's whole light, direct and indirect together (the mixed signals' sigma_l).
+    assert lobes.signal("specular").mixed and lobes.signal("diffuse").mixed
     np.testing.assert_array_equal(lobes.albedo, rgb(layers, "Denoising Albedo"))
 
 
@@ -168,6 +170,11 @@ def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> Non
     assert [s.guide_albedo for s in combined.frame.signals] == [True]
     paired = read_frame(TESTDATA / "seq" / "in.0001.exr", build_mapping("svgf")).frame
     assert [s.guide_albedo for s in paired.signals] == [True, True]
+    # Only a signal holding direct and indirect light together is mixed.
+    assert [s.mixed for s in combined.frame.signals] == [True]
+    assert not any(s.mixed for s in paired.signals)
+    split = {s.name: s.mixed for s in cycles.frame.signals}
+    assert split == {"diffuse_direct": False, "diffuse_indirect": False, "specular": True}
     # The tracer's lobe passes where it wrote them, else its own direct and indirect layers.
     traced = read_frame(GLOSSY / "in.0002.exr", build_mapping("svgf"))
     assert traced.plan.set == "lobes-split" and traced.plan.checked

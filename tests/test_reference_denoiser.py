@@ -63,6 +63,8 @@ CASES: dict[str, tuple[SVGFParams, dict[str, Any], int | None]] = {
                                            {**THREE, "light_step": (4, 0.4)}, None),
     "default+extras, moving edge": (resolve_params("default", **EXTRAS),
                                     {"moving_edge": True}, None),
+    # one combined colour: a mixed signal, at mixed_sigma_luminance
+    "default, combined": (resolve_params("default"), {"layout": "combined"}, None),
 }
 WORST: dict[str, float] = {}
 

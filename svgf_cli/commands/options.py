@@ -87,6 +87,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "antilag_tolerance": click.FloatRange(min=0.0),
     "glossy_history_clamp": click.FloatRange(min=0.0),
     "glossy_sigma_luminance": click.FloatRange(min=0.0),
+    "mixed_sigma_luminance": click.FloatRange(min=0.0),
 }
 
 FILTER_SECTION = "Filter parameters (each overrides its --preset value)"

@@ -468,9 +468,7 @@ class Denoiser:
         guide_luminance = run.plane("guide_luminance")
         guide_inverse_scale = run.plane("guide_inverse_scale")
         groups = signal_groups(len(run.names))
-        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance
-        sigmas = [glossy_sigma if signal.glossy else p.sigma_luminance
-                  for signal in run.frame.signals]
+        sigmas = [signal_sigma_luminance(p, signal) for signal in run.frame.signals]
         for iteration in range(iterations):
             out_name = scratch(filtered_name_now, history_name if feeds_back else "")
             if iteration == feedback:
@@ -941,6 +939,16 @@ def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
     counts[kind] = counts.get(kind, 0) + value
     if value:
         counts[f"{kind}.{plane}"] = counts.get(f"{kind}.{plane}", 0) + value
+
+
+def signal_sigma_luminance(params: SVGFParams, signal: Signal) -> float:
+    """The a-trous luminance stop of ``signal``: glossy signals' own, else mixed signals'
+    own (direct and indirect light together), else ``sigma_luminance``."""
+    if signal.glossy:
+        return params.glossy_sigma_luminance or params.sigma_luminance
+    if signal.mixed:
+        return params.mixed_sigma_luminance or params.sigma_luminance
+    return params.sigma_luminance
 
 
 def signal_groups(num_signals: int) -> list[slice]:

@@ -104,6 +104,13 @@ class SVGFParams:
         "sigma_l of glossy signals: reflections carry detail the spatial filter must keep"
         " (0 = the same as sigma_luminance).",
     )
+    mixed_sigma_luminance: float = _p(
+        0.0,
+        "sigma_l of signals holding direct and indirect light together (a combined colour, one"
+        " lobe's whole light): their variance is the indirect light's, which would blur the"
+        " direct light's detail (0 = the same as sigma_luminance; glossy signals keep"
+        " glossy_sigma_luminance).",
+    )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
         5,
@@ -177,7 +184,8 @@ PRESETS: dict[str, SVGFParams] = {
     # demodulation by the G-buffer albedo only where it is at least 0.1, and an a-trous
     # reach that grows with the image (atrous_iterations_for).
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
-                          glossy_sigma_luminance=1.0, spatial_variance_sigma_luminance=0.5,
+                          glossy_sigma_luminance=1.0, mixed_sigma_luminance=2.5,
+                          spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
                           atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).

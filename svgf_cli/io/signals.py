@@ -96,7 +96,8 @@ class SignalRecipe:
     as a reflectance when ``albedo_cap``; none: white, i.e. filtered as radiance);
     ``gradient`` names the gradient samples summed into its `TemporalGradient` (empty:
     none); ``guide_albedo``: ``albedo`` is the G-buffer albedo AOV, not this light's own
-    reflectance (``Signal.guide_albedo``)."""
+    reflectance (``Signal.guide_albedo``); ``mixed``: direct and indirect light together
+    (``Signal.mixed``)."""
 
     name: str
     terms: tuple[Term, ...]
@@ -106,6 +107,7 @@ class SignalRecipe:
     glossy: bool = False
     albedo_cap: bool = True
     guide_albedo: bool = False
+    mixed: bool = False
 
 
 # Lobes whose light follows reflections or refractions rather than the surface
@@ -326,7 +328,7 @@ def _recipes(
         own = colour(lobe)
         light = tuple(f"{lobe}_{part}" for part in parts)
         return SignalRecipe(signal or lobe, (Term(light, times(lobe)),), (own,) if own else (),
-                            glossy=lobe in GLOSSY_LOBES)
+                            glossy=lobe in GLOSSY_LOBES, mixed=len(parts) > 1)
 
     def per_lobe(lobe_names: Sequence[str]) -> list[SignalRecipe]:
         """One signal per lobe, the glossy lobes merged into one when both are present."""
@@ -342,7 +344,8 @@ def _recipes(
                 parts = [lobe_signal(one) for one in specular]
                 signals.append(SignalRecipe(
                     SPECULAR, tuple(t for p in parts for t in p.terms),
-                    tuple(a for p in parts for a in p.albedo), glossy=True, albedo_cap=False))
+                    tuple(a for p in parts for a in p.albedo), glossy=True, albedo_cap=False,
+                    mixed=True))
         return signals
 
     if name == "lobes":
@@ -370,7 +373,7 @@ def _recipes(
             for part in ("direct", "indirect")
         ), True
     return (SignalRecipe("color", (Term(("color",)),), ("albedo",), minus_emission=True,
-                         guide_albedo=True),), False
+                         guide_albedo=True, mixed=True),), False
 
 
 def plan_signals(
@@ -526,7 +529,7 @@ def compose_signals(
                 np.minimum(albedo, np.float32(1.0), out=albedo)
         signals.append(Signal(recipe.name, np.ascontiguousarray(radiance), albedo,
                               _gradient(plan, recipe, channel), glossy=recipe.glossy,
-                              guide_albedo=recipe.guide_albedo))
+                              guide_albedo=recipe.guide_albedo, mixed=recipe.mixed))
     return signals, emission
 
 

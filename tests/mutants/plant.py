@@ -293,6 +293,21 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "mixed-sigma-ignored", "filters",
+        "a signal mixing direct and indirect light stops at the diffuse sigma_l",
+        "svgf_cli/filters/denoiser.py",
+        (("    if signal.mixed:\n", "    if False:\n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "combined-not-mixed", "io",
+        "the combined colour is not marked as mixing direct and indirect light",
+        "svgf_cli/io/signals.py",
+        (("                         guide_albedo=True, mixed=True),), False",
+          "                         guide_albedo=True),), False"),),
+        ("tests/test_io_signals.py", *IO_TESTS),
+    ),
+    Mutant(
         "fireflies-drop-excess", "filters",
         "firefly spreading clamps the sample and drops its excess (energy lost)",
         "svgf_cli/filters/fireflies.py",
