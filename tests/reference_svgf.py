@@ -1115,6 +1115,14 @@ class ReferenceDenoiser:
         counts = clean.counts
         geom = geometry(clean.depth, clean.normal)
         surface = geom.surface
+        if p.glossy_emitter_radiance:
+            # A glossy signal is radiance where the G-buffer albedo is no reflectance (a
+            # specular path reached a light): its colour becomes that albedo there.
+            guide = clean_albedo(frame.albedo)
+            emitter = guide.max(axis=0) > MAX_REFLECTANCE
+            for index, glossy in enumerate(clean.glossy):
+                if glossy:
+                    clean.albedo[index] = np.where(emitter, guide, clean.albedo[index])
         planes = []
         for index, name in enumerate(clean.names):
             illumination, mode, clamped = demodulate(clean.radiance[index],

@@ -104,8 +104,8 @@ class _Workspace:
 
     def shape(self, name: str) -> tuple[tuple[int, ...], type]:
         h, w, s = self.height, self.width, self.num_signals
-        if name in _ILLUMINATION_SCRATCH:
-            return (s, 3, h, w), F32
+        if name in _ILLUMINATION_SCRATCH or name.startswith("emitter_colour."):
+            return ((s, 3, h, w) if name in _ILLUMINATION_SCRATCH else (3, h, w)), F32
         shapes: dict[str, tuple[tuple[int, ...], type]] = {
             "normal": ((3, h, w), F32),
             "ddx": ((h, w), F32),
@@ -358,6 +358,8 @@ class Denoiser:
         illumination_name = "demodulated"
         illumination = work[illumination_name]
         mode = work["mode"]
+        if p.glossy_emitter_radiance:
+            frame = run.frame = self._mark_reflected_lights(frame, work)
         self._demodulate(frame.signals, depth, illumination, mode, counts)
         if p.firefly_clamp > 0.0:
             firefly_clamp(illumination, depth, F32(p.firefly_clamp), run.weights,
@@ -760,6 +762,24 @@ class Denoiser:
             counts[f"clamped.{name}"] = int(total[modulate.CLAMPED])
             counts[f"radiance_mode.{name}"] = int(total[modulate.RADIANCE_MODE])
             counts[f"implausible_albedo.{name}"] = int(total[modulate.IMPLAUSIBLE])
+
+    def _mark_reflected_lights(self, frame: Frame, work: _Workspace) -> Frame:
+        """The frame with each glossy signal's demodulation colour replaced by the G-buffer
+        albedo where that is no reflectance (``modulate.emitter_colour``): a specular path
+        reached a light there, and the signal is filtered as radiance. Written into
+        workspace planes (the caller's planes are never modified); demodulation and
+        remodulation both read the replaced colour, so the modes agree."""
+        if not any(signal.glossy for signal in frame.signals):
+            return frame
+        signals = []
+        for index, signal in enumerate(frame.signals):
+            if signal.glossy:
+                colour = work[f"emitter_colour.{index}"]
+                modulate.emitter_colour(signal.albedo, frame.albedo, F32(MAX_REFLECTANCE),
+                                        colour)
+                signal = dataclasses.replace(signal, albedo=colour)
+            signals.append(signal)
+        return dataclasses.replace(frame, signals=signals)
 
     def _before_accumulation(self, temporal: TemporalState) -> int:
         """Adjust the reprojected history before it is blended: the optional history clamp,

@@ -228,3 +228,34 @@ def remodulate_add(
             o_b[x] += vb
         counts[y, 0] = nonfinite
         counts[y, 1] = extreme
+
+
+@njit(parallel=True, **_JIT)
+def emitter_colour(
+    albedo: np.ndarray, guide: np.ndarray, max_reflectance: np.float32, out: np.ndarray,
+) -> None:
+    """A glossy signal's demodulation colour with reflected lights marked radiance:
+    ``out = guide`` where the G-buffer albedo is no reflectance (``max(clean(guide)) >
+    max_reflectance``, so :func:`effective_albedo` puts the pixel in radiance mode), else
+    ``out = albedo``.
+
+    Why: Cycles' ``Denoising Albedo`` holds the light's emission (up to ~1000) where a
+    specular path from the pixel reached a light. Such a sample is a reflected image of the
+    emitter, up to 1000x its neighbours that missed it; demodulated by the glossy colour it
+    would be averaged with them (a sharp highlight blurred into a dim blob). In radiance
+    mode it is filtered only with the pixels that also see the light, as the combined
+    signal does. A renderer whose albedo AOV stays a reflectance changes nothing.
+    """
+    height, width = albedo.shape[1], albedo.shape[2]
+    for y in prange(height):
+        g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
+        a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
+        o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
+        for x in range(width):
+            gr = clean_albedo(g_r[x])
+            gg = clean_albedo(g_g[x])
+            gb = clean_albedo(g_b[x])
+            emitter = max(gr, max(gg, gb)) > max_reflectance
+            o_r[x] = gr if emitter else a_r[x]
+            o_g[x] = gg if emitter else a_g[x]
+            o_b[x] = gb if emitter else a_b[x]
