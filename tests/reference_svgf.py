@@ -344,6 +344,19 @@ def effective_albedo(albedo: np.ndarray, black: float,
     return ~demodulated[..., 0, :, :], divisor
 
 
+def reflected_lights(guide: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the (cleaned) G-buffer albedo is above ``MAX_REFLECTANCE`` at the pixel
+    and at one or more of its 8 neighbours (``modulate.emitter_colour``)."""
+    lit = np.pad(guide.max(axis=0) > MAX_REFLECTANCE, 1)
+    height, width = guide.shape[1:]
+    neighbours = np.zeros((height, width), dtype=np.int64)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                neighbours += lit[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
+    return lit[1:-1, 1:-1] & (neighbours > 0)
+
+
 def demodulation_floor(params: SVGFParams, clean: CleanFrame, index: int) -> float:
     """The ``black`` of :func:`effective_albedo` for signal ``index``: ``albedo_epsilon``,
     raised to ``guide_albedo_floor`` for a signal demodulated by the G-buffer albedo."""
@@ -1117,9 +1130,10 @@ class ReferenceDenoiser:
         surface = geom.surface
         if p.glossy_emitter_radiance:
             # A glossy signal is radiance where the G-buffer albedo is no reflectance (a
-            # specular path reached a light): its colour becomes that albedo there.
+            # specular path reached a light) at the pixel and at one of its 8 neighbours:
+            # its colour becomes that albedo there.
             guide = clean_albedo(frame.albedo)
-            emitter = guide.max(axis=0) > MAX_REFLECTANCE
+            emitter = reflected_lights(guide)
             for index, glossy in enumerate(clean.glossy):
                 if glossy:
                     clean.albedo[index] = np.where(emitter, guide, clean.albedo[index])

@@ -96,10 +96,19 @@ def test_read_only_frames_keep_their_glossy_signals():
 
 
 def _emitter_colour_reference(albedo: np.ndarray, guide: np.ndarray) -> np.ndarray:
-    """Float64: the G-buffer albedo (non-finite channels 0) where its brightest channel is
-    above 1.05, else the signal's own colour."""
+    """Float64, pixel by pixel: the G-buffer albedo (non-finite channels 0) where its
+    brightest channel is above 1.05 at the pixel and at one of its 8 neighbours (inside the
+    image), else the signal's own colour."""
     clean = np.where(np.isfinite(guide), guide.astype(np.float64), 0.0)
-    return np.where(clean.max(axis=0) > 1.05, clean, albedo.astype(np.float64))
+    lit = clean.max(axis=0) > 1.05
+    height, width = lit.shape
+    out = albedo.astype(np.float64)
+    for y in range(height):
+        for x in range(width):
+            around = lit[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2]
+            if lit[y, x] and around.sum() > 1:
+                out[:, y, x] = clean[:, y, x]
+    return out
 
 
 def test_emitter_colour_matches_the_float64_reference():
@@ -112,13 +121,18 @@ def test_emitter_colour_matches_the_float64_reference():
     guide[0, 6, 7] = np.nan  # non-finite: 0, the other channels decide
     guide[2, 6, 7] = 30.0
     guide[:, 7, 8] = (np.inf, 0.5, 0.5)  # cleaned to a reflectance
+    guide[:, 0, 0] = guide[:, 0, 1] = 9.0  # a pair in the corner
+    guide[:, 8, 12] = 9.0  # a lone hit in the corner
+    guide[:, 7:9, 11] = guide[:, 7, 12] = 0.5
     out = np.full_like(albedo, -1.0)
     emitter_colour(albedo, guide, F32(1.05), out)
     want = _emitter_colour_reference(albedo, guide)
     np.testing.assert_array_equal(out, want.astype(F32))
-    assert out[1, 2, 3] == guide[1, 2, 3] and out[0, 4, 5] == albedo[0, 4, 5]
-    assert out[0, 6, 7] == 0.0 and out[2, 6, 7] == 30.0
-    assert out[0, 7, 8] == albedo[0, 7, 8]
+    lit = np.isfinite(guide) & (guide > 1.05)
+    assert 0 < np.sum(np.all(out == np.where(np.isfinite(guide), guide, 0), axis=0) & lit.any(0))
+    assert out[0, 6, 7] == 0.0 and out[2, 6, 7] == 30.0  # cleaned (a neighbour is lit)
+    assert out[0, 7, 8] == albedo[0, 7, 8] and out[0, 4, 5] == albedo[0, 4, 5]
+    assert out[0, 0, 1] == 9.0 and out[0, 8, 12] == albedo[0, 8, 12]
 
 
 def _highlight_frame(t: int, marked: bool) -> Frame:

@@ -235,27 +235,41 @@ def emitter_colour(
     albedo: np.ndarray, guide: np.ndarray, max_reflectance: np.float32, out: np.ndarray,
 ) -> None:
     """A glossy signal's demodulation colour with reflected lights marked radiance:
-    ``out = guide`` where the G-buffer albedo is no reflectance (``max(clean(guide)) >
-    max_reflectance``, so :func:`effective_albedo` puts the pixel in radiance mode), else
-    ``out = albedo``.
+    ``out = clean(guide)`` where the G-buffer albedo is no reflectance (``max(clean(guide))
+    > max_reflectance``, so :func:`effective_albedo` puts the pixel in radiance mode) at the
+    pixel and at one or more of its 8 neighbours, else ``out = albedo``.
 
     Why: Cycles' ``Denoising Albedo`` holds the light's emission (up to ~1000) where a
-    specular path from the pixel reached a light. Such a sample is a reflected image of the
-    emitter, up to 1000x its neighbours that missed it; demodulated by the glossy colour it
-    would be averaged with them (a sharp highlight blurred into a dim blob). In radiance
-    mode it is filtered only with the pixels that also see the light, as the combined
-    signal does. A renderer whose albedo AOV stays a reflectance changes nothing.
+    specular path from the pixel reached a light. On a polished surface such samples form
+    the light's sharp reflected image, hundreds of times brighter than the neighbours whose
+    samples missed it; demodulated by the glossy colour they would be averaged with those
+    neighbours (a sharp highlight blurred into a dim blob). In radiance mode they are
+    filtered among themselves, as the combined signal does. A hit with no such neighbour is
+    a sample of a rough surface's blurry reflection: it stays demodulated, so the a-trous
+    spreads its light (alone in its mode it would only be clamped by the despike). A
+    renderer whose albedo AOV stays a reflectance changes nothing.
     """
     height, width = albedo.shape[1], albedo.shape[2]
+    lit = np.empty((height + 2, width + 2), dtype=np.uint8)  # implausible, zero border
+    lit[0, :] = 0
+    lit[height + 1, :] = 0
     for y in prange(height):
+        g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
+        row = lit[y + 1]
+        row[0] = 0
+        row[width + 1] = 0
+        for x in range(width):
+            brightest = max(clean_albedo(g_r[x]), max(clean_albedo(g_g[x]), clean_albedo(g_b[x])))
+            row[x + 1] = brightest > max_reflectance
+    for y in prange(height):
+        above, here, below = lit[y], lit[y + 1], lit[y + 2]
         g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
         a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
         o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
         for x in range(width):
-            gr = clean_albedo(g_r[x])
-            gg = clean_albedo(g_g[x])
-            gb = clean_albedo(g_b[x])
-            emitter = max(gr, max(gg, gb)) > max_reflectance
-            o_r[x] = gr if emitter else a_r[x]
-            o_g[x] = gg if emitter else a_g[x]
-            o_b[x] = gb if emitter else a_b[x]
+            neighbours = (above[x] + above[x + 1] + above[x + 2] + here[x] + here[x + 2]
+                          + below[x] + below[x + 1] + below[x + 2])
+            emitter = here[x + 1] > 0 and neighbours > 0
+            o_r[x] = clean_albedo(g_r[x]) if emitter else a_r[x]
+            o_g[x] = clean_albedo(g_g[x]) if emitter else a_g[x]
+            o_b[x] = clean_albedo(g_b[x]) if emitter else a_b[x]

@@ -108,8 +108,9 @@ class SVGFParams:
         False,
         "Filter a glossy signal as radiance where the G-buffer albedo is no reflectance"
         " (brightest channel above 1.05: Cycles' Denoising Albedo holds the light's emission"
-        " where a specular path reached a light): a reflected light is filtered with the"
-        " pixels that also see it, not blurred into the surface around it.",
+        " where a specular path reached a light) at the pixel and at a neighbour: a reflected"
+        " light is filtered with the pixels that also see it, not blurred into the surface"
+        " around it.",
     )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
