@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from svgf_cli.filters.denoiser import Denoiser
-from svgf_cli.filters.modulate import emitter_colour
+from svgf_cli.filters.modulate import emitter_colour, reflected_lights
 from svgf_cli.filters.params import PRESETS
 from svgf_cli.frame import Frame, Signal
 
@@ -125,11 +125,19 @@ def test_emitter_colour_matches_the_float64_reference():
     guide[:, 8, 12] = 9.0  # a lone hit in the corner
     guide[:, 7:9, 11] = guide[:, 7, 12] = 0.5
     out = np.full_like(albedo, -1.0)
-    emitter_colour(albedo, guide, F32(1.05), out)
+    lit = np.full((11, 15), 7, np.uint8)
+    assert not reflected_lights(np.minimum(albedo, F32(1.05)), F32(1.05), lit)
+    assert lit.max() == 0
+    assert reflected_lights(guide, F32(1.05), lit)
+    np.testing.assert_array_equal(
+        lit[1:-1, 1:-1], np.where(np.isfinite(guide), guide, 0).max(axis=0) > 1.05)
+    assert lit[0].max() == lit[-1].max() == lit[:, 0].max() == lit[:, -1].max() == 0
+    emitter_colour(albedo, guide, lit, out)
     want = _emitter_colour_reference(albedo, guide)
     np.testing.assert_array_equal(out, want.astype(F32))
-    lit = np.isfinite(guide) & (guide > 1.05)
-    assert 0 < np.sum(np.all(out == np.where(np.isfinite(guide), guide, 0), axis=0) & lit.any(0))
+    bright = (np.isfinite(guide) & (guide > 1.05)).any(axis=0)
+    replaced = np.all(out == np.where(np.isfinite(guide), guide, 0), axis=0) & bright
+    assert replaced.sum() > 10 and replaced.sum() < bright.sum()  # pairs taken, lone hits not
     assert out[0, 6, 7] == 0.0 and out[2, 6, 7] == 30.0  # cleaned (a neighbour is lit)
     assert out[0, 7, 8] == albedo[0, 7, 8] and out[0, 4, 5] == albedo[0, 4, 5]
     assert out[0, 0, 1] == 9.0 and out[0, 8, 12] == albedo[0, 8, 12]

@@ -125,6 +125,7 @@ class _Workspace:
             "guide_inverse_scale": ((s, h, w), F32),
             "taa": ((3, h, w), F32),
             "despike_luminance": ((h, w), F32),
+            "reflected_lights": ((h + 2, w + 2), np.uint8),
             "antilag_scratch": (scratch_shape(s, h, w), F32),
             "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
@@ -771,12 +772,14 @@ class Denoiser:
         remodulation both read the replaced colour, so the modes agree."""
         if not any(signal.glossy for signal in frame.signals):
             return frame
+        lit = work["reflected_lights"]
+        if not modulate.reflected_lights(frame.albedo, F32(MAX_REFLECTANCE), lit):
+            return frame  # the albedo AOV is a reflectance everywhere: nothing to mark
         signals = []
         for index, signal in enumerate(frame.signals):
             if signal.glossy:
                 colour = work[f"emitter_colour.{index}"]
-                modulate.emitter_colour(signal.albedo, frame.albedo, F32(MAX_REFLECTANCE),
-                                        colour)
+                modulate.emitter_colour(signal.albedo, frame.albedo, lit, colour)
                 signal = dataclasses.replace(signal, albedo=colour)
             signals.append(signal)
         return dataclasses.replace(frame, signals=signals)
