@@ -1128,6 +1128,7 @@ class ReferenceDenoiser:
         counts = clean.counts
         geom = geometry(clean.depth, clean.normal)
         surface = geom.surface
+        marked: dict[int, int] = {}
         if p.glossy_emitter_radiance:
             # A glossy signal is radiance where the G-buffer albedo is no reflectance (a
             # specular path reached a light) at the pixel and at one of its 8 neighbours:
@@ -1136,6 +1137,7 @@ class ReferenceDenoiser:
             emitter = reflected_lights(guide)
             for index, glossy in enumerate(clean.glossy):
                 if glossy:
+                    marked[index] = int(np.sum(emitter & surface))
                     clean.albedo[index] = np.where(emitter, guide, clean.albedo[index])
         planes = []
         for index, name in enumerate(clean.names):
@@ -1146,7 +1148,9 @@ class ReferenceDenoiser:
             counts[f"clamped.{name}"] = clamped
             counts[f"radiance_mode.{name}"] = int(np.sum(mode & surface))
             counts[f"implausible_albedo.{name}"] = int(
-                np.sum((brightest > MAX_REFLECTANCE) & surface))
+                np.sum((brightest > MAX_REFLECTANCE) & surface)) - marked.get(index, 0)
+            if index in marked:
+                counts[f"reflected_light.{name}"] = marked[index]
             planes.append((illumination, mode))
         illumination = np.stack([c for c, _ in planes])
         radiance_mode = np.stack([m for _, m in planes])

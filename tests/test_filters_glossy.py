@@ -132,9 +132,14 @@ def test_emitter_colour_matches_the_float64_reference():
     np.testing.assert_array_equal(
         lit[1:-1, 1:-1], np.where(np.isfinite(guide), guide, 0).max(axis=0) > 1.05)
     assert lit[0].max() == lit[-1].max() == lit[:, 0].max() == lit[:, -1].max() == 0
-    emitter_colour(albedo, guide, lit, out)
+    depth = np.full((9, 13), 2.0, F32)
+    depth[0, 0] = 0.0  # background: marked, not counted
+    rows = np.full(9, -1, np.int64)
+    emitter_colour(albedo, guide, lit, depth, out, rows)
     want = _emitter_colour_reference(albedo, guide)
     np.testing.assert_array_equal(out, want.astype(F32))
+    replaced = np.any(want != albedo, axis=0)
+    np.testing.assert_array_equal(rows, (replaced & (depth > 0)).sum(axis=1))
     bright = (np.isfinite(guide) & (guide > 1.05)).any(axis=0)
     replaced = np.all(out == np.where(np.isfinite(guide), guide, 0), axis=0) & bright
     assert replaced.sum() > 10 and replaced.sum() < bright.sum()  # pairs taken, lone hits not
@@ -193,3 +198,16 @@ def test_reflected_light_stays_sharp():
     assert sharp_ring < 0.15 < blurred_ring
     off = PRESETS["default"].replace(glossy_emitter_radiance=False)
     assert _highlight_peak(marked=True, params=off) == (blurred_peak, blurred_ring)
+
+
+def test_reflected_lights_are_counted_not_warned_about():
+    """Marked pixels are reported as reflected light, not as implausible colour passes."""
+    frame = _highlight_frame(0, marked=True)
+    hit = frame.albedo[0] > 1.0
+    padded = np.pad(hit, 1)
+    neighbours = sum(np.roll(np.roll(padded, dy, 0), dx, 1)[1:-1, 1:-1]
+                     for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx)
+    out = Denoiser(PRESETS["default"]).process(frame)
+    assert out.counts["reflected_light.glossy"] == int(np.sum(hit & (neighbours > 0))) > 0
+    assert out.counts["implausible_albedo.glossy"] == 0
+    assert not any("demodulation colour" in line for line in out.warnings())

@@ -359,9 +359,15 @@ class Denoiser:
         illumination_name = "demodulated"
         illumination = work[illumination_name]
         mode = work["mode"]
+        marked: dict[str, int] = {}
         if p.glossy_emitter_radiance:
-            frame = run.frame = self._mark_reflected_lights(frame, work)
+            frame = run.frame = self._mark_reflected_lights(frame, depth, work, marked)
         self._demodulate(frame.signals, depth, illumination, mode, counts)
+        for name, total in marked.items():
+            # Their colour (the G-buffer albedo) is above 1 by construction: information,
+            # not an implausible colour pass.
+            counts[f"reflected_light.{name}"] = total
+            counts[f"implausible_albedo.{name}"] -= total
         if p.firefly_clamp > 0.0:
             firefly_clamp(illumination, depth, F32(p.firefly_clamp), run.weights,
                           work["spare_a"])
@@ -764,22 +770,27 @@ class Denoiser:
             counts[f"radiance_mode.{name}"] = int(total[modulate.RADIANCE_MODE])
             counts[f"implausible_albedo.{name}"] = int(total[modulate.IMPLAUSIBLE])
 
-    def _mark_reflected_lights(self, frame: Frame, work: _Workspace) -> Frame:
+    def _mark_reflected_lights(self, frame: Frame, depth: np.ndarray, work: _Workspace,
+                               marked: dict[str, int]) -> Frame:
         """The frame with each glossy signal's demodulation colour replaced by the G-buffer
         albedo where that is no reflectance (``modulate.emitter_colour``): a specular path
         reached a light there, and the signal is filtered as radiance. Written into
         workspace planes (the caller's planes are never modified); demodulation and
-        remodulation both read the replaced colour, so the modes agree."""
-        if not any(signal.glossy for signal in frame.signals):
+        remodulation both read the replaced colour, so the modes agree. ``marked`` gets the
+        surface pixels marked per glossy signal."""
+        marked.update({signal.name: 0 for signal in frame.signals if signal.glossy})
+        if not marked:
             return frame
         lit = work["reflected_lights"]
         if not modulate.reflected_lights(frame.albedo, F32(MAX_REFLECTANCE), lit):
             return frame  # the albedo AOV is a reflectance everywhere: nothing to mark
+        rows = np.zeros(frame.height, dtype=np.int64)
         signals = []
         for index, signal in enumerate(frame.signals):
             if signal.glossy:
                 colour = work[f"emitter_colour.{index}"]
-                modulate.emitter_colour(signal.albedo, frame.albedo, lit, colour)
+                modulate.emitter_colour(signal.albedo, frame.albedo, lit, depth, colour, rows)
+                marked[signal.name] = int(rows.sum())
                 signal = dataclasses.replace(signal, albedo=colour)
             signals.append(signal)
         return dataclasses.replace(frame, signals=signals)

@@ -259,12 +259,14 @@ def reflected_lights(guide: np.ndarray, max_reflectance: np.float32, out_lit: np
 
 @njit(parallel=True, **_JIT)
 def emitter_colour(
-    albedo: np.ndarray, guide: np.ndarray, lit: np.ndarray, out: np.ndarray,
+    albedo: np.ndarray, guide: np.ndarray, lit: np.ndarray, depth: np.ndarray,
+    out: np.ndarray, marked: np.ndarray,
 ) -> None:
     """A glossy signal's demodulation colour with reflected lights marked radiance:
     ``out = clean(guide)`` where the G-buffer albedo is no reflectance at the pixel and at
     one or more of its 8 neighbours (``lit`` from :func:`reflected_lights`; ``clean(guide)``
     then puts the pixel in radiance mode, :func:`effective_albedo`), else ``out = albedo``.
+    ``marked`` (H,) int64 receives per row the surface pixels (depth > 0) so marked.
 
     Why: Cycles' ``Denoising Albedo`` holds the light's emission (up to ~1000) where a
     specular path from the pixel reached a light. On a polished surface such samples form
@@ -282,10 +284,14 @@ def emitter_colour(
         g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
         a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
         o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
+        z = depth[y]
+        count = np.int32(0)
         for x in range(width):
             neighbours = (above[x] + above[x + 1] + above[x + 2] + here[x] + here[x + 2]
                           + below[x] + below[x + 1] + below[x + 2])
-            emitter = here[x + 1] > 0 and neighbours > 0
+            emitter = (here[x + 1] > 0) & (neighbours > 0)
             o_r[x] = clean_albedo(g_r[x]) if emitter else a_r[x]
             o_g[x] = clean_albedo(g_g[x]) if emitter else a_g[x]
             o_b[x] = clean_albedo(g_b[x]) if emitter else a_b[x]
+            count += np.int32(1) if emitter & (z[x] > _ZERO) else np.int32(0)
+        marked[y] = count

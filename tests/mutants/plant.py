@@ -372,8 +372,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "emitter-lone-hits", "filters",
         "a lone reflected-light sample (no lit neighbour) filtered as radiance too",
         "svgf_cli/filters/modulate.py",
-        (("            emitter = here[x + 1] > 0 and neighbours > 0",
-          "            emitter = here[x + 1] > 0 and neighbours >= 0"),),
+        (("            emitter = (here[x + 1] > 0) & (neighbours > 0)",
+          "            emitter = (here[x + 1] > 0) & (neighbours >= 0)"),),
         FILTER_TESTS,
     ),
     Mutant(
