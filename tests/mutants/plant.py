@@ -364,7 +364,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "emitter-mode-ignored", "filters",
         "glossy signals demodulated where the G-buffer albedo marks a reflected light",
         "svgf_cli/filters/denoiser.py",
-        (("            frame = run.frame = self._mark_reflected_lights(frame, work)",
+        (("            frame = run.frame = self._mark_reflected_lights(frame, depth, work, marked)",
           "            pass"),),
         FILTER_TESTS,
     ),
