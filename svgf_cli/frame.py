@@ -281,6 +281,9 @@ COUNT_KEYS = {
     " implausible demodulation colour)",
     "implausible_albedo.<signal>": "of those, pixels whose demodulation colour exceeds a"
     " reflectance (a channel above 1 + tolerance)",
+    "reflected_light.<signal>": "surface pixels of a glossy signal filtered as radiance"
+    " because the G-buffer albedo marks a reflected light there (not counted as implausible;"
+    " information, not a problem)",
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
     "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
     " matched them (information, not a problem)",

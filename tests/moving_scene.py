@@ -35,7 +35,10 @@ Signal layouts (``layout``):
   edges move across the wall, so pixels change mode from frame to frame), **glossy** (a
   specular colour that exceeds a reflectance, up to 1.3, on part of the object: filtered as
   radiance there) and **transmission** (a colour only on the sticker and the object's left
-  part, black elsewhere, with a little radiance of its own there).
+  part, black elsewhere, with a little radiance of its own there). The G-buffer albedo is
+  no reflectance (8, like Cycles' Denoising Albedo where a specular path reached a light)
+  on a patch of the copper, where the default preset filters the glossy signal as
+  radiance (``glossy_emitter_radiance``).
 
 ``moving_edge`` adds the moving black stripe to the albedo of the other layouts too.
 :func:`plant_extremes` puts non-finite and beyond-limit values into one frame.
@@ -215,6 +218,9 @@ def scene_frame(t: int, *, seed: int = 0, layout: str = "split", noise: bool = T
         transmission_radiance = np.where(clear_black[None], 0.05,
                                          transmission_colour * transmission_light) * lobes[1]
         transmission_radiance[:, sky] = 0.0
+        # A light reflected by the copper: the G-buffer albedo holds its emission there.
+        reflected_light = body & (a >= 7.0) & (a < 8.5) & (b >= 4.0) & (b < 6.5)
+        geometry["albedo"] = f32(np.where(reflected_light[None], 8.0, albedo))
         frame = Frame(signals=[
             Signal("diffuse", f32(direct_radiance - emission + indirect_radiance), f32(albedo)),
             Signal("glossy", f32(glossy_radiance), f32(glossy_colour), glossy=True),

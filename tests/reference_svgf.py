@@ -347,6 +347,19 @@ def effective_albedo(albedo: np.ndarray, black: float,
     return ~demodulated[..., 0, :, :], divisor
 
 
+def reflected_lights(guide: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the (cleaned) G-buffer albedo is above ``MAX_REFLECTANCE`` at the pixel
+    and at one or more of its 8 neighbours (``modulate.emitter_colour``)."""
+    lit = np.pad(guide.max(axis=0) > MAX_REFLECTANCE, 1)
+    height, width = guide.shape[1:]
+    neighbours = np.zeros((height, width), dtype=np.int64)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                neighbours += lit[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
+    return lit[1:-1, 1:-1] & (neighbours > 0)
+
+
 def demodulation_floor(params: SVGFParams, clean: CleanFrame, index: int) -> float:
     """The ``black`` of :func:`effective_albedo` for signal ``index``: ``albedo_epsilon``,
     raised to ``guide_albedo_floor`` for a signal demodulated by the G-buffer albedo."""
@@ -1168,6 +1181,17 @@ class ReferenceDenoiser:
         counts = clean.counts
         geom = geometry(clean.depth, clean.normal)
         surface = geom.surface
+        marked: dict[int, int] = {}
+        if p.glossy_emitter_radiance:
+            # A glossy signal is radiance where the G-buffer albedo is no reflectance (a
+            # specular path reached a light) at the pixel and at one of its 8 neighbours:
+            # its colour becomes that albedo there.
+            guide = clean_albedo(frame.albedo)
+            emitter = reflected_lights(guide)
+            for index, glossy in enumerate(clean.glossy):
+                if glossy:
+                    marked[index] = int(np.sum(emitter & surface))
+                    clean.albedo[index] = np.where(emitter, guide, clean.albedo[index])
         planes = []
         for index, name in enumerate(clean.names):
             illumination, mode, clamped = demodulate(clean.radiance[index],
@@ -1177,7 +1201,9 @@ class ReferenceDenoiser:
             counts[f"clamped.{name}"] = clamped
             counts[f"radiance_mode.{name}"] = int(np.sum(mode & surface))
             counts[f"implausible_albedo.{name}"] = int(
-                np.sum((brightest > MAX_REFLECTANCE) & surface))
+                np.sum((brightest > MAX_REFLECTANCE) & surface)) - marked.get(index, 0)
+            if index in marked:
+                counts[f"reflected_light.{name}"] = marked[index]
             planes.append((illumination, mode))
         illumination = np.stack([c for c, _ in planes])
         radiance_mode = np.stack([m for _, m in planes])

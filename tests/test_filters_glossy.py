@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.modulate import emitter_colour, reflected_lights
 from svgf_cli.filters.params import PRESETS
 from svgf_cli.frame import Frame, Signal
 
@@ -92,3 +93,121 @@ def test_paper_preset_has_no_glossy_rules():
 def test_read_only_frames_keep_their_glossy_signals():
     """The Denoiser copies read-only planes; the copy must keep what each signal is."""
     assert _trail(glossy=True, read_only=True) == _trail(glossy=True)
+
+
+def _emitter_colour_reference(albedo: np.ndarray, guide: np.ndarray) -> np.ndarray:
+    """Float64, pixel by pixel: the G-buffer albedo (non-finite channels 0) where its
+    brightest channel is above 1.05 at the pixel and at one of its 8 neighbours (inside the
+    image), else the signal's own colour."""
+    clean = np.where(np.isfinite(guide), guide.astype(np.float64), 0.0)
+    lit = clean.max(axis=0) > 1.05
+    height, width = lit.shape
+    out = albedo.astype(np.float64)
+    for y in range(height):
+        for x in range(width):
+            around = lit[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2]
+            if lit[y, x] and around.sum() > 1:
+                out[:, y, x] = clean[:, y, x]
+    return out
+
+
+def test_emitter_colour_matches_the_float64_reference():
+    rng = np.random.default_rng(3)
+    albedo = rng.uniform(0.0, 1.0, (3, 9, 13)).astype(F32)
+    guide = rng.uniform(0.0, 1.0, (3, 9, 13)).astype(F32)
+    guide[:, rng.uniform(size=(9, 13)) < 0.3] *= 40.0  # lights seen through a reflection
+    guide[1, 2, 3] = 1.06  # one channel just above a reflectance
+    guide[:, 4, 5] = (1.0, 1.05, 0.2)  # at the limit: still a reflectance
+    guide[0, 6, 7] = np.nan  # non-finite: 0, the other channels decide
+    guide[2, 6, 7] = 30.0
+    guide[:, 7, 8] = (np.inf, 0.5, 0.5)  # cleaned to a reflectance
+    guide[:, 0, 0] = guide[:, 0, 1] = 9.0  # a pair in the corner
+    guide[:, 8, 12] = 9.0  # a lone hit in the corner
+    guide[:, 7:9, 11] = guide[:, 7, 12] = 0.5
+    out = np.full_like(albedo, -1.0)
+    lit = np.full((11, 15), 7, np.uint8)
+    assert not reflected_lights(np.minimum(albedo, F32(1.05)), F32(1.05), lit)
+    assert lit.max() == 0
+    assert reflected_lights(guide, F32(1.05), lit)
+    np.testing.assert_array_equal(
+        lit[1:-1, 1:-1], np.where(np.isfinite(guide), guide, 0).max(axis=0) > 1.05)
+    assert lit[0].max() == lit[-1].max() == lit[:, 0].max() == lit[:, -1].max() == 0
+    depth = np.full((9, 13), 2.0, F32)
+    depth[0, 0] = 0.0  # background: marked, not counted
+    rows = np.full(9, -1, np.int64)
+    emitter_colour(albedo, guide, lit, depth, out, rows)
+    want = _emitter_colour_reference(albedo, guide)
+    np.testing.assert_array_equal(out, want.astype(F32))
+    replaced = np.any(want != albedo, axis=0)
+    np.testing.assert_array_equal(rows, (replaced & (depth > 0)).sum(axis=1))
+    bright = (np.isfinite(guide) & (guide > 1.05)).any(axis=0)
+    replaced = np.all(out == np.where(np.isfinite(guide), guide, 0), axis=0) & bright
+    assert replaced.sum() > 10 and replaced.sum() < bright.sum()  # pairs taken, lone hits not
+    assert out[0, 6, 7] == 0.0 and out[2, 6, 7] == 30.0  # cleaned (a neighbour is lit)
+    assert out[0, 7, 8] == albedo[0, 7, 8] and out[0, 4, 5] == albedo[0, 4, 5]
+    assert out[0, 0, 1] == 9.0 and out[0, 8, 12] == albedo[0, 8, 12]
+
+
+def _highlight_frame(t: int, marked: bool) -> Frame:
+    """A glossy sphere-like surface reflecting a small light: a 3x3 highlight (true glossy
+    radiance 180) on a dim reflection (0.09), 1-spp noise everywhere (a sample sees the light
+    or not: a Bernoulli hit of probability 1/2 at twice the value). With ``marked`` the
+    G-buffer albedo holds the light's emission (40) where a sample saw it, as Cycles'
+    Denoising Albedo does; else it stays the surface's 0.5."""
+    rng = np.random.default_rng(100 + t)
+    colour = np.full((3, HEIGHT, WIDTH), 0.5, F32)
+    diffuse = colour * rng.exponential(1.0, (HEIGHT, WIDTH)).astype(F32)[None]
+    reflection = (0.1 * rng.exponential(1.0, (HEIGHT, WIDTH))).astype(F32)
+    hit = np.zeros((HEIGHT, WIDTH), bool)
+    hit[10:13, 18:21] = rng.uniform(size=(3, 3)) < 0.5
+    reflection[hit] = 400.0
+    gloss_colour = np.full((3, HEIGHT, WIDTH), 0.9, F32)
+    guide = colour.copy()
+    if marked:
+        guide[:, hit] = 40.0
+    normal = np.zeros((3, HEIGHT, WIDTH), F32)
+    normal[2] = 1.0
+    return Frame(
+        signals=[Signal("diffuse", np.ascontiguousarray(diffuse), colour),
+                 Signal("glossy", np.ascontiguousarray(gloss_colour * reflection[None]),
+                        gloss_colour, glossy=True)],
+        normal=normal, depth=np.full((HEIGHT, WIDTH), 4.0, F32),
+        motion=np.zeros((2, HEIGHT, WIDTH), F32), mesh_id=np.ones((HEIGHT, WIDTH), np.int32),
+        albedo=guide,
+    )
+
+
+def _highlight_peak(marked: bool, params=PRESETS["default"]) -> tuple[float, float]:
+    """Mean glossy output on the highlight and on the ring of pixels around it (frame 6)."""
+    denoiser = Denoiser(params, debug_layers=True)
+    for t in range(6):
+        out = denoiser.process(_highlight_frame(t, marked))
+    glossy = out.layers["glossy.G"]
+    ring = glossy[8:15, 16:23].sum() - glossy[10:13, 18:21].sum()
+    return float(glossy[10:13, 18:21].mean()), float(ring / (49 - 9))
+
+
+def test_reflected_light_stays_sharp():
+    """Truth: 180 on the highlight, 0.09 around it. Demodulated by the glossy colour the
+    samples that saw the light are averaged with the dim ones around them (measured: a
+    blob: 28 on the highlight, 0.66 around it); marked by the G-buffer albedo they are
+    filtered as radiance, among themselves (measured 163 and 0.083)."""
+    blurred_peak, blurred_ring = _highlight_peak(marked=False)
+    sharp_peak, sharp_ring = _highlight_peak(marked=True)
+    assert blurred_peak < 0.25 * 180.0 and sharp_peak > 0.75 * 180.0
+    assert sharp_ring < 0.15 < blurred_ring
+    off = PRESETS["default"].replace(glossy_emitter_radiance=False)
+    assert _highlight_peak(marked=True, params=off) == (blurred_peak, blurred_ring)
+
+
+def test_reflected_lights_are_counted_not_warned_about():
+    """Marked pixels are reported as reflected light, not as implausible colour passes."""
+    frame = _highlight_frame(0, marked=True)
+    hit = frame.albedo[0] > 1.0
+    padded = np.pad(hit, 1)
+    neighbours = sum(np.roll(np.roll(padded, dy, 0), dx, 1)[1:-1, 1:-1]
+                     for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx)
+    out = Denoiser(PRESETS["default"]).process(frame)
+    assert out.counts["reflected_light.glossy"] == int(np.sum(hit & (neighbours > 0))) > 0
+    assert out.counts["implausible_albedo.glossy"] == 0
+    assert not any("demodulation colour" in line for line in out.warnings())

@@ -105,8 +105,8 @@ class _Workspace:
 
     def shape(self, name: str) -> tuple[tuple[int, ...], type]:
         h, w, s = self.height, self.width, self.num_signals
-        if name in _ILLUMINATION_SCRATCH:
-            return (s, 3, h, w), F32
+        if name in _ILLUMINATION_SCRATCH or name.startswith("emitter_colour."):
+            return ((s, 3, h, w) if name in _ILLUMINATION_SCRATCH else (3, h, w)), F32
         shapes: dict[str, tuple[tuple[int, ...], type]] = {
             "normal": ((3, h, w), F32),
             "ddx": ((h, w), F32),
@@ -128,6 +128,7 @@ class _Workspace:
             # despike's luminance scratch, and firefly spreading's before it (the two never
             # overlap: one runs before the accumulation, the other after the a-trous)
             "despike_luminance": ((h, w), F32),
+            "reflected_lights": ((h + 2, w + 2), np.uint8),
             "antilag_scratch": (scratch_shape(s, h, w), F32),
             "antilag_lambda": ((s, *cell_shape(h, w)), F32),
         }
@@ -362,7 +363,15 @@ class Denoiser:
         illumination_name = "demodulated"
         illumination = work[illumination_name]
         mode = work["mode"]
+        marked: dict[str, int] = {}
+        if p.glossy_emitter_radiance:
+            frame = run.frame = self._mark_reflected_lights(frame, depth, work, marked)
         self._demodulate(frame.signals, depth, illumination, mode, counts)
+        for name, total in marked.items():
+            # Their colour (the G-buffer albedo) is above 1 by construction: information,
+            # not an implausible colour pass.
+            counts[f"reflected_light.{name}"] = total
+            counts[f"implausible_albedo.{name}"] -= total
         if p.firefly_clamp > 0.0:
             firefly_clamp(illumination, depth, F32(p.firefly_clamp), run.weights,
                           work["spare_a"])
@@ -764,6 +773,31 @@ class Denoiser:
             counts[f"clamped.{name}"] = int(total[modulate.CLAMPED])
             counts[f"radiance_mode.{name}"] = int(total[modulate.RADIANCE_MODE])
             counts[f"implausible_albedo.{name}"] = int(total[modulate.IMPLAUSIBLE])
+
+    def _mark_reflected_lights(self, frame: Frame, depth: np.ndarray, work: _Workspace,
+                               marked: dict[str, int]) -> Frame:
+        """The frame with each glossy signal's demodulation colour replaced by the G-buffer
+        albedo where that is no reflectance (``modulate.emitter_colour``): a specular path
+        reached a light there, and the signal is filtered as radiance. Written into
+        workspace planes (the caller's planes are never modified); demodulation and
+        remodulation both read the replaced colour, so the modes agree. ``marked`` gets the
+        surface pixels marked per glossy signal."""
+        marked.update({signal.name: 0 for signal in frame.signals if signal.glossy})
+        if not marked:
+            return frame
+        lit = work["reflected_lights"]
+        if not modulate.reflected_lights(frame.albedo, F32(MAX_REFLECTANCE), lit):
+            return frame  # the albedo AOV is a reflectance everywhere: nothing to mark
+        rows = np.zeros(frame.height, dtype=np.int64)
+        signals = []
+        for index, signal in enumerate(frame.signals):
+            if signal.glossy:
+                colour = work[f"emitter_colour.{index}"]
+                modulate.emitter_colour(signal.albedo, frame.albedo, lit, depth, colour, rows)
+                marked[signal.name] = int(rows.sum())
+                signal = dataclasses.replace(signal, albedo=colour)
+            signals.append(signal)
+        return dataclasses.replace(frame, signals=signals)
 
     def _before_accumulation(self, temporal: TemporalState) -> int:
         """Adjust the reprojected history before it is blended: the optional history clamp,

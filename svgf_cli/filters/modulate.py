@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from svgf_cli.filters.fastmath import FASTMATH
+from svgf_cli.filters.fastmath import FASTMATH, float32_bits
 from svgf_cli.filters.values import (  # noqa: F401 - NO_HISTORY belongs to the mode mask
     NO_HISTORY,
     VALUE_LIMIT,
@@ -49,6 +49,7 @@ from svgf_cli.filters.values import (  # noqa: F401 - NO_HISTORY belongs to the 
 F32 = np.float32
 _ONE = F32(1.0)
 _ZERO = F32(0.0)
+_INF_BITS = np.int32(0x7F800000)
 MAX_SIGNALS = 15  # bits of the uint16 mode mask below NO_HISTORY
 # Counters written per row by demodulate (columns of ``counts``).
 NONFINITE_RADIANCE, EXTREME_RADIANCE, NONFINITE_ALBEDO, RADIANCE_MODE, IMPLAUSIBLE, CLAMPED = (
@@ -228,3 +229,69 @@ def remodulate_add(
             o_b[x] += vb
         counts[y, 0] = nonfinite
         counts[y, 1] = extreme
+
+
+@njit(parallel=True, **_JIT)
+def reflected_lights(guide: np.ndarray, max_reflectance: np.float32, out_lit: np.ndarray) -> bool:
+    """``out_lit[y + 1, x + 1] = max(clean(guide[:, y, x])) > max_reflectance`` (uint8, an
+    (H + 2, W + 2) plane whose one-pixel border is set to 0): where the G-buffer albedo is
+    no reflectance. Returns whether any pixel is (if not, :func:`emitter_colour` would change
+    nothing)."""
+    height, width = guide.shape[1], guide.shape[2]
+    # On the bits (fast-math may not keep NaN and Inf tests): for m > 0, clean(v) > m is
+    # bits(m) < bits(v) < bits(+Inf) as int32 (negative values, NaN and Inf fall outside).
+    above = float32_bits(max_reflectance)
+    out_lit[0, :] = 0
+    out_lit[height + 1, :] = 0
+    for y in prange(height):
+        g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
+        row = out_lit[y + 1, 1:width + 1]
+        out_lit[y + 1, 0] = 0
+        out_lit[y + 1, width + 1] = 0
+        for x in range(width):
+            r, g, b = float32_bits(g_r[x]), float32_bits(g_g[x]), float32_bits(g_b[x])
+            bright = (((r > above) & (r < _INF_BITS)) | ((g > above) & (g < _INF_BITS))
+                      | ((b > above) & (b < _INF_BITS)))
+            row[x] = np.uint8(1) if bright else np.uint8(0)
+    # Reduced outside the loop: a count or an or-reduction inside it stops it vectorizing.
+    return bool(out_lit.any())
+
+
+@njit(parallel=True, **_JIT)
+def emitter_colour(
+    albedo: np.ndarray, guide: np.ndarray, lit: np.ndarray, depth: np.ndarray,
+    out: np.ndarray, marked: np.ndarray,
+) -> None:
+    """A glossy signal's demodulation colour with reflected lights marked radiance:
+    ``out = clean(guide)`` where the G-buffer albedo is no reflectance at the pixel and at
+    one or more of its 8 neighbours (``lit`` from :func:`reflected_lights`; ``clean(guide)``
+    then puts the pixel in radiance mode, :func:`effective_albedo`), else ``out = albedo``.
+    ``marked`` (H,) int64 receives per row the surface pixels (depth > 0) so marked.
+
+    Why: Cycles' ``Denoising Albedo`` holds the light's emission (up to ~1000) where a
+    specular path from the pixel reached a light. On a polished surface such samples form
+    the light's sharp reflected image, hundreds of times brighter than the neighbours whose
+    samples missed it; demodulated by the glossy colour they would be averaged with those
+    neighbours (a sharp highlight blurred into a dim blob). In radiance mode they are
+    filtered among themselves, as the combined signal does. A hit with no such neighbour is
+    a sample of a rough surface's blurry reflection: it stays demodulated, so the a-trous
+    spreads its light (alone in its mode it would only be clamped by the despike). A
+    renderer whose albedo AOV stays a reflectance changes nothing.
+    """
+    height, width = albedo.shape[1], albedo.shape[2]
+    for y in prange(height):
+        above, here, below = lit[y], lit[y + 1], lit[y + 2]
+        g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
+        a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
+        o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
+        z = depth[y]
+        count = np.int32(0)
+        for x in range(width):
+            neighbours = (above[x] + above[x + 1] + above[x + 2] + here[x] + here[x + 2]
+                          + below[x] + below[x + 1] + below[x + 2])
+            emitter = (here[x + 1] > 0) & (neighbours > 0)
+            o_r[x] = clean_albedo(g_r[x]) if emitter else a_r[x]
+            o_g[x] = clean_albedo(g_g[x]) if emitter else a_g[x]
+            o_b[x] = clean_albedo(g_b[x]) if emitter else a_b[x]
+            count += np.int32(1) if emitter & (z[x] > _ZERO) else np.int32(0)
+        marked[y] = count

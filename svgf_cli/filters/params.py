@@ -111,6 +111,14 @@ class SVGFParams:
         " direct light's detail (0 = the same as sigma_luminance; glossy signals keep"
         " glossy_sigma_luminance).",
     )
+    glossy_emitter_radiance: bool = _p(
+        False,
+        "Filter a glossy signal as radiance where the G-buffer albedo is no reflectance"
+        " (brightest channel above 1.05: Cycles' Denoising Albedo holds the light's emission"
+        " where a specular path reached a light) at the pixel and at a neighbour: a reflected"
+        " light is filtered with the pixels that also see it, not blurred into the surface"
+        " around it.",
+    )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
         5,
@@ -177,15 +185,16 @@ PRESETS: dict[str, SVGFParams] = {
     # first iteration fed back as history.
     "paper": SVGFParams(),
     # The recommended set (measured in docs/results.md): the paper's filter plus anti-lag, a
-    # loose history clamp against outliers (k = 3), the glossy rules, a tighter luminance
+    # loose history clamp against outliers (k = 3), the glossy rules (reflected lights
+    # filtered as radiance: docs/signals.md), a tighter luminance
     # stop for the short-history spatial variance (0.5: fireflies and lit/shadowed
     # neighbours no longer inflate it into an over-blur), firefly spreading (k = 10),
     # despike (ratio 2),
     # demodulation by the G-buffer albedo only where it is at least 0.1, and an a-trous
     # reach that grows with the image (atrous_iterations_for).
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
-                          glossy_sigma_luminance=1.0, mixed_sigma_luminance=2.5,
-                          spatial_variance_sigma_luminance=0.5,
+                          glossy_sigma_luminance=1.0, glossy_emitter_radiance=True,
+                          mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
                           atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).

@@ -408,6 +408,22 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "emitter-mode-ignored", "filters",
+        "glossy signals demodulated where the G-buffer albedo marks a reflected light",
+        "svgf_cli/filters/denoiser.py",
+        (("            frame = run.frame = self._mark_reflected_lights(frame, depth, work, marked)",
+          "            pass"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "emitter-lone-hits", "filters",
+        "a lone reflected-light sample (no lit neighbour) filtered as radiance too",
+        "svgf_cli/filters/modulate.py",
+        (("            emitter = (here[x + 1] > 0) & (neighbours > 0)",
+          "            emitter = (here[x + 1] > 0) & (neighbours >= 0)"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "variance-mode-blind", "filters", "mode test removed from the spatial variance",
         "svgf_cli/filters/variance.py",
         (("w = w if (mode_p[i] ^ mode_q[i]) & bit == 0 else _ZERO", "w = w"),),
