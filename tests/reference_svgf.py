@@ -62,7 +62,11 @@ from typing import Any
 
 import numpy as np
 
-from svgf_cli.filters.bidirectional import CONSISTENCY_SIGMA
+from svgf_cli.filters.bidirectional import (
+    CONSISTENCY_SIGMA,
+    PASS_ANTILAG_SIGMA_SCALE,
+    REFERENCE_COUNT,
+)
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame, Signal
 
@@ -1242,13 +1246,15 @@ def effective_count(h: float, alpha: float) -> float:
 
 def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reprojected,
                       depth: np.ndarray, alpha: float, moments_alpha: float,
-                      weights: Sequence[float] = REC709, history_cap: int = 32,
+                      weights: Sequence[float] = REC709,
+                      reference_count: float = REFERENCE_COUNT,
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A bidirectional run's combined accumulation (``docs/bidirectional.md``): per signal
     and surface pixel, ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` for the colour
     (counts with ``alpha``) and the moments ``(l, l^2)`` (counts with ``moments_alpha``),
-    whose variance ``m2 - m1^2`` is then scaled by ``min(1, n(cap) / (1 + n_f + n_r))``;
-    history length ``1 + h_f + h_r``; background: the current values, length 0."""
+    whose variance ``m2 - m1^2`` is then scaled by ``min(1, n_ref / (1 + n_f + n_r))``
+    (``n_ref``: ``reference_count``); history length ``1 + h_f + h_r``; background: the
+    current values, length 0."""
     x = np.asarray(current, dtype=F64)
     lum = luminance(x, weights)
     x_moments = np.stack([lum, lum * lum], axis=1)
@@ -1270,9 +1276,9 @@ def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reproj
                     nf, nr = effective_count(hf, alpha_), effective_count(hr, alpha_)
                     target[s, :, y, px] = (here[s, :, y, px] + nf * f_side[s, :, y, px]
                                            + nr * r_side[s, :, y, px]) / (1.0 + nf + nr)
-                # the variance relative to a long causal history's count n_ref
+                # the variance relative to the reference count n_ref
                 nf, nr = effective_count(hf, moments_alpha), effective_count(hr, moments_alpha)
-                shrink = min(1.0, effective_count(history_cap, moments_alpha) / (1 + nf + nr))
+                shrink = min(1.0, reference_count / (1 + nf + nr))
                 m1 = moments[s, 0, y, px]
                 moments[s, 1, y, px] = m1 * m1 + shrink * max(moments[s, 1, y, px] - m1 * m1, 0)
                 length[s, y, px] = 1.0 + hf + hr
@@ -1390,7 +1396,9 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
     frame (:func:`combine_histories`), filtered spatially and composed. Returns the outputs
     in frame order."""
     # Each pass keeps its accumulation unfiltered as its history (feedback_iteration -1).
-    passes = params.replace(feedback_iteration=-1)
+    # Their anti-lag tests at a share of the causal significance (the other side refills).
+    passes = params.replace(feedback_iteration=-1,
+                            antilag_sigma=params.antilag_sigma * PASS_ANTILAG_SIGMA_SCALE)
     forward = _Capturing(passes)
     kept = []
     for frame in frames:
@@ -1425,8 +1433,7 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
             state.illumination,
             dataclasses.replace(forward_history, history_length=forward_length),
             dataclasses.replace(state.history, history_length=reverse_length),
-            state.geom.depth, params.alpha, params.moments_alpha, state.clean.weights,
-            params.history_cap)
+            state.geom.depth, params.alpha, params.moments_alpha, state.clean.weights)
         filtered, variance, _ = reverse.filter_spatially(
             state.clean, state.geom, colour, moments, length, state.radiance_mode)
         outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,

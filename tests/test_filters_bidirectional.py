@@ -12,6 +12,7 @@ from moving_scene import ACESCG_LUMINANCE, scene_sequence
 
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
+    REFERENCE_COUNT,
     SideHistory,
     combine_histories,
     consistent_lengths,
@@ -71,14 +72,13 @@ def test_combine_histories_matches_the_reference() -> None:
     combine_histories(current, reverse.colour, reverse.moments, reverse.length, depth,
                       effective_counts(params.alpha, 32),
                       effective_counts(params.moments_alpha, 32),
-                      float32_weights(ACESCG_LUMINANCE),
-                      effective_counts(params.moments_alpha, 32)[-1], *out)
+                      float32_weights(ACESCG_LUMINANCE), F32(REFERENCE_COUNT), *out)
 
     def side(s: SideHistory) -> ref.Reprojected:
         return ref.Reprojected(s.colour, s.moments, s.length, np.zeros(s.length.shape))
 
     want = ref.combine_histories(current, side(forward), side(reverse), depth, params.alpha,
-                                 params.moments_alpha, ACESCG_LUMINANCE)
+                                 params.moments_alpha, ACESCG_LUMINANCE, REFERENCE_COUNT)
     for got, expected, what in zip(out, want, ("colour", "moments", "length"), strict=True):
         np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6, err_msg=what)
     # the current sample counts once: with no history on either side the result is it

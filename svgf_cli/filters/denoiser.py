@@ -39,6 +39,8 @@ from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
+    PASS_ANTILAG_SIGMA_SCALE,
+    REFERENCE_COUNT,
     SideHistory,
     combine_histories,
     consistent_lengths,
@@ -165,6 +167,8 @@ class TemporalState:
     glossy: tuple[bool, ...] = ()
     # Where anti-lag may keep its statistics (None: a workspace plane of its own).
     antilag_scratch: np.ndarray | None = None
+    # A pass of a bidirectional run: anti-lag tests at PASS_ANTILAG_SIGMA_SCALE of its sigma.
+    bidirectional: bool = False
 
 
 @dataclass
@@ -177,6 +181,7 @@ class _FrameRun:
     work: _Workspace
     weights: tuple[np.float32, np.float32, np.float32]
     iterations: int  # a-trous iterations at this frame's size (atrous_iterations_for)
+    bidirectional: bool = False  # a pass of a bidirectional run (forward_step, reverse_step)
     counts: dict[str, int] = field(
         default_factory=lambda: {"nonfinite": 0, "extreme": 0, "history_resets": 0})
     depth: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
@@ -387,7 +392,7 @@ class Denoiser:
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
                 run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
                 tuple(signal.glossy for signal in frame.signals),
-                antilag_scratch=run.plane("antilag_scratch"),
+                antilag_scratch=run.plane("antilag_scratch"), bidirectional=run.bidirectional,
             )
             shortened = self._before_accumulation(temporal)
             if p.antilag:
@@ -399,7 +404,8 @@ class Denoiser:
             moments.fill(0.0)
             self._lend_stale_history(run)
             temporal = TemporalState(run.names, illumination, mode, accumulated, moments,
-                                     history_length, depth, run.weights)
+                                     history_length, depth, run.weights,
+                                     bidirectional=run.bidirectional)
         if before_blend is not None:
             before_blend(temporal)
         accumulate_in_place(
@@ -563,6 +569,7 @@ class Denoiser:
         blend; views of this Denoiser's buffers, valid only during the call), by default a
         copy."""
         run = self._start_frame(frame)
+        run.bidirectional = True
         kept: list[Kept | SideHistory] = []
 
         def capture(temporal: TemporalState) -> None:
@@ -600,6 +607,7 @@ class Denoiser:
         if self.params.taa:
             raise ValueError("TAA filters the output causally; it cannot run bidirectionally")
         run = self._start_frame(frame)
+        run.bidirectional = True
         work = run.work
         combined = self._combined_name()
         combine = None
@@ -626,7 +634,7 @@ class Denoiser:
                 combine_histories(
                     temporal.current, temporal.history_illumination, temporal.history_moments,
                     reverse_length, temporal.depth, self._colour_counts,
-                    self._moment_counts, run.weights, self._moment_counts[-1],
+                    self._moment_counts, run.weights, F32(REFERENCE_COUNT),
                     into.colour, into.moments, into.length,
                 )
 
@@ -779,10 +787,12 @@ class Denoiser:
         scratch = temporal.antilag_scratch
         if scratch is None:
             scratch = work["antilag_scratch"]
+        # A bidirectional pass's false alarm costs less: the other side refills the history.
+        sigma = p.antilag_sigma * (PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)
         return antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
-            p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
+            sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
             scratch, work["antilag_lambda"], temporal.gradients,
         )
 

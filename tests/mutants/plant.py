@@ -354,6 +354,14 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "bidirectional-antilag-causal-sigma", "filters",
+        "the passes of a bidirectional run test their history at the causal significance",
+        "svgf_cli/filters/denoiser.py",
+        (("(PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)",
+          "(1.0 if temporal.bidirectional else 1.0)"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
         "svgf_cli/filters/denoiser.py",
         (("        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance",
