@@ -64,8 +64,8 @@ import numpy as np
 
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
+    GLOSSY_REFERENCE_COUNT,
     PASS_ANTILAG_SIGMA_SCALE,
-    REFERENCE_COUNT,
 )
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame, Signal
@@ -1247,15 +1247,18 @@ def effective_count(h: float, alpha: float) -> float:
 def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reprojected,
                       depth: np.ndarray, alpha: float, moments_alpha: float,
                       weights: Sequence[float] = REC709,
-                      reference_count: float = REFERENCE_COUNT,
+                      reference_counts: Sequence[float] | None = None, history_cap: int = 32,
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A bidirectional run's combined accumulation (``docs/bidirectional.md``): per signal
     and surface pixel, ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` for the colour
     (counts with ``alpha``) and the moments ``(l, l^2)`` (counts with ``moments_alpha``),
     whose variance ``m2 - m1^2`` is then scaled by ``min(1, n_ref / (1 + n_f + n_r))``
-    (``n_ref``: ``reference_count``); history length ``1 + h_f + h_r``; background: the
-    current values, length 0."""
+    (``n_ref``: ``reference_counts[s]``, by default ``n(history_cap)`` with
+    ``moments_alpha``); history length ``1 + h_f + h_r``; background: the current values,
+    length 0."""
     x = np.asarray(current, dtype=F64)
+    if reference_counts is None:
+        reference_counts = [effective_count(history_cap, moments_alpha)] * x.shape[0]
     lum = luminance(x, weights)
     x_moments = np.stack([lum, lum * lum], axis=1)
     colour = x.copy()
@@ -1278,7 +1281,7 @@ def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reproj
                                            + nr * r_side[s, :, y, px]) / (1.0 + nf + nr)
                 # the variance relative to the reference count n_ref
                 nf, nr = effective_count(hf, moments_alpha), effective_count(hr, moments_alpha)
-                shrink = min(1.0, reference_count / (1 + nf + nr))
+                shrink = min(1.0, reference_counts[s] / (1 + nf + nr))
                 m1 = moments[s, 0, y, px]
                 moments[s, 1, y, px] = m1 * m1 + shrink * max(moments[s, 1, y, px] - m1 * m1, 0)
                 length[s, y, px] = 1.0 + hf + hr
@@ -1433,7 +1436,9 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
             state.illumination,
             dataclasses.replace(forward_history, history_length=forward_length),
             dataclasses.replace(state.history, history_length=reverse_length),
-            state.geom.depth, params.alpha, params.moments_alpha, state.clean.weights)
+            state.geom.depth, params.alpha, params.moments_alpha, state.clean.weights,
+            [GLOSSY_REFERENCE_COUNT if s.glossy else
+             effective_count(params.history_cap, params.moments_alpha) for s in frame.signals])
         filtered, variance, _ = reverse.filter_spatially(
             state.clean, state.geom, colour, moments, length, state.radiance_mode)
         outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,

@@ -12,7 +12,7 @@ from moving_scene import ACESCG_LUMINANCE, scene_sequence
 
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
-    REFERENCE_COUNT,
+    GLOSSY_REFERENCE_COUNT,
     SideHistory,
     combine_histories,
     consistent_lengths,
@@ -67,18 +67,21 @@ def test_combine_histories_matches_the_reference() -> None:
     current = rng.exponential(2.0, (shape[0], 3, *shape[1:])).astype(F32)
     depth = np.where(rng.random(shape[1:]) < 0.15, 0.0, 4.0).astype(F32)
     params = resolve_params("falcor")  # alpha 0.05, moments alpha 0.2: the two tables differ
+    # n_ref per signal: a glossy signal's and a long causal history's count
+    reference_counts = [GLOSSY_REFERENCE_COUNT,
+                        float(effective_counts(params.moments_alpha, 32)[-1])]
     # in place: the forward history's buffers receive the combination
     out = (forward.colour.copy(), forward.moments.copy(), forward.length.copy())
     combine_histories(current, reverse.colour, reverse.moments, reverse.length, depth,
                       effective_counts(params.alpha, 32),
                       effective_counts(params.moments_alpha, 32),
-                      float32_weights(ACESCG_LUMINANCE), F32(REFERENCE_COUNT), *out)
+                      float32_weights(ACESCG_LUMINANCE), np.array(reference_counts, F32), *out)
 
     def side(s: SideHistory) -> ref.Reprojected:
         return ref.Reprojected(s.colour, s.moments, s.length, np.zeros(s.length.shape))
 
     want = ref.combine_histories(current, side(forward), side(reverse), depth, params.alpha,
-                                 params.moments_alpha, ACESCG_LUMINANCE, REFERENCE_COUNT)
+                                 params.moments_alpha, ACESCG_LUMINANCE, reference_counts)
     for got, expected, what in zip(out, want, ("colour", "moments", "length"), strict=True):
         np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6, err_msg=what)
     # the current sample counts once: with no history on either side the result is it

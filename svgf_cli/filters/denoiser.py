@@ -39,8 +39,8 @@ from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
+    GLOSSY_REFERENCE_COUNT,
     PASS_ANTILAG_SIGMA_SCALE,
-    REFERENCE_COUNT,
     SideHistory,
     combine_histories,
     consistent_lengths,
@@ -622,6 +622,12 @@ class Denoiser:
                                          f"{buffer.shape}")
                     np.copyto(buffer, given)
 
+            # n_ref per signal: a long causal history's count, GLOSSY_REFERENCE_COUNT for
+            # glossy signals (filters.bidirectional).
+            reference_counts = np.array(
+                [GLOSSY_REFERENCE_COUNT if signal.glossy else self._moment_counts[-1]
+                 for signal in frame.signals], dtype=F32)
+
             def combine(temporal: TemporalState) -> None:
                 # The reverse pass blends with its own length, so its shortened one goes to
                 # scratch (the variance planes are dead until the variance is estimated).
@@ -634,7 +640,7 @@ class Denoiser:
                 combine_histories(
                     temporal.current, temporal.history_illumination, temporal.history_moments,
                     reverse_length, temporal.depth, self._colour_counts,
-                    self._moment_counts, run.weights, F32(REFERENCE_COUNT),
+                    self._moment_counts, run.weights, reference_counts,
                     into.colour, into.moments, into.length,
                 )
 

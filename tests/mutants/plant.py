@@ -362,6 +362,14 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "bidirectional-glossy-reference-count", "filters",
+        "a bidirectional run scales a glossy signal's variance as any other signal's",
+        "svgf_cli/filters/denoiser.py",
+        (("[GLOSSY_REFERENCE_COUNT if signal.glossy else self._moment_counts[-1]",
+          "[self._moment_counts[-1] if signal.glossy else self._moment_counts[-1]"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
         "svgf_cli/filters/denoiser.py",
         (("        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance",
