@@ -66,6 +66,8 @@ from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
     GLOSSY_REFERENCE_COUNT,
     PASS_ANTILAG_SIGMA_SCALE,
+    STATIC_FILTERED_SHARE,
+    STATIC_MOTION,
 )
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame, Signal
@@ -1157,8 +1159,11 @@ class ReferenceDenoiser:
             reprojected.history_length, geom.depth, p.alpha, p.moments_alpha, p.history_cap,
             clean.weights)
 
+        accumulation = colour
         colour, variance_before_atrous, colour_history = self.filter_spatially(
             clean, geom, colour, moments, length, radiance_mode)
+        colour_history = self.pass_history(clean, geom, accumulation, moments, length,
+                                           radiance_mode, colour_history)
         self.history = History(np.array(colour_history), np.array(moments), np.array(length),
                                radiance_mode, np.ones(geom.depth.shape, bool), geom.depth,
                                geom.unit_normal, np.array(clean.mesh_id))
@@ -1169,6 +1174,13 @@ class ReferenceDenoiser:
     def before_blend(self, state: FrameState) -> None:
         """Called with the frame's state after the anti-lag hook, before the blend (also on
         a frame without history); a bidirectional run reads the resampled history here."""
+
+    def pass_history(self, clean: CleanFrame, geom: Geometry, accumulation: np.ndarray,
+                     moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray,
+                     colour_history: np.ndarray) -> np.ndarray:
+        """The colour history kept for the next frame (a causal run: ``colour_history``, the
+        output of ``feedback_iteration``); a bidirectional pass keeps its own."""
+        return colour_history
 
     def filter_spatially(self, clean: CleanFrame, geom: Geometry, colour: np.ndarray,
                          moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray
@@ -1386,6 +1398,29 @@ class _Capturing(ReferenceDenoiser):
 
     def before_blend(self, state: FrameState) -> None:
         self.state = state
+
+    def pass_history(self, clean: CleanFrame, geom: Geometry, accumulation: np.ndarray,
+                     moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray,
+                     colour_history: np.ndarray) -> np.ndarray:
+        """``H = w F + (1 - w) U``: ``U`` the colour entering the a-trous (the accumulation,
+        or with ``spatial_variance_blur_color`` its blurred colour), ``F`` the first
+        a-trous iteration's output, ``w = STATIC_FILTERED_SHARE`` where the pixel's motion
+        is below ``STATIC_MOTION`` on both axes, else 0."""
+        p = self.params
+        variance, unfiltered = estimate_variance(accumulation, moments, length, radiance_mode,
+                                                 geom, p)
+        if iteration_count(p.atrous_iterations, *geom.depth.shape) < 1:
+            return unfiltered
+        sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
+                  else p.sigma_luminance for glossy in clean.glossy]
+        guides = luminance_stop_guides(unfiltered, variance, geom.depth, sigmas, clean.weights)
+        filtered, _ = atrous_iteration(unfiltered, variance, guides[0], radiance_mode,
+                                       guides[1], geom.depth, geom.ddx, geom.ddy,
+                                       geom.unit_normal, 1, p.sigma_depth, p.sigma_normal)
+        motion = np.asarray(clean.motion, dtype=F64)
+        still = (np.abs(motion[0]) < STATIC_MOTION) & (np.abs(motion[1]) < STATIC_MOTION)
+        share = np.where(still, STATIC_FILTERED_SHARE, 0.0)
+        return unfiltered + share * (filtered - unfiltered)
 
 
 def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams

@@ -95,6 +95,10 @@ GLOSSY_REFERENCE_COUNT = 3.0
 # A pass of a bidirectional run tests its history against the frame (anti-lag) at this share
 # of the causal significance ``antilag_sigma`` (module docstring).
 PASS_ANTILAG_SIGMA_SCALE = 6.0 / 7.0
+# Share of the first a-trous iteration's output in a pass's colour history where the pixel
+# does not move, and the motion (pixels, each axis) below which it does not (module docstring).
+STATIC_FILTERED_SHARE = 0.3
+STATIC_MOTION = 1e-3
 
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
@@ -213,6 +217,36 @@ def combine_histories(
                 shrink = min(_ONE, reference_counts[s] * mx[x])
                 m1[x] = mean
                 m2[x] = mean * mean + shrink * max(second - mean * mean, _ZERO)
+
+
+@njit(parallel=True, **_JIT)
+def blend_static_history(
+    filtered: np.ndarray,
+    unfiltered: np.ndarray,
+    motion: np.ndarray,
+    share: np.float32,
+    limit: np.float32,
+) -> None:
+    """A pass's colour history, in place in ``filtered`` (S, 3, H, W):
+    ``H = w F + (1 - w) U`` per signal, channel and pixel, with ``F`` the first a-trous
+    iteration's output, ``U`` the colour entering the a-trous, ``w = share`` where the
+    pixel's motion (2, H, W) is below ``limit`` on both axes (it does not move) and 0
+    elsewhere (module docstring)."""
+    num_signals = filtered.shape[0]
+    height, width = motion.shape[1], motion.shape[2]
+    for y in prange(height):
+        mx = motion[0, y]
+        my = motion[1, y]
+        w = np.empty(width, dtype=np.float32)
+        for x in range(width):
+            still = (abs(mx[x]) < limit) & (abs(my[x]) < limit)
+            w[x] = share if still else _ZERO
+        for s in range(num_signals):
+            for c in range(3):
+                f = filtered[s, c, y]
+                u = unfiltered[s, c, y]
+                for x in range(width):
+                    f[x] = u[x] + w[x] * (f[x] - u[x])
 
 
 @njit(inline="always", **_JIT)

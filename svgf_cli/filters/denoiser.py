@@ -41,7 +41,10 @@ from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
     GLOSSY_REFERENCE_COUNT,
     PASS_ANTILAG_SIGMA_SCALE,
+    STATIC_FILTERED_SHARE,
+    STATIC_MOTION,
     SideHistory,
+    blend_static_history,
     combine_histories,
     consistent_lengths,
     effective_counts,
@@ -661,17 +664,22 @@ class Denoiser:
 
     def _pass_history(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> str:
         """The colour history a pass of a bidirectional run keeps (the workspace buffer's
-        name): its accumulation as blended, unfiltered, where a causal run keeps the output
-        of its feedback iteration. The combination weighs each side as an average of its
-        effective samples; a spatially filtered history is a blurred one, and the blur would
-        compound in both passes (``docs/bidirectional.md``). With the variance stage's
-        colour blur (``spatial_variance_blur_color``) the colour entering the a-trous, as a
-        causal run with ``feedback_iteration`` -1 keeps."""
-        if not self.params.spatial_variance_blur_color:
-            return "accumulated"
+        name): its accumulation as blended (with the variance stage's colour blur,
+        ``spatial_variance_blur_color``, the colour entering the a-trous), and where the
+        pixel does not move a share ``STATIC_FILTERED_SHARE`` of the first a-trous
+        iteration's output (:func:`blend_static_history`), where a causal run keeps the
+        output of its feedback iteration everywhere. The combination weighs each side as
+        an average of its effective samples; a spatially filtered history is a blurred one,
+        and where the pixels move the blur compounds with the resampling in both passes;
+        where they do not, some of it pays (``docs/bidirectional.md``)."""
         work = run.work
-        return self._filter_spatially(run, "accumulated", work["moments"],
-                                      work["history_length"], 0, protected).history_name
+        filtered = self._filter_spatially(run, "accumulated", work["moments"],
+                                          work["history_length"], min(1, run.iterations),
+                                          protected, feeds_back=False)
+        if filtered.name != filtered.history_name:
+            blend_static_history(run.plane(filtered.name), run.plane(filtered.history_name),
+                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))
+        return filtered.name
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""

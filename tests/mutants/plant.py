@@ -370,6 +370,14 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "bidirectional-static-history-unfiltered", "filters",
+        "the passes of a bidirectional run keep no filtered colour where pixels stand still",
+        "svgf_cli/filters/denoiser.py",
+        (("run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))",
+          "run.motion, F32(0.0), F32(STATIC_MOTION))"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
         "svgf_cli/filters/denoiser.py",
         (("        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance",
