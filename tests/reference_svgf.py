@@ -63,7 +63,13 @@ from typing import Any
 
 import numpy as np
 
-from svgf_cli.filters.bidirectional import CONSISTENCY_SIGMA
+from svgf_cli.filters.bidirectional import (
+    CONSISTENCY_SIGMA,
+    GLOSSY_REFERENCE_COUNT,
+    PASS_ANTILAG_SIGMA_SCALE,
+    STATIC_FILTERED_SHARE,
+    STATIC_MOTION,
+)
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame, Signal
 
@@ -1238,8 +1244,11 @@ class ReferenceDenoiser:
             reprojected.history_length, geom.depth, p.alpha, p.moments_alpha, p.history_cap,
             clean.weights)
 
+        accumulation = colour
         colour, variance_before_atrous, colour_history = self.filter_spatially(
             clean, geom, colour, moments, length, radiance_mode)
+        colour_history = self.pass_history(clean, geom, accumulation, moments, length,
+                                           radiance_mode, colour_history)
         self.history = History(np.array(colour_history), np.array(moments), np.array(length),
                                radiance_mode, np.ones(geom.depth.shape, bool), geom.depth,
                                geom.unit_normal, np.array(clean.mesh_id))
@@ -1250,6 +1259,13 @@ class ReferenceDenoiser:
     def before_blend(self, state: FrameState) -> None:
         """Called with the frame's state after the anti-lag hook, before the blend (also on
         a frame without history); a bidirectional run reads the resampled history here."""
+
+    def pass_history(self, clean: CleanFrame, geom: Geometry, accumulation: np.ndarray,
+                     moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray,
+                     colour_history: np.ndarray) -> np.ndarray:
+        """The colour history kept for the next frame (a causal run: ``colour_history``, the
+        output of ``feedback_iteration``); a bidirectional pass keeps its own."""
+        return colour_history
 
     def filter_spatially(self, clean: CleanFrame, geom: Geometry, colour: np.ndarray,
                          moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray
@@ -1330,14 +1346,19 @@ def effective_count(h: float, alpha: float) -> float:
 
 def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reprojected,
                       depth: np.ndarray, alpha: float, moments_alpha: float,
-                      weights: Sequence[float] = REC709, history_cap: int = 32,
+                      weights: Sequence[float] = REC709,
+                      reference_counts: Sequence[float] | None = None, history_cap: int = 32,
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A bidirectional run's combined accumulation (``docs/bidirectional.md``): per signal
     and surface pixel, ``c = (x + n_f H_f + n_r H_r) / (1 + n_f + n_r)`` for the colour
     (counts with ``alpha``) and the moments ``(l, l^2)`` (counts with ``moments_alpha``),
-    whose variance ``m2 - m1^2`` is then scaled by ``min(1, n(cap) / (1 + n_f + n_r))``;
-    history length ``1 + h_f + h_r``; background: the current values, length 0."""
+    whose variance ``m2 - m1^2`` is then scaled by ``min(1, n_ref / (1 + n_f + n_r))``
+    (``n_ref``: ``reference_counts[s]``, by default ``n(history_cap)`` with
+    ``moments_alpha``); history length ``1 + h_f + h_r``; background: the current values,
+    length 0."""
     x = np.asarray(current, dtype=F64)
+    if reference_counts is None:
+        reference_counts = [effective_count(history_cap, moments_alpha)] * x.shape[0]
     lum = luminance(x, weights)
     x_moments = np.stack([lum, lum * lum], axis=1)
     colour = x.copy()
@@ -1358,9 +1379,9 @@ def combine_histories(current: np.ndarray, forward: Reprojected, reverse: Reproj
                     nf, nr = effective_count(hf, alpha_), effective_count(hr, alpha_)
                     target[s, :, y, px] = (here[s, :, y, px] + nf * f_side[s, :, y, px]
                                            + nr * r_side[s, :, y, px]) / (1.0 + nf + nr)
-                # the variance relative to a long causal history's count n_ref
+                # the variance relative to the reference count n_ref
                 nf, nr = effective_count(hf, moments_alpha), effective_count(hr, moments_alpha)
-                shrink = min(1.0, effective_count(history_cap, moments_alpha) / (1 + nf + nr))
+                shrink = min(1.0, reference_counts[s] / (1 + nf + nr))
                 m1 = moments[s, 0, y, px]
                 moments[s, 1, y, px] = m1 * m1 + shrink * max(moments[s, 1, y, px] - m1 * m1, 0)
                 length[s, y, px] = 1.0 + hf + hr
@@ -1466,6 +1487,29 @@ class _Capturing(ReferenceDenoiser):
     def before_blend(self, state: FrameState) -> None:
         self.state = state
 
+    def pass_history(self, clean: CleanFrame, geom: Geometry, accumulation: np.ndarray,
+                     moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray,
+                     colour_history: np.ndarray) -> np.ndarray:
+        """``H = w F + (1 - w) U``: ``U`` the colour entering the a-trous (the accumulation,
+        or with ``spatial_variance_blur_color`` its blurred colour), ``F`` the first
+        a-trous iteration's output, ``w = STATIC_FILTERED_SHARE`` where the pixel's motion
+        is below ``STATIC_MOTION`` on both axes, else 0."""
+        p = self.params
+        variance, unfiltered = estimate_variance(accumulation, moments, length, radiance_mode,
+                                                 geom, p)
+        if iteration_count(p.atrous_iterations, *geom.depth.shape) < 1:
+            return unfiltered
+        sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
+                  else p.sigma_luminance for glossy in clean.glossy]
+        guides = luminance_stop_guides(unfiltered, variance, geom.depth, sigmas, clean.weights)
+        filtered, _ = atrous_iteration(unfiltered, variance, guides[0], radiance_mode,
+                                       guides[1], geom.depth, geom.ddx, geom.ddy,
+                                       geom.unit_normal, 1, p.sigma_depth, p.sigma_normal)
+        motion = np.asarray(clean.motion, dtype=F64)
+        still = (np.abs(motion[0]) < STATIC_MOTION) & (np.abs(motion[1]) < STATIC_MOTION)
+        share = np.where(still, STATIC_FILTERED_SHARE, 0.0)
+        return unfiltered + share * (filtered - unfiltered)
+
 
 def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
                             ) -> list[ReferenceOutput]:
@@ -1478,7 +1522,9 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
     frame (:func:`combine_histories`), filtered spatially and composed. Returns the outputs
     in frame order."""
     # Each pass keeps its accumulation unfiltered as its history (feedback_iteration -1).
-    passes = params.replace(feedback_iteration=-1)
+    # Their anti-lag tests at a share of the causal significance (the other side refills).
+    passes = params.replace(feedback_iteration=-1,
+                            antilag_sigma=params.antilag_sigma * PASS_ANTILAG_SIGMA_SCALE)
     forward = _Capturing(passes)
     kept = []
     for frame in frames:
@@ -1514,7 +1560,8 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
             dataclasses.replace(forward_history, history_length=forward_length),
             dataclasses.replace(state.history, history_length=reverse_length),
             state.geom.depth, params.alpha, params.moments_alpha, state.clean.weights,
-            params.history_cap)
+            [GLOSSY_REFERENCE_COUNT if s.glossy else
+             effective_count(params.history_cap, params.moments_alpha) for s in frame.signals])
         filtered, variance, _ = reverse.filter_spatially(
             state.clean, state.geom, colour, moments, length, state.radiance_mode)
         outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,

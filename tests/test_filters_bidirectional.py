@@ -12,7 +12,11 @@ from moving_scene import ACESCG_LUMINANCE, scene_sequence
 
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
+    GLOSSY_REFERENCE_COUNT,
+    STATIC_FILTERED_SHARE,
+    STATIC_MOTION,
     SideHistory,
+    blend_static_history,
     combine_histories,
     consistent_lengths,
     effective_counts,
@@ -66,19 +70,21 @@ def test_combine_histories_matches_the_reference() -> None:
     current = rng.exponential(2.0, (shape[0], 3, *shape[1:])).astype(F32)
     depth = np.where(rng.random(shape[1:]) < 0.15, 0.0, 4.0).astype(F32)
     params = resolve_params("falcor")  # alpha 0.05, moments alpha 0.2: the two tables differ
+    # n_ref per signal: a glossy signal's and a long causal history's count
+    reference_counts = [GLOSSY_REFERENCE_COUNT,
+                        float(effective_counts(params.moments_alpha, 32)[-1])]
     # in place: the forward history's buffers receive the combination
     out = (forward.colour.copy(), forward.moments.copy(), forward.length.copy())
     combine_histories(current, reverse.colour, reverse.moments, reverse.length, depth,
                       effective_counts(params.alpha, 32),
                       effective_counts(params.moments_alpha, 32),
-                      float32_weights(ACESCG_LUMINANCE),
-                      effective_counts(params.moments_alpha, 32)[-1], *out)
+                      float32_weights(ACESCG_LUMINANCE), np.array(reference_counts, F32), *out)
 
     def side(s: SideHistory) -> ref.Reprojected:
         return ref.Reprojected(s.colour, s.moments, s.length, np.zeros(s.length.shape))
 
     want = ref.combine_histories(current, side(forward), side(reverse), depth, params.alpha,
-                                 params.moments_alpha, ACESCG_LUMINANCE)
+                                 params.moments_alpha, ACESCG_LUMINANCE, reference_counts)
     for got, expected, what in zip(out, want, ("colour", "moments", "length"), strict=True):
         np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6, err_msg=what)
     # the current sample counts once: with no history on either side the result is it
@@ -220,14 +226,35 @@ def test_pack_history_error_is_half_rounding_at_any_exposure() -> None:
     np.testing.assert_allclose(back.moments[:, 1], side.moments[:, 1], rtol=1e-5)
 
 
+def test_blend_static_history_matches_the_reference() -> None:
+    """``H = U + w (F - U)`` with ``w = share`` where both motion components are below the
+    limit, in float64, on pixels still, barely moving, moving and in a hole."""
+    rng = np.random.default_rng(5)
+    shape = (2, 3, 7, 9)
+    filtered = rng.exponential(1.0, shape).astype(F32)
+    unfiltered = rng.exponential(1.0, shape).astype(F32)
+    motion = rng.choice(np.array([0.0, 5e-4, -2e-3, 0.7, -3.0, NO_MOTION], F32), (2, 7, 9))
+    motion[:, 0, :3] = 0.0  # certainly some still pixels
+    got = filtered.copy()
+    blend_static_history(got, unfiltered, motion, F32(0.3), F32(1e-3))
+    still = (np.abs(motion[0].astype(np.float64)) < 1e-3) & (np.abs(motion[1]) < 1e-3)
+    want = unfiltered + np.where(still, 0.3, 0.0) * (filtered.astype(np.float64) - unfiltered)
+    assert still.any() and not still.all()
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(got[:, :, ~still], unfiltered[:, :, ~still])
+
+
 @pytest.mark.parametrize("preset", ["default", "falcor"])
-def test_forward_step_keeps_the_unfiltered_history(preset: str) -> None:
-    """The forward pass runs as a causal run that feeds back its unfiltered accumulation
-    (``feedback_iteration`` -1; with falcor's colour blur, the colour entering the a-trous):
-    its stored history is that run's, bit for bit, and not the filtered one a causal run
-    with the preset's own feedback iteration keeps."""
+def test_forward_step_keeps_the_unfiltered_history_where_pixels_move(preset: str) -> None:
+    """Where every pixel moves the forward pass runs as a causal run that feeds back its
+    unfiltered accumulation (``feedback_iteration`` -1; with falcor's colour blur, the
+    colour entering the a-trous): its stored history is that run's, bit for bit, and not
+    the filtered one a causal run with the preset's own feedback iteration keeps. Where the
+    wall stands still it keeps ``STATIC_FILTERED_SHARE`` of the filtered one there."""
     params = resolve_params(preset)
     frames = scene_sequence(4)
+    assert not any(np.any(np.all(np.abs(f.motion) < STATIC_MOTION, axis=0) & (f.depth > 0))
+                   for f in frames)
     causal = Denoiser(params.replace(feedback_iteration=-1))
     forward, filtered = Denoiser(params), Denoiser(params)
     for frame in frames:
@@ -238,6 +265,23 @@ def test_forward_step_keeps_the_unfiltered_history(preset: str) -> None:
     for key in ("history_illumination", "history_moments", "history_length", "history_mode"):
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
     assert not np.array_equal(a["history_illumination"], filtered.state()["history_illumination"])
+    # a still wall (first frame: no history carries one pixel's difference to another):
+    # the history there is not the unfiltered one, elsewhere it is
+    still_frames = scene_sequence(1, wall_speed=0.0)
+    causal = Denoiser(params.replace(feedback_iteration=-1))
+    forward = Denoiser(params)
+    for frame in still_frames:
+        causal.process(frame)
+        forward.forward_step(frame)
+    still = np.all(np.abs(still_frames[-1].motion) < STATIC_MOTION, axis=0)
+    a, b = causal.state(), forward.state()
+    assert still.mean() > 0.3
+    moving = ~still & (still_frames[-1].depth > 0)
+    np.testing.assert_array_equal(a["history_illumination"][:, :, moving],
+                                  b["history_illumination"][:, :, moving])
+    assert not np.array_equal(a["history_illumination"][:, :, still],
+                              b["history_illumination"][:, :, still])
+    assert 0.0 < STATIC_FILTERED_SHARE < 1.0
 
 
 CASES = {
@@ -247,6 +291,8 @@ CASES = {
     "default, three signals with glossy, light step": (
         resolve_params("default"), {"layout": "three", "light_step": (2, 0.4),
                                     "motion_next": True}),
+    # A still wall: the passes keep part of their filtered colour there.
+    "default, still wall": (resolve_params("default"), {"wall_speed": 0.0, "motion_next": True}),
     "falcor, three signals, light step": (
         resolve_params("falcor", firefly_clamp=2.0, history_clamp=1.5),
         {"layout": "three", "luminance_weights": ACESCG_LUMINANCE, "light_step": (3, 0.4),

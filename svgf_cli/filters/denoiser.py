@@ -39,7 +39,12 @@ from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
+    GLOSSY_REFERENCE_COUNT,
+    PASS_ANTILAG_SIGMA_SCALE,
+    STATIC_FILTERED_SHARE,
+    STATIC_MOTION,
     SideHistory,
+    blend_static_history,
     combine_histories,
     consistent_lengths,
     effective_counts,
@@ -169,6 +174,8 @@ class TemporalState:
     glossy: tuple[bool, ...] = ()
     # Where anti-lag may keep its statistics (None: a workspace plane of its own).
     antilag_scratch: np.ndarray | None = None
+    # A pass of a bidirectional run: anti-lag tests at PASS_ANTILAG_SIGMA_SCALE of its sigma.
+    bidirectional: bool = False
 
 
 @dataclass
@@ -181,6 +188,7 @@ class _FrameRun:
     work: _Workspace
     weights: tuple[np.float32, np.float32, np.float32]
     iterations: int  # a-trous iterations at this frame's size (atrous_iterations_for)
+    bidirectional: bool = False  # a pass of a bidirectional run (forward_step, reverse_step)
     counts: dict[str, int] = field(
         default_factory=lambda: {"nonfinite": 0, "extreme": 0, "history_resets": 0})
     depth: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
@@ -400,7 +408,7 @@ class Denoiser:
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
                 run.weights, _gradient_samples(frame) if p.antilag_gradients else None,
                 tuple(signal.glossy for signal in frame.signals),
-                antilag_scratch=run.plane("antilag_scratch"),
+                antilag_scratch=run.plane("antilag_scratch"), bidirectional=run.bidirectional,
             )
             shortened = self._before_accumulation(temporal)
             if p.antilag:
@@ -414,7 +422,8 @@ class Denoiser:
             moments.fill(0.0)
             self._lend_stale_history(run)
             temporal = TemporalState(run.names, illumination, mode, accumulated, moments,
-                                     history_length, depth, run.weights)
+                                     history_length, depth, run.weights,
+                                     bidirectional=run.bidirectional)
         if before_blend is not None:
             before_blend(temporal)
         accumulate_in_place(
@@ -576,6 +585,7 @@ class Denoiser:
         blend; views of this Denoiser's buffers, valid only during the call), by default a
         copy."""
         run = self._start_frame(frame)
+        run.bidirectional = True
         kept: list[Kept | SideHistory] = []
 
         def capture(temporal: TemporalState) -> None:
@@ -613,6 +623,7 @@ class Denoiser:
         if self.params.taa:
             raise ValueError("TAA filters the output causally; it cannot run bidirectionally")
         run = self._start_frame(frame)
+        run.bidirectional = True
         work = run.work
         combined = self._combined_name()
         combine = None
@@ -627,6 +638,12 @@ class Denoiser:
                                          f"{buffer.shape}")
                     np.copyto(buffer, given)
 
+            # n_ref per signal: a long causal history's count, GLOSSY_REFERENCE_COUNT for
+            # glossy signals (filters.bidirectional).
+            reference_counts = np.array(
+                [GLOSSY_REFERENCE_COUNT if signal.glossy else self._moment_counts[-1]
+                 for signal in frame.signals], dtype=F32)
+
             def combine(temporal: TemporalState) -> None:
                 # The reverse pass blends with its own length, so its shortened one goes to
                 # scratch (the variance planes are dead until the variance is estimated).
@@ -639,7 +656,7 @@ class Denoiser:
                 combine_histories(
                     temporal.current, temporal.history_illumination, temporal.history_moments,
                     reverse_length, temporal.depth, self._colour_counts,
-                    self._moment_counts, run.weights, self._moment_counts[-1],
+                    self._moment_counts, run.weights, reference_counts,
                     into.colour, into.moments, into.length,
                 )
 
@@ -660,17 +677,22 @@ class Denoiser:
 
     def _pass_history(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> str:
         """The colour history a pass of a bidirectional run keeps (the workspace buffer's
-        name): its accumulation as blended, unfiltered, where a causal run keeps the output
-        of its feedback iteration. The combination weighs each side as an average of its
-        effective samples; a spatially filtered history is a blurred one, and the blur would
-        compound in both passes (``docs/bidirectional.md``). With the variance stage's
-        colour blur (``spatial_variance_blur_color``) the colour entering the a-trous, as a
-        causal run with ``feedback_iteration`` -1 keeps."""
-        if not self.params.spatial_variance_blur_color:
-            return "accumulated"
+        name): its accumulation as blended (with the variance stage's colour blur,
+        ``spatial_variance_blur_color``, the colour entering the a-trous), and where the
+        pixel does not move a share ``STATIC_FILTERED_SHARE`` of the first a-trous
+        iteration's output (:func:`blend_static_history`), where a causal run keeps the
+        output of its feedback iteration everywhere. The combination weighs each side as
+        an average of its effective samples; a spatially filtered history is a blurred one,
+        and where the pixels move the blur compounds with the resampling in both passes;
+        where they do not, some of it pays (``docs/bidirectional.md``)."""
         work = run.work
-        return self._filter_spatially(run, "accumulated", work["moments"],
-                                      work["history_length"], 0, protected).history_name
+        filtered = self._filter_spatially(run, "accumulated", work["moments"],
+                                          work["history_length"], min(1, run.iterations),
+                                          protected, feeds_back=False)
+        if filtered.name != filtered.history_name:
+            blend_static_history(run.plane(filtered.name), run.plane(filtered.history_name),
+                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))
+        return filtered.name
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""
@@ -817,10 +839,12 @@ class Denoiser:
         scratch = temporal.antilag_scratch
         if scratch is None:
             scratch = work["antilag_scratch"]
+        # A bidirectional pass's false alarm costs less: the other side refills the history.
+        sigma = p.antilag_sigma * (PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)
         return antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
-            p.antilag_sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
+            sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
             scratch, work["antilag_lambda"], temporal.gradients,
         )
 
