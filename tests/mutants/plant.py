@@ -266,8 +266,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "guide-flag-dropped", "io", "a combined signal is not marked as demodulated by the "
         "albedo AOV",
         "svgf_cli/io/signals.py",
-        (("                              guide_albedo=recipe.guide_albedo))",
-          "                              ))"),),
+        (("                              guide_albedo=recipe.guide_albedo, mixed=recipe.mixed))",
+          "                              mixed=recipe.mixed))"),),
         ("tests/test_io_signals.py", *IO_TESTS),
     ),
     Mutant(
@@ -427,8 +427,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
         "svgf_cli/filters/denoiser.py",
-        (("        glossy_sigma = p.glossy_sigma_luminance or p.sigma_luminance",
-          "        glossy_sigma = p.sigma_luminance"),),
+        (("        return params.glossy_sigma_luminance or params.sigma_luminance",
+          "        return params.sigma_luminance"),),
         FILTER_TESTS,
     ),
     Mutant(
