@@ -514,7 +514,9 @@ def despike_lone(output: np.ndarray, emission: np.ndarray | None, radiance_mode:
 def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np.ndarray,
                      depth: np.ndarray, spread: Sequence[bool], k: float,
                      weights: Sequence[float] = REC709, ratio: float = 4.0, radius: int = 4,
-                     depth_tolerance: float = 0.1) -> tuple[np.ndarray, list[int]]:
+                     depth_tolerance: float = 0.1, albedo: np.ndarray | None = None,
+                     guide: Sequence[bool] = (), albedo_tolerance: float = 0.25,
+                     ) -> tuple[np.ndarray, list[int]]:
     """Per signal ``s`` with ``spread[s]``: a demodulated surface sample whose luminance
     exceeds ``L = max(m1 + k sqrt(max(m2 - m1^2, 0)), ratio * max(M, 0))`` (``m1``, ``m2``
     the history's luminance moments; ``M`` the second-largest luminance among its in-image
@@ -522,7 +524,9 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
     where there is none) is a firefly. Every firefly's rgb is scaled to ``L``; then each
     one's removed rgb is added in equal shares to the demodulated surface pixels of the
     ``(2 radius + 1)^2`` window around it (itself included) whose depth is within
-    ``depth_tolerance`` of its own, relatively. Returns the result and the number of
+    ``depth_tolerance`` of its own, relatively; for a signal with ``guide[s]`` (demodulated
+    by the G-buffer albedo) also whose colour ``albedo[s]`` has a luminance within
+    ``albedo_tolerance`` of the firefly's, relatively. Returns the result and the number of
     fireflies per signal."""
     c = np.array(current, dtype=F64)
     z = np.asarray(depth, dtype=F64)
@@ -555,6 +559,11 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
             xs = slice(max(x - radius, 0), x + radius + 1)
             receives = demodulated[ys, xs] & (np.abs(z[ys, xs] - z[y, x])
                                               <= depth_tolerance * z[y, x])
+            if guide and guide[s]:
+                assert albedo is not None
+                colour = luminance(np.asarray(albedo[s], dtype=F64), weights)
+                receives &= np.abs(colour[ys, xs] - colour[y, x]) <= (
+                    albedo_tolerance * colour[y, x])
             c[s][:, ys, xs] += np.where(receives, 1.0, 0.0) * (excess / receives.sum())[
                 :, None, None]
         counts[s] = len(found)
@@ -1230,7 +1239,8 @@ class ReferenceDenoiser:
             if p.spread_fireflies > 0.0:  # against the history anti-lag left
                 illumination, found = spread_fireflies(
                     illumination, radiance_mode, reprojected.moments, geom.depth,
-                    [not g for g in clean.glossy], p.spread_fireflies, clean.weights)
+                    [not g for g in clean.glossy], p.spread_fireflies, clean.weights,
+                    albedo=clean.albedo, guide=clean.guide)
                 counts.update({f"fireflies_spread.{name}": count
                                for name, count in zip(clean.names, found, strict=True)})
             self.last_reprojected = reprojected

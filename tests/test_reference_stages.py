@@ -447,8 +447,9 @@ def test_firefly_spreading_matches_reference(weights: tuple) -> None:
     current, moments, mask, radiance_mode, depth = _firefly_case(3)
     got = current.copy()
     keep = np.empty(depth.shape, F32)
-    counts = spread_fireflies(got, moments, mask, depth, (True, True, False), 10.0, weights,
-                              keep)
+    albedo = [np.full((3, *depth.shape), 0.5, F32)] * 3
+    counts = spread_fireflies(got, albedo, (False,) * 3, moments, mask, depth,
+                              (True, True, False), 10.0, weights, keep)
     want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
                                        [True, True, False], 10.0, weights)
     _close(got, want, 2e-6, "firefly spreading")
@@ -480,13 +481,53 @@ def test_firefly_spreading_leaves_a_converged_history_alone() -> None:
     moments[:, 0, 5, 5] = 100.0  # the history knows this pixel is bright
     moments[:, 1, 5, 5] = 100.0 ** 2 * 1.1
     got = current.copy()
-    counts = spread_fireflies(got, moments, mask, depth, (True, True, False), 10.0, REC709,
-                              np.empty(depth.shape, F32))
+    albedo = [np.full((3, *depth.shape), 0.5, F32)] * 3
+    counts = spread_fireflies(got, albedo, (False,) * 3, moments, mask, depth,
+                              (True, True, False), 10.0, REC709, np.empty(depth.shape, F32))
     want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
                                        [True, True, False], 10.0)
     _close(got, want, 2e-6, "firefly spreading")
     assert counts == found
     assert ref.luminance(want, REC709)[0, 5, 5] >= ref.luminance(current, REC709)[0, 5, 5]
+
+
+def test_firefly_spreading_keeps_to_its_colour_under_the_g_buffer_albedo() -> None:
+    """A signal demodulated by the G-buffer albedo (a combined colour) shares a firefly's
+    excess only with pixels of a similar colour (within 25 %): that albedo is no reflectance
+    of the glossy light such a signal carries, and shared onto a brighter colour the light
+    would come back brighter. A signal demodulated by its own reflectance shares across
+    colours (its illumination is what is smooth)."""
+    height, width = 12, 12
+    current = np.full((1, 3, height, width), 0.5, F32)
+    current[0, :, 5, 5] = 50.0  # one firefly, on a dark square
+    moments = np.empty((1, 2, height, width), F32)
+    moments[:, 0] = 0.5
+    moments[:, 1] = 0.25 * 1.01
+    depth = np.full((height, width), 5.0, F32)
+    radiance_mode = np.zeros((1, height, width), dtype=bool)
+    checker = np.where((np.indices(depth.shape).sum(axis=0) // 2) % 2 == 1, 0.12, 0.48)
+    assert checker[5, 5] == 0.12
+    albedo = np.broadcast_to(checker.astype(F32), (1, 3, height, width)).copy()
+    window = (slice(1, 10), slice(1, 10))
+    light = checker[window] == 0.48
+    others = np.ones((9, 9), dtype=bool)
+    others[4, 4] = False  # the firefly itself, which loses its excess
+    for guide in (True, False):
+        got = current.copy()
+        counts = spread_fireflies(got, [albedo[0]], (guide,), moments, mode_mask(radiance_mode),
+                                  depth, (True,), 10.0, REC709, np.empty(depth.shape, F32))
+        want, found = ref.spread_fireflies(current, radiance_mode, moments, depth, [True], 10.0,
+                                           albedo=albedo, guide=[guide])
+        _close(got, want, 2e-6, "firefly spreading")
+        assert counts == found == [1]
+        gained = (want[0] - current[0])[1][window]
+        assert gained[4, 4] < 0.0
+        if guide:  # only the dark squares share it
+            assert np.all(gained[light] == 0.0) and np.all(gained[~light & others] > 0.0)
+        else:
+            assert np.all(gained[others] > 0.0)
+        np.testing.assert_allclose(want[0].sum(), current[0].astype(np.float64).sum(),
+                                   rtol=1e-9)  # the excess is kept, as demodulated light
 
 
 def test_history_clamp_matches_reference() -> None:

@@ -414,7 +414,7 @@ class Denoiser:
             if p.antilag:
                 counts["antilag"] = shortened
             if p.spread_fireflies > 0.0:
-                counts.update(self._spread_fireflies(temporal))
+                counts.update(self._spread_fireflies(temporal, frame.signals))
         else:
             # Blend factor 1 everywhere; clear the stale contents (weight 0, but 0 * inf).
             history_length.fill(0.0)
@@ -848,7 +848,8 @@ class Denoiser:
             scratch, work["antilag_lambda"], temporal.gradients,
         )
 
-    def _spread_fireflies(self, temporal: TemporalState) -> dict[str, int]:
+    def _spread_fireflies(self, temporal: TemporalState,
+                          signals: list[Signal]) -> dict[str, int]:
         """Bound the current samples that are fireflies against the history anti-lag left
         and share their excess over their surface (``filters.fireflies``); glossy signals
         are left alone. Not on a frame without history: a single frame cannot tell a small
@@ -857,7 +858,9 @@ class Denoiser:
         assert work is not None
         glossy = temporal.glossy or (False,) * len(temporal.names)
         spread = spread_fireflies(
-            temporal.current, temporal.history_moments, temporal.mode, temporal.depth,
+            temporal.current, [signal.albedo for signal in signals],
+            tuple(signal.guide_albedo for signal in signals), temporal.history_moments,
+            temporal.mode, temporal.depth,
             tuple(not g for g in glossy), self.params.spread_fireflies,
             temporal.luminance_weights, work["despike_luminance"])
         return {f"fireflies_spread.{name}": count

@@ -19,7 +19,9 @@ second-largest current luminance among its 8 same-mode surface neighbours: outli
 its own past *and* against its neighbours; a lighting change raises the neighbours too) is
 scaled down to ``L(p)`` (hue kept), and its excess rgb ``c(p) (1 - L(p) / l(p))`` is shared
 equally among the surface pixels ``q`` of the ``(2 RADIUS + 1)^2`` window around ``p``
-(``p`` included) in the same mode with ``|z(q) - z(p)| <= DEPTH_TOLERANCE z(p)``. The
+(``p`` included) in the same mode with ``|z(q) - z(p)| <= DEPTH_TOLERANCE z(p)``; for a
+signal demodulated by the G-buffer albedo also ``|a(q) - a(p)| <= ALBEDO_TOLERANCE a(p)``
+(``a`` the luminance of its colour: the same material, see ``ALBEDO_TOLERANCE``). The
 signal's energy over the image is unchanged; only where it sits moves by a few pixels, which
 the converged image also spreads it over. Glossy signals are left alone: a small bright
 highlight that moves is the signal there, not an outlier.
@@ -43,6 +45,14 @@ _BACKGROUND = F32(-np.finfo(np.float32).max)
 RADIUS = 4
 # A receiving pixel's depth within this fraction of the firefly's: the same surface.
 DEPTH_TOLERANCE = F32(0.1)
+# For a signal demodulated by the G-buffer albedo (``guide``), also its colour's luminance
+# within this fraction of the firefly's. The excess is shared as demodulated light, which
+# each receiver's colour remodulates. That is right for a reflectance (the illumination is
+# what is smooth), but the G-buffer albedo is no reflectance of the glossy light such a
+# signal carries: a glint over a dark checker square (0.06), shared onto a light one
+# (0.48), came back eight times brighter (7.5x the reference's local maximum).
+ALBEDO_TOLERANCE = F32(0.25)
+ANY_COLOUR = F32(np.finfo(np.float32).max)
 # How many times its second-brightest same-mode neighbour a sample must be.
 NEIGHBOUR_RATIO = F32(4.0)
 
@@ -109,14 +119,20 @@ def _bounds(
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
-def _receives(zq: np.float32, z: np.float32, mode_q: np.uint16, bit: np.uint16) -> bool:
-    """Whether a pixel at depth ``zq`` in mode ``mode_q`` shares a firefly at depth ``z``."""
-    return zq > _ZERO and (mode_q & bit) == 0 and abs(zq - z) <= DEPTH_TOLERANCE * z
+def _receives(zq: np.float32, z: np.float32, mode_q: np.uint16, bit: np.uint16,
+              aq: np.float32, a: np.float32, tolerance: np.float32) -> bool:
+    """Whether a pixel at depth ``zq`` in mode ``mode_q`` with demodulation-colour luminance
+    ``aq`` shares a firefly at depth ``z`` with colour luminance ``a``."""
+    return (zq > _ZERO and (mode_q & bit) == 0 and abs(zq - z) <= DEPTH_TOLERANCE * z
+            and abs(aq - a) <= tolerance * a)
 
 
 @njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 def _share(
     illumination: np.ndarray,
+    albedo: np.ndarray,
+    albedo_tolerance: np.float32,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
     mode: np.ndarray,
     depth: np.ndarray,
     bit: np.uint16,
@@ -147,22 +163,24 @@ def _share(
                     excess[i, c] = value - kept
                     illumination[c, y, x] = kept
                 i += 1
+    wr, wg, wb = luminance_weights
     for i in range(total):
         y, x = ys[i], xs[i]
         z = depth[y, x]
+        a = wr * albedo[0, y, x] + wg * albedo[1, y, x] + wb * albedo[2, y, x]
         y0, y1 = max(y - RADIUS, 0), min(y + RADIUS + 1, height)
         x0, x1 = max(x - RADIUS, 0), min(x + RADIUS + 1, width)
         receivers = 0
         for yy in range(y0, y1):
             for xx in range(x0, x1):
-                zq = depth[yy, xx]
-                if _receives(zq, z, mode[yy, xx], bit):
+                aq = wr * albedo[0, yy, xx] + wg * albedo[1, yy, xx] + wb * albedo[2, yy, xx]
+                if _receives(depth[yy, xx], z, mode[yy, xx], bit, aq, a, albedo_tolerance):
                     receivers += 1
         share = _ONE / F32(receivers)  # p itself always receives
         for yy in range(y0, y1):
             for xx in range(x0, x1):
-                zq = depth[yy, xx]
-                if _receives(zq, z, mode[yy, xx], bit):
+                aq = wr * albedo[0, yy, xx] + wg * albedo[1, yy, xx] + wb * albedo[2, yy, xx]
+                if _receives(depth[yy, xx], z, mode[yy, xx], bit, aq, a, albedo_tolerance):
                     for c in range(3):
                         illumination[c, yy, xx] += excess[i, c] * share
     return total
@@ -170,6 +188,8 @@ def _share(
 
 def spread_fireflies(
     illumination: np.ndarray,
+    albedo: list[np.ndarray],
+    guide: tuple[bool, ...],
     moments: np.ndarray,
     mode: np.ndarray,
     depth: np.ndarray,
@@ -181,8 +201,10 @@ def spread_fireflies(
     """In place on the current samples ``illumination`` (S, 3, H, W): per signal ``s`` with
     ``spread[s]``, bound each firefly to ``L(p)`` and share its excess over its window (the
     module docstring's rule); ``moments`` (S, 2, H, W) are the reprojected history's,
-    ``mode`` the (H, W) uint16 modes (bit ``s`` set: radiance). ``keep`` is an (H, W)
-    float32 scratch plane. Returns the number of fireflies per signal."""
+    ``albedo`` the signals' demodulation colours (3, H, W) each and ``guide`` whether each
+    is the G-buffer albedo (``Signal.guide_albedo``), ``mode`` the (H, W) uint16
+    modes (bit ``s`` set: radiance). ``keep`` is an (H, W) float32 scratch plane. Returns
+    the number of fireflies per signal."""
     height = depth.shape[0]
     flagged = np.zeros(height, dtype=np.int64)
     counts = []
@@ -193,5 +215,7 @@ def spread_fireflies(
         bit = np.uint16(1 << s)
         _bounds(illumination[s], moments[s], mode, depth, bit, F32(k), NEIGHBOUR_RATIO,
                 luminance_weights, keep, flagged)
-        counts.append(int(_share(illumination[s], mode, depth, bit, keep, flagged)))
+        tolerance = ALBEDO_TOLERANCE if guide[s] else ANY_COLOUR
+        counts.append(int(_share(illumination[s], albedo[s], tolerance, luminance_weights,
+                                 mode, depth, bit, keep, flagged)))
     return counts

@@ -327,8 +327,16 @@ MUTANTS: tuple[Mutant, ...] = (
         "fireflies-cross-depth-edges", "filters",
         "a firefly's excess is shared with pixels of another surface",
         "svgf_cli/filters/fireflies.py",
-        (("    return zq > _ZERO and (mode_q & bit) == 0 and abs(zq - z) <= DEPTH_TOLERANCE * z",
-          "    return zq > _ZERO and (mode_q & bit) == 0"),),
+        (("    return (zq > _ZERO and (mode_q & bit) == 0 and abs(zq - z) <= DEPTH_TOLERANCE * z\n",
+          "    return (zq > _ZERO and (mode_q & bit) == 0\n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "fireflies-guide-any-colour", "filters",
+        "a firefly under the G-buffer albedo shares its light with brighter colours too",
+        "svgf_cli/filters/fireflies.py",
+        (("        tolerance = ALBEDO_TOLERANCE if guide[s] else ANY_COLOUR",
+          "        tolerance = ANY_COLOUR"),),
         FILTER_TESTS,
     ),
     Mutant(
