@@ -154,6 +154,12 @@ def test_traced_direct_indirect_without_its_layers_is_built_from_the_lobes(
         expected = sum(rgb(layers, f"{s}{tag}", "") * rgb(layers, f"{s}Col", "")
                        for s in ("Diff", "Gloss"))
         np.testing.assert_allclose(frame.frame.signal(part).radiance, expected, rtol=1e-6)
+        # Demodulated by the G-buffer albedo, which does not describe the glossy light in
+        # it: marked so (its floor; firefly spreading's colour test), as the combined colour.
+        assert frame.frame.signal(part).guide_albedo
+    # Cycles builds the pair over the lobes' own colours: reflectances, not the guide.
+    cycles = read_frame(ROLL / "in.0001.exr", build_mapping("cycles", signals="direct-indirect"))
+    assert not any(s.guide_albedo for s in cycles.frame.signals)
 
 
 def test_auto_takes_the_first_set_of_the_measured_order_the_file_offers() -> None:

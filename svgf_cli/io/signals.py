@@ -367,9 +367,12 @@ def _recipes(
             albedo = tuple(c for lobe in lobes.present if (c := colour(lobe)) is not None)
         else:
             albedo = ("albedo",)
+        # Summed lobes over the G-buffer albedo: glossy light over a dark diffuse base, as
+        # in the combined colour (Signal.guide_albedo: its floor and firefly colour test).
         return tuple(
             SignalRecipe(part, tuple(Term((f"{lobe}_{part}",), times(lobe))
-                                     for lobe in lobes.present), albedo)
+                                     for lobe in lobes.present), albedo,
+                         guide_albedo=albedo == ("albedo",))
             for part in ("direct", "indirect")
         ), True
     return (SignalRecipe("color", (Term(("color",)),), ("albedo",), minus_emission=True,

@@ -300,6 +300,14 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "lobe-pair-guide-unmarked", "io",
+        "direct + indirect summed from lobes over the albedo AOV is not marked as guided",
+        "svgf_cli/io/signals.py",
+        (("                         guide_albedo=albedo == (\"albedo\",))",
+          "                         guide_albedo=False)"),),
+        ("tests/test_io_signals.py", *IO_TESTS),
+    ),
+    Mutant(
         "combined-not-mixed", "io",
         "the combined colour is not marked as mixing direct and indirect light",
         "svgf_cli/io/signals.py",
