@@ -22,9 +22,9 @@ equally among the surface pixels ``q`` of the ``(2 RADIUS + 1)^2`` window around
 (``p`` included) in the same mode with ``|z(q) - z(p)| <= DEPTH_TOLERANCE z(p)``; for a
 signal demodulated by the G-buffer albedo also ``|a(q) - a(p)| <= ALBEDO_TOLERANCE a(p)``
 (``a`` the luminance of its colour: the same material, see ``ALBEDO_TOLERANCE``). The
-signal's energy over the image is unchanged; only where it sits moves by a few pixels, which
-the converged image also spreads it over. Glossy signals are left alone: a small bright
-highlight that moves is the signal there, not an outlier.
+signal's demodulated light over the image is unchanged; only where it sits moves by a few
+pixels, which the converged image also spreads it over. Glossy signals are left alone: a
+small bright highlight that moves is the signal there, not an outlier.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ DEPTH_TOLERANCE = F32(0.1)
 # signal carries: a glint over a dark checker square (0.06), shared onto a light one
 # (0.48), came back eight times brighter (7.5x the reference's local maximum).
 ALBEDO_TOLERANCE = F32(0.25)
-ANY_COLOUR = F32(np.finfo(np.float32).max)
+ANY_COLOUR = F32(1e30)  # no colour test (finite: times a colour it must not overflow)
 # How many times its second-brightest same-mode neighbour a sample must be.
 NEIGHBOUR_RATIO = F32(4.0)
 
