@@ -538,6 +538,10 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
         if not spread[s]:
             continue
         demodulated = (z > 0.0) & ~radiance_mode[s]
+        guided = bool(guide) and guide[s]
+        if guided:
+            assert albedo is not None
+            colour = luminance(np.asarray(albedo[s], dtype=F64), weights)
         found = []
         for y in range(height):
             for x in range(width):
@@ -559,9 +563,7 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
             xs = slice(max(x - radius, 0), x + radius + 1)
             receives = demodulated[ys, xs] & (np.abs(z[ys, xs] - z[y, x])
                                               <= depth_tolerance * z[y, x])
-            if guide and guide[s]:
-                assert albedo is not None
-                colour = luminance(np.asarray(albedo[s], dtype=F64), weights)
+            if guided:
                 receives &= np.abs(colour[ys, xs] - colour[y, x]) <= (
                     albedo_tolerance * colour[y, x])
             c[s][:, ys, xs] += np.where(receives, 1.0, 0.0) * (excess / receives.sum())[
