@@ -634,8 +634,14 @@ def render_frame(
     lobes: bool = False,
     motion_next: bool = False,
     gradient_samples: bool = False,
+    reference_supersample: int = 1,
 ) -> tuple[FrameResult, FrameResult | None]:
     """Render one frame (and its reference when ``reference_spp`` > 0).
+
+    ``reference_supersample`` k > 1: the reference averages a k x k grid of positions in
+    each pixel (a box pixel filter; ``reference_spp / k^2`` samples each, at least 1)
+    instead of the pixel centre the input samples, as a production renderer's converged
+    frame averages its pixel filter's footprint.
 
     ``lobes``: also the per-lobe light passes and colours; ``motion_next``: the motion to
     frame + 1; ``gradient_samples``: A-SVGF temporal gradient samples against frame - 1
@@ -672,15 +678,42 @@ def render_frame(
         )
         reference = None
         if reference_spp > 0:
-            ref_key = frame_key(seed, frame, STREAM_REFERENCE)
-            ref = trace_samples(geo, hits, reference_spp, max_depth, ref_key)
+            direct, indirect = _reference(scene, animation, frame, geo, hits, reference_spp,
+                                          max_depth, seed, reference_supersample, threads,
+                                          stats)
             reference = FrameResult(
-                layers={},
-                direct=ref.direct.reshape(height, width, 3).astype(np.float32),
-                indirect=ref.indirect.reshape(height, width, 3).astype(np.float32),
-                camera=geo.camera,
+                layers={}, direct=direct, indirect=indirect, camera=geo.camera,
                 prev_camera=geo.prev_camera,
             )
     finally:
         geo.tracer.close()
     return result, reference
+
+
+def _reference(
+    scene: Scene, animation: Animation, frame: int, geo: FrameGeometry, hits: PrimaryHits,
+    spp: int, max_depth: int, seed: int, supersample: int, threads: int,
+    stats: TraceStats | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's direct and indirect radiance, (H, W, 3) float32: ``spp`` samples from
+    the input's pixel-centre hits, or with ``supersample`` k > 1 the mean over a k x k grid
+    of sub-pixel positions (the frame traced at k times the resolution, ``ceil(spp / k^2)``
+    samples each, box-filtered down)."""
+    height, width = geo.camera.height, geo.camera.width
+    key = frame_key(seed, frame, STREAM_REFERENCE)
+    if supersample <= 1:
+        ref = trace_samples(geo, hits, spp, max_depth, key)
+        return (ref.direct.reshape(height, width, 3).astype(np.float32),
+                ref.indirect.reshape(height, width, 3).astype(np.float32))
+    k = supersample
+    fine = prepare_frame(scene, animation, frame, width * k, height * k, threads=threads,
+                         stats=stats)
+    try:
+        ref = trace_samples(fine, trace_primary(fine), -(-spp // (k * k)), max_depth, key)
+    finally:
+        fine.tracer.close()
+
+    def box(plane: np.ndarray) -> np.ndarray:
+        return plane.reshape(height, k, width, k, 3).mean(axis=(1, 3)).astype(np.float32)
+
+    return box(ref.direct), box(ref.indirect)

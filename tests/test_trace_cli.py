@@ -214,3 +214,29 @@ def test_slimmer_files_for_fixtures(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert set(reference) == {"R", "G", "B"}
     assert {str(ref_spec.channelformat(k)) for k in range(3)} == {"half"}
     assert ref_spec.getattribute("compression") == "zip"
+
+
+def test_a_supersampled_reference_averages_the_pixel(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Emission only (--max-depth 0: noise-free): the pixel-centre reference of the ceiling
+    light is all or nothing per pixel; with --reference-supersample 2 the pixels its edge
+    crosses take the covered share, and the light's total stays about the same."""
+    refs = {}
+    for k in (1, 2):
+        code, _, _ = run(small(str(tmp_path / f"i{k}.####.exr"), "--frames", "1",
+                               "--max-depth", "0", "--reference", str(tmp_path / f"r{k}.####.exr"),
+                               "--reference-spp", "4", "--reference-supersample", str(k), "-q",
+                               resolution="48x28"), capsys)  # fmt: skip
+        assert code == 0
+        refs[k] = read_exr(tmp_path / f"r{k}.0001.exr")
+    centre, coarse_spec = refs[1]
+    boxed, spec = refs[2]
+    light = float(centre["R"].max())
+    assert light > 1.0
+    assert set(np.unique(centre["R"]).tolist()) <= {0.0, light}
+    partial = (boxed["R"] > 0.05 * light) & (boxed["R"] < 0.95 * light)
+    assert partial.sum() >= 4
+    assert abs(float(boxed["R"].sum()) / float(centre["R"].sum()) - 1.0) < 0.3
+    assert spec.getattribute("svgf/reference/supersample") == 2
+    assert coarse_spec.getattribute("svgf/reference/supersample") is None

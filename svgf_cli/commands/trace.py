@@ -63,6 +63,11 @@ def resolve_threads(threads: int) -> int:
               help="Also write converged reference frames (R,G,B + direct/indirect, float).")
 @click.option("--reference-spp", type=click.IntRange(min=1), default=512, show_default=True,
               help="Samples per pixel of the references (traced in memory-bounded batches).")
+@click.option("--reference-supersample", type=click.IntRange(1, 16), default=1,
+              show_default=True, metavar="K",
+              help="Average each reference pixel over a KxK grid of positions (a box pixel "
+                   "filter, --reference-spp / K^2 samples each), as a production renderer's "
+                   "converged frame does; 1: the pixel centre, as the input.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @click.option("--float", "float_radiance", is_flag=True,
               help="Write radiance layers as float instead of half.")
@@ -100,6 +105,7 @@ def command(
     animation: Path | None,
     reference: str | None,
     reference_spp: int,
+    reference_supersample: int,
     overwrite: bool,
     float_radiance: bool,
     lobes: bool,
@@ -176,7 +182,7 @@ def command(
             loaded, anim, frame, width, height, spp, max_depth, seed,
             reference_spp=reference_spp if reference else 0,
             threads=n_threads, stats=stats, lobes=lobes, motion_next=motion_next,
-            gradient_samples=gradient_samples,
+            gradient_samples=gradient_samples, reference_supersample=reference_supersample,
         )  # fmt: skip
         channels, half = input_channels(result, half_radiance=not float_radiance,
                                         skip=skip_layers)  # fmt: skip
@@ -190,6 +196,8 @@ def command(
             ref_attrs = frame_attributes(
                 ref, frame=frame, spp=reference_spp, seed=seed, max_depth=max_depth,
                 kind="reference",
+                extra={"svgf/reference/supersample": reference_supersample}
+                if reference_supersample > 1 else None,
             )
             write_exr(ref_paths[index],
                       reference_channels(ref, rgb_only=reference_layers == "rgb"),

@@ -132,6 +132,14 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         _STATIC | {"camera-motion", "moving-objects"},
     ),
     SequenceSpec(
+        "testdata/seq_box",
+        "testdata/seq's inputs against references box-filtered over 4x4 positions in each "
+        "pixel (svgf trace --reference-supersample 4), as a production renderer's converged "
+        "frame: texture and object edges anti-aliased where the 1-spp input is not.",
+        _STATIC | {"camera-motion", "moving-objects"},
+        inputs="../seq/in.####.exr",
+    ),
+    SequenceSpec(
         "testdata/lag/light_slide_dim",
         "The ceiling light slides 16 mm a frame right to left (static camera) and dims to 45% "
         "at frame 10 (16 frames; 2048-spp references).",
