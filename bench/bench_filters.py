@@ -181,7 +181,6 @@ def denoiser_buffer_bytes(denoiser: Denoiser) -> int:
         arrays += list(denoiser._history.values())
     if denoiser._taa_previous is not None:
         arrays.append(denoiser._taa_previous)
-    arrays += [a for a in (denoiser._colour_history, denoiser._colour_work) if a is not None]
     return sum(a.nbytes for a in arrays)
 
 

@@ -10,7 +10,8 @@ Steps (each a subprocess of this Python, so it runs exactly what a user would ty
    with that frame's relMSE and FLIP (the image in the README comes from here).
 
 Run ``python -m svgf_cli.demo [--frames 1-24] [--resolution 320x180] [--reference-spp 64]
-[--out demo]``. Exits non-zero with an ``ERROR:`` line naming the step that failed.
+[--reference-supersample 4] [--out demo]``. Exits non-zero with an ``ERROR:`` line naming
+the step that failed.
 """
 
 from __future__ import annotations
@@ -41,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", default="1-24")
     parser.add_argument("--resolution", default="320x180")
     parser.add_argument("--reference-spp", default="64")
+    # References averaged over 4x4 positions per pixel, as a production renderer's pixel
+    # filter averages (svgf trace's default samples the pixel centre, like the input).
+    parser.add_argument("--reference-supersample", default="4")
     parser.add_argument("--out", default="demo")
     args = parser.parse_args(argv)
     scene = TESTDATA / "cornell_checker.obj"
@@ -58,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
         "trace", str(scene), "-o", noisy, "--frames", args.frames,
         "--resolution", args.resolution, "--spp", "1", "--max-depth", "5", "--seed", "0",
         "--animation", str(animation), "--reference", reference,
-        "--reference-spp", args.reference_spp, "--overwrite",
+        "--reference-spp", args.reference_spp,
+        "--reference-supersample", args.reference_supersample, "--overwrite",
     ])  # fmt: skip
     _run("denoise", ["denoise", noisy, "-o", denoised, "--overwrite"])
     _run("evaluate", ["evaluate", denoised, "--reference", reference, "--input", noisy])
@@ -68,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nDemo outputs in {out.resolve()}/:")
     print(f"  {noisy}      noisy 1-spp input with its G-buffer")
     print(f"  {denoised}     SVGF-denoised frames")
-    print(f"  {reference}     converged references ({args.reference_spp} spp)")
+    print(f"  {reference}     converged references ({args.reference_spp} spp over "
+          f"{args.reference_supersample}x{args.reference_supersample} positions per pixel)")
     print(f"\nPicture (input | svgf | reference): {picture.resolve()}")
     return 0
 

@@ -737,75 +737,6 @@ def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray,
     return Reprojected(illumination, moments, history_length, path)
 
 
-def accumulate_colour(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray, prev: History,
-                      prev_colour: np.ndarray, colour: np.ndarray, alpha: float,
-                      depth_tolerance: float, depth_slack: float, normal_tolerance: float,
-                      black: float) -> np.ndarray:
-    """One signal's demodulation colour accumulated over time (``filters.colour_history``):
-    ``lerp(clamp(bilinear(prev_colour, P)), c, alpha)`` with the bilinear taps that pass
-    :func:`tap_consistent` (weights renormalised; below 0.01 in total: none), the history
-    clamped per channel to the current colour's min/max over the 3x3 surface pixels. The
-    (cleaned) colour itself on background, where it or the result is in radiance mode, and
-    where no tap passes."""
-    c = clean_albedo(colour)
-    out = c.copy()
-    radiance_mode, _ = effective_albedo(c, black)
-    z = geom.depth
-    height, width = z.shape
-    mv = np.asarray(motion, dtype=F64)
-    for y in range(height):
-        for x in range(width):
-            px, py = x + mv[0, y, x], y + mv[1, y, x]
-            if (z[y, x] <= 0.0 or radiance_mode[y, x]
-                    or not (math.isfinite(px) and math.isfinite(py))):
-                continue
-            x0, y0 = math.floor(px), math.floor(py)
-            fx, fy = px - x0, py - y0
-            taps = [(x0, y0, (1 - fx) * (1 - fy)), (x0 + 1, y0, fx * (1 - fy)),
-                    (x0, y0 + 1, (1 - fx) * fy), (x0 + 1, y0 + 1, fx * fy)]
-            passing = [(tx, ty, w) for tx, ty, w in taps if w > 0.0 and tap_consistent(
-                tx, ty, z[y, x], geom.unit_normal[:, y, x], mesh_id[y, x],
-                geom.depth_slope[y, x], geom.normal_width[y, x], prev, depth_tolerance,
-                depth_slack, normal_tolerance)]
-            total = sum(w for _, _, w in passing)
-            if total < MIN_BILINEAR_WEIGHT:
-                continue
-            history = sum(w * prev_colour[:, ty, tx] for tx, ty, w in passing) / total
-            window = (slice(max(y - 1, 0), y + 2), slice(max(x - 1, 0), x + 2))
-            near = c[:, window[0], window[1]][:, z[window] > 0.0]
-            history = np.clip(history, near.min(axis=1), near.max(axis=1))
-            accumulated = history + alpha * (c[:, y, x] - history)
-            if not effective_albedo(accumulated[:, None, None], black)[0][0, 0]:
-                out[:, y, x] = accumulated
-    return out
-
-
-def bound_remodulation(illumination: np.ndarray, colour: np.ndarray, accumulated: np.ndarray,
-                       depth: np.ndarray, black: float) -> np.ndarray:
-    """The filtered light that remodulation by ``colour`` turns into the anti-aliased value
-    (``filters.colour_history``): ``clamp(f a', lo, hi) / c'`` per channel, ``[lo, hi]``
-    the range of ``f_q c'_q`` over the 3x3 surface pixels demodulated by their colour; the
-    light unchanged on background, where either colour is in radiance mode and in channels
-    where ``a' == c'``."""
-    f = np.asarray(illumination, dtype=F64)
-    mode_c, c_eff = effective_albedo(colour, black)
-    mode_a, a_eff = effective_albedo(accumulated, black)
-    product = f * c_eff
-    usable_q = (np.asarray(depth) > 0.0) & ~mode_c
-    out = f.copy()
-    height, width = usable_q.shape
-    for y in range(height):
-        for x in range(width):
-            if not usable_q[y, x] or mode_a[y, x]:
-                continue
-            window = (slice(max(y - 1, 0), y + 2), slice(max(x - 1, 0), x + 2))
-            near = product[:, window[0], window[1]][:, usable_q[window]]
-            bounded = np.clip(f[:, y, x] * a_eff[:, y, x], near.min(axis=1), near.max(axis=1))
-            changed = a_eff[:, y, x] != c_eff[:, y, x]
-            out[changed, y, x] = bounded[changed] / c_eff[changed, y, x]
-    return out
-
-
 # --------------------------------------------------------------------------- 2 accumulation
 def accumulate(illumination: np.ndarray, reprojected_illumination: np.ndarray,
                reprojected_moments: np.ndarray, reprojected_length: np.ndarray,
@@ -1235,8 +1166,6 @@ class ReferenceDenoiser:
         self.history: History | None = None
         self.taa_previous: np.ndarray | None = None
         self.last_reprojected: Reprojected | None = None  # for tests and diagnosis
-        # (S, 3, H, W) accumulated demodulation colours (antialias_colours)
-        self.colour_history: np.ndarray | None = None
 
     def before_accumulation(self, temporal: TemporalState) -> int | None:
         """Adjust the reprojected history before it is blended: the optional history clamp,
@@ -1300,15 +1229,6 @@ class ReferenceDenoiser:
                                          clean.weights)
 
         shape = illumination.shape
-        colours = None
-        if p.antialias_colours:
-            colours = np.stack([
-                accumulate_colour(clean.motion, geom, clean.mesh_id, self.history,
-                                  self.colour_history[index], clean.albedo[index],
-                                  p.antialias_colours_alpha, p.depth_tolerance, p.depth_slack,
-                                  p.normal_tolerance, demodulation_floor(p, clean, index))
-                if p.temporal and self.history is not None else clean_albedo(clean.albedo[index])
-                for index in range(len(clean.names))])
         if p.temporal and self.history is not None:
             reprojected = reproject(clean.motion, geom, clean.mesh_id, radiance_mode,
                                     self.history, p.depth_tolerance, p.depth_slack,
@@ -1345,7 +1265,6 @@ class ReferenceDenoiser:
                                radiance_mode, np.ones(geom.depth.shape, bool), geom.depth,
                                geom.unit_normal, np.array(clean.mesh_id))
         counts["history_resets"] = reset_nonfinite_history(self.history)
-        self.colour_history = colours
         return self.compose(clean, geom, colour, variance_before_atrous, length,
                             radiance_mode, counts)
 
@@ -1400,12 +1319,7 @@ class ReferenceDenoiser:
                 counts[f"despiked.{name}"] = value
         per_signal = {}
         for index, name in enumerate(clean.names):
-            light = colour[index]
-            if self.colour_history is not None:  # antialias_colours: this frame's colours
-                light = bound_remodulation(light, clean.albedo[index],
-                                           self.colour_history[index], geom.depth,
-                                           demodulation_floor(p, clean, index))
-            radiance = remodulate(light, clean.albedo[index],
+            radiance = remodulate(colour[index], clean.albedo[index],
                                   demodulation_floor(p, clean, index))
             per_signal[name] = radiance_with_background(radiance, clean.radiance[index],
                                                         geom.depth)

@@ -259,7 +259,7 @@ def test_state_carries_named_per_signal_history() -> None:
     for f, want in zip(frames[3:], tail, strict=True):
         assert resumed.process(f).color.tobytes() == want.tobytes()
     old = {k: v for k, v in state.items() if k not in ("format_version", "history_mode")}
-    with pytest.raises(ValueError, match="format 1, this version reads format 3"):
+    with pytest.raises(ValueError, match="format 1, this version reads format 2"):
         Denoiser(params).load_state(old)
     renamed = dict(state)
     renamed["history_length"] = state["history_length"][:2]

@@ -81,7 +81,6 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "spread_fireflies": click.FloatRange(min=0.0),
     "despike": click.FloatRange(min=0.0),
     "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
-    "antialias_colours_alpha": click.FloatRange(0.0, 1.0, min_open=True),
     "antilag_radius": click.IntRange(1, 16),
     "antilag_sigma": click.FloatRange(min=0.0),
     "antilag_spatial_samples": click.FloatRange(min=1.0),

@@ -50,7 +50,6 @@ from svgf_cli.filters.bidirectional import (
     effective_counts,
 )
 from svgf_cli.filters.clamp import firefly_clamp, history_clamp
-from svgf_cli.filters.colour_history import accumulate_colours, antialias_remodulation
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
@@ -65,9 +64,8 @@ from svgf_cli.frame import DenoisedFrame, Frame, Signal
 F32 = np.float32
 Kept = TypeVar("Kept")
 
-# Version of the state() layout: 2 = per-signal history length and modes, named signals;
-# 3 = the accumulated demodulation colours (antialias_colours).
-STATE_FORMAT = 3
+# Version of the state() layout: 2 = per-signal history length and modes, named signals.
+STATE_FORMAT = 2
 
 # A demodulation colour whose brightest channel exceeds this is not a reflectance (1 plus a
 # tolerance for pixel-filter overshoot and half-float storage): such pixels are filtered as
@@ -198,11 +196,6 @@ class _FrameRun:
     motion: np.ndarray = field(default_factory=lambda: np.empty((2, 0, 0), F32))
     mode: np.ndarray = field(default_factory=lambda: np.empty((0, 0), np.uint16))
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
-    composes: bool = True  # the frame is composed into an output (not a forward pass)
-    # the accumulated demodulation colours (antialias_colours; else None), one per distinct
-    # colour plane, and the index into them of each signal's
-    colours: np.ndarray | None = None
-    colour_of: tuple[int, ...] = ()
     # Scratch roles lent by last frame's history once it is reprojected (dead until
     # _store_history replaces it); they take precedence over the workspace's own planes.
     borrowed: dict[str, np.ndarray] = field(default_factory=dict)
@@ -291,11 +284,6 @@ class Denoiser:
         # as scratch; _store_history adopts them).
         self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
-        # antialias_colours: the accumulated colours (U, 3, H, W), one per distinct colour
-        # plane; per signal, the first signal sharing its plane; next frame's buffer
-        self._colour_history: np.ndarray | None = None
-        self._colour_sharing: tuple[int, ...] | None = None
-        self._colour_work: np.ndarray | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
         self.stage_cpu_seconds: dict[str, float] = {}
@@ -314,8 +302,6 @@ class Denoiser:
     def reset(self) -> None:
         """Drop all history: the next frame is processed cold."""
         self._history = None
-        self._colour_history = None
-        self._colour_sharing = None
         self._taa_previous = None
         self._signal_names = None
         self._frames_processed = 0
@@ -417,8 +403,6 @@ class Denoiser:
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
                 history_length,
             )
-            if p.antialias_colours and run.composes:
-                self._accumulate_colours(run, depth_slope, normal_width, history)
             self._lend_stale_history(run)
             temporal = TemporalState(
                 run.names, illumination, mode, accumulated, moments, history_length, depth,
@@ -436,8 +420,6 @@ class Denoiser:
             history_length.fill(0.0)
             accumulated.fill(0.0)
             moments.fill(0.0)
-            if p.antialias_colours and run.composes:
-                self._accumulate_colours(run, depth_slope, normal_width, None)
             self._lend_stale_history(run)
             temporal = TemporalState(run.names, illumination, mode, accumulated, moments,
                                      history_length, depth, run.weights,
@@ -544,8 +526,9 @@ class Denoiser:
         if p.despike > 0.0:
             illumination = self._despike(run, filtered)
             run.lap("despike")
-        output, layers = self._compose(run, illumination, filtered.variance,
-                                       filtered.history_length)
+        output, layers = self._compose(run.frame, illumination, filtered.variance,
+                                       filtered.history_length, run.mode, run.depth,
+                                       run.counts)
         run.lap("modulate")
         if p.despike > 0.0:
             self._despike_lone(run, output)
@@ -603,7 +586,6 @@ class Denoiser:
         copy."""
         run = self._start_frame(frame)
         run.bidirectional = True
-        run.composes = False
         kept: list[Kept | SideHistory] = []
 
         def capture(temporal: TemporalState) -> None:
@@ -724,9 +706,6 @@ class Denoiser:
         if self._history is not None:
             for key in _HISTORY_SHAPES:
                 state[key] = self._history[key].copy()
-            if self._colour_history is not None and self._colour_sharing is not None:
-                state["history_colour"] = self._colour_history.copy()
-                state["colour_sharing"] = np.array(self._colour_sharing, dtype=np.int64)
         if self._taa_previous is not None:
             state["taa_previous"] = self._taa_previous.copy()
         return state
@@ -776,55 +755,12 @@ class Denoiser:
             taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
             if history is not None and taa_previous.shape[1:] != history["prev_depth"].shape:
                 raise ValueError("denoiser state taa_previous does not match the history shape")
-        colours, sharing = _colour_state(state, names, history)
         self._history = history
-        self._colour_history, self._colour_sharing = colours, sharing
-        self._colour_work = None
         self._taa_previous = taa_previous
         self._signal_names = names
         self._frames_processed = frames
 
     # ----------------------------------------------------------------- stages
-    def _accumulate_colours(self, run: _FrameRun, depth_slope: np.ndarray,
-                            normal_width: np.ndarray,
-                            history: dict[str, np.ndarray] | None) -> None:
-        """The frame's demodulation colours accumulated over time (``filters.colour_history``;
-        without history, the colours themselves), one per distinct colour plane (a split
-        lobe's direct and indirect light share theirs), into ``run.colours`` and
-        ``run.colour_of``; :meth:`_store_history` keeps them."""
-        p, frame = self.params, run.frame
-        signals = frame.signals
-        sharing = tuple(
-            next((j for j in range(index) if signals[j].albedo is signal.albedo
-                  and signals[j].guide_albedo == signal.guide_albedo), index)
-            for index, signal in enumerate(signals))
-        distinct = [index for index, first in enumerate(sharing) if first == index]
-        shape = (len(distinct), 3, frame.height, frame.width)
-        out = self._colour_work
-        if out is None or out.shape != shape:
-            out = np.zeros(shape, dtype=F32)
-        previous = self._colour_history
-        if (history is None or previous is None or previous.shape != shape
-                or sharing != self._colour_sharing):
-            for slot, index in enumerate(distinct):
-                np.copyto(out[slot], signals[index].albedo)
-                out[slot][~np.isfinite(out[slot])] = 0.0
-        else:
-            accumulate_colours(
-                run.motion, run.depth, run.normal, frame.mesh_id, depth_slope, normal_width,
-                history["prev_depth"], history["prev_normal"], history["prev_mesh_id"],
-                previous, tuple(signals[i].albedo for i in distinct),
-                np.arange(len(distinct), dtype=np.int64),
-                np.array([self._rules[signals[i].guide_albedo][0] for i in distinct],
-                         dtype=F32),
-                F32(p.antialias_colours_alpha), F32(p.depth_tolerance), F32(p.depth_slack),
-                F32(p.normal_tolerance), F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR),
-                out,
-            )
-        self._colour_sharing = sharing
-        run.colours = out
-        run.colour_of = tuple(distinct.index(first) for first in sharing)
-
     def _clean_geometry(
         self, frame: Frame, counts: dict[str, int]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -931,14 +867,13 @@ class Denoiser:
                 for name, count in zip(temporal.names, spread, strict=True)}
 
     def _compose(
-        self, run: _FrameRun, filtered: np.ndarray, variance: np.ndarray,
-        history_length: np.ndarray,
+        self, frame: Frame, filtered: np.ndarray, variance: np.ndarray,
+        history_length: np.ndarray, mode: np.ndarray, depth: np.ndarray,
+        counts: dict[str, int],
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Remodulate (by the accumulated colours, bounded, with antialias_colours), restore
-        the background, sum the signals and add the emission straight into a fresh output
-        array (handed to the caller, so nothing full-frame stays resident); the debug
-        layers when asked."""
-        frame, mode, depth, counts = run.frame, run.mode, run.depth, run.counts
+        """Remodulate, restore the background, sum the signals and add the emission straight
+        into a fresh output array (handed to the caller, so nothing full-frame stays
+        resident); the debug layers when asked."""
         height, width = depth.shape
         radiance = np.zeros((3, height, width), dtype=F32)
         emission = frame.emission
@@ -949,13 +884,9 @@ class Denoiser:
         layers: dict[str, np.ndarray] = {}
         for index, signal in enumerate(frame.signals):
             add_emission = has_emission and index == 0
-            rules = self._rules[signal.guide_albedo]
             modulate.remodulate_add(filtered[index], signal.radiance, signal.albedo, depth,
-                                    emission_plane, add_emission, *rules, radiance, rows)
-            if run.colours is not None:
-                antialias_remodulation(filtered[index], signal.albedo,
-                                       run.colours[run.colour_of[index]], depth, *rules,
-                                       radiance)
+                                    emission_plane, add_emission,
+                                    *self._rules[signal.guide_albedo], radiance, rows)
             if add_emission:
                 total = rows.sum(axis=0)
                 _add(counts, "nonfinite", "emission", int(total[0]))
@@ -964,11 +895,8 @@ class Denoiser:
                 name = signal.name
                 alone = np.zeros((3, height, width), dtype=F32)
                 modulate.remodulate_add(filtered[index], signal.radiance, signal.albedo, depth,
-                                        emission_plane, False, *rules, alone, rows)
-                if run.colours is not None:
-                    antialias_remodulation(filtered[index], signal.albedo,
-                                           run.colours[run.colour_of[index]], depth, *rules,
-                                           alone)
+                                        emission_plane, False,
+                                        *self._rules[signal.guide_albedo], alone, rows)
                 for c, channel in enumerate("RGB"):
                     layers[f"{name}.{channel}"] = alone[c]
                 layers[f"variance.{name}"] = variance[index].copy()
@@ -1061,34 +989,10 @@ class Denoiser:
         # The frame's planes belong to the caller: copy.
         np.copyto(history["prev_depth"], run.depth)
         np.copyto(history["prev_mesh_id"], frame.mesh_id)
-        if run.colours is not None:
-            # This frame's colours become the history; last frame's, next frame's buffer.
-            self._colour_history, self._colour_work = run.colours, self._colour_history
         counts["history_resets"] += values.reset_nonfinite_history(
             history["history_illumination"], history["history_moments"],
             history["history_length"], history["history_mode"],
         )
-
-
-def _colour_state(
-    state: dict[str, np.ndarray], names: tuple[str, ...] | None,
-    history: dict[str, np.ndarray] | None,
-) -> tuple[np.ndarray | None, tuple[int, ...] | None]:
-    """The accumulated colours of a :meth:`Denoiser.state` and their sharing, checked
-    against the signals and the history's size; (None, None) when it has none."""
-    if "history_colour" not in state or names is None or history is None:
-        return None, None
-    sharing = tuple(int(j) for j in np.asarray(state.get("colour_sharing", ())).ravel())
-    colours = np.asarray(state["history_colour"])
-    distinct = sum(1 for index, first in enumerate(sharing) if first == index)
-    expected = (distinct, 3, *history["prev_depth"].shape)
-    if (len(sharing) != len(names) or any(not 0 <= j <= i for i, j in enumerate(sharing))
-            or colours.shape != expected):
-        raise ValueError(f"denoiser state history_colour: shape {colours.shape} and sharing "
-                         f"{sharing} do not fit signals {'+'.join(names)}")
-    colours = np.array(colours, dtype=F32, copy=True, order="C")
-    colours[~np.isfinite(colours)] = 0.0  # a state file is input too
-    return colours, sharing
 
 
 def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:

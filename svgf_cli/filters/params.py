@@ -169,16 +169,6 @@ class SVGFParams:
         " same-mode neighbour (any neighbour, in the output, for a pixel whose mode none"
         " shares) is brought down to that bound (fireflies the a-trous kept; 0 = off).",
     )
-    antialias_colours: bool = _p(
-        False,
-        "Remodulate by each signal's colour accumulated over time (reprojected like the light,"
-        " clamped to the current 3x3 range): where the camera or an object moves, the one"
-        " point a 1-spp pixel samples becomes the pixel's footprint average, so texture edges"
-        " come out anti-aliased; the result is bounded by the 3x3 neighbours' remodulated"
-        " values.",
-    )
-    antialias_colours_alpha: float = _p(
-        0.2, "Blend factor of the colour accumulation (antialias_colours).")
     taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
     taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
 
@@ -206,7 +196,7 @@ PRESETS: dict[str, SVGFParams] = {
                           glossy_sigma_luminance=1.0, glossy_emitter_radiance=True,
                           mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
-                          antialias_colours=True, atrous_iterations=AUTO_ITERATIONS),
+                          atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

@@ -59,7 +59,7 @@ def _whole_if_close(h: np.float32) -> np.float32:
     inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
     error_model="numpy",
 )
-def tap_consistent(
+def _tap_consistent(
     tx: int,
     ty: int,
     z: np.float32,
@@ -230,16 +230,16 @@ def _reproject_rows(
             g10 = fx * (_ONE - fy)
             g01 = (_ONE - fx) * fy
             g11 = fx * fy
-            if not tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
+            if not _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
                 g00 = _ZERO
-            if not tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
+            if not _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
                 g10 = _ZERO
-            if not tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+            if not _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
                 g01 = _ZERO
-            if not tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+            if not _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
                                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
                 g11 = _ZERO
             # Taps with zero weight may lie outside the image: clamp their index.
@@ -292,7 +292,7 @@ def _reproject_rows(
                 if box_mask < 0:
                     box_mask = 0
                     for k in range(9):
-                        if tap_consistent(cx - 1 + k % 3, cy - 1 + k // 3, z, nx, ny, nz, mesh,
+                        if _tap_consistent(cx - 1 + k % 3, cy - 1 + k // 3, z, nx, ny, nz, mesh,
                                            max_depth_diff, max_normal_diff_sq, prev_depth,
                                            prev_normal, prev_mesh_id):
                             box_mask |= 1 << k

@@ -57,7 +57,6 @@ FILTER_TESTS = (
     "tests/test_filters_antilag.py",
     "tests/test_filters_glossy.py",
     "tests/test_filters_bidirectional.py",
-    "tests/test_filters_colour_history.py",
 )
 IO_TESTS = (
     "tests/test_io_presets.py",
@@ -315,30 +314,6 @@ MUTANTS: tuple[Mutant, ...] = (
         (("                         guide_albedo=True, mixed=True),), False",
           "                         guide_albedo=True),), False"),),
         ("tests/test_io_signals.py", *IO_TESTS),
-    ),
-    Mutant(
-        "colour-history-no-clamp", "filters",
-        "the accumulated colour is not clamped to the current 3x3 range (a changed texture"
-        " ghosts)",
-        "svgf_cli/filters/colour_history.py",
-        (("                hr = min(max(hr, lo_r), hi_r)\n", "                hr = hr\n"),),
-        FILTER_TESTS,
-    ),
-    Mutant(
-        "colour-history-unbounded", "filters",
-        "remodulation by the accumulated colour is not bounded by the neighbours' values",
-        "svgf_cli/filters/colour_history.py",
-        (("                out[0, uy, ux] += min(max(f_r * a_r, lo_r), hi_r) - f_r * c_r",
-          "                out[0, uy, ux] += f_r * a_r - f_r * c_r"),),
-        FILTER_TESTS,
-    ),
-    Mutant(
-        "colour-history-not-kept", "filters",
-        "the colour accumulation ignores the history (every frame starts over)",
-        "svgf_cli/filters/denoiser.py",
-        (("                self._accumulate_colours(run, depth_slope, normal_width, history)",
-          "                self._accumulate_colours(run, depth_slope, normal_width, None)"),),
-        FILTER_TESTS,
     ),
     Mutant(
         "fireflies-drop-excess", "filters",
