@@ -1580,3 +1580,58 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
                                        state.radiance_mode, dict(own.counts)))
         later = frame
     return outputs[::-1]
+
+
+# --------------------------------------------------------------------------- temporal albedo
+def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: np.ndarray,
+                      motion: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray,
+                      prev_depth: np.ndarray, prev_mesh_id: np.ndarray, alpha: float,
+                      cap: float, black: float) -> tuple[np.ndarray, np.ndarray]:
+    """``filters.albedo_history.accumulate_albedo`` of one signal: the running mean of its
+    (cleaned) demodulation colour. The bilinear taps at ``(x + mx, y + my)`` that are in the
+    image, not background and of the same mesh id, renormalised (rejected below 0.01); the
+    resampled mean clamped per channel to the current 3x3 range of foreground pixels;
+    ``h = min(cap, h_prev + 1)``, ``a = lerp(a_hist, a, max(alpha, 1/h))`` (equation 6);
+    kept only where it is in the same mode as the current colour (``effective_albedo``).
+    Returns ``(colour (3, H, W), length (H, W))``; without history (or in the background)
+    the current colour with length 1 (0 in the background)."""
+    a = clean_albedo(albedo)
+    hist = np.asarray(history, dtype=F64)
+    h_prev = np.asarray(history_length, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    height, width = z.shape
+    out = a.copy()
+    length = np.where(z > 0.0, 1.0, 0.0)
+    mode_now = effective_albedo(a, black)[0]
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0.0:
+                continue
+            px, py = x + float(motion[0, y, x]), y + float(motion[1, y, x])
+            if not (abs(px) < 1e7 and abs(py) < 1e7):
+                continue
+            x0, y0 = math.floor(px), math.floor(py)
+            fx, fy = px - x0, py - y0
+            total, colour, h = 0.0, np.zeros(3), 0.0
+            for ty, wy in ((y0, 1.0 - fy), (y0 + 1, fy)):
+                for tx, wx in ((x0, 1.0 - fx), (x0 + 1, fx)):
+                    if not (0 <= tx < width and 0 <= ty < height):
+                        continue
+                    if prev_depth[ty, tx] <= 0.0 or prev_mesh_id[ty, tx] != mesh_id[y, x]:
+                        continue
+                    total += wx * wy
+                    colour += wx * wy * hist[:, ty, tx]
+                    h += wx * wy * h_prev[ty, tx]
+            if total < 0.01 or h / total <= 0.0:
+                continue
+            y_lo, y_hi = max(y - 1, 0), min(y + 2, height)
+            x_lo, x_hi = max(x - 1, 0), min(x + 2, width)
+            window = a[:, y_lo:y_hi, x_lo:x_hi][:, z[y_lo:y_hi, x_lo:x_hi] > 0.0]
+            mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
+            n = min(cap, h / total + 1.0)
+            mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
+            if effective_albedo(mean[:, None, None], black)[0][0, 0] != mode_now[y, x]:
+                continue
+            out[:, y, x] = mean
+            length[y, x] = n
+    return out, length

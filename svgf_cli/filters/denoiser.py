@@ -35,6 +35,7 @@ from typing import TypeVar
 import numpy as np
 
 from svgf_cli.filters import modulate, values
+from svgf_cli.filters.albedo_history import accumulate_albedo
 from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import (
@@ -284,6 +285,10 @@ class Denoiser:
         # as scratch; _store_history adopts them).
         self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
+        # temporal_albedo: each signal's running mean colour (S, 3, H, W) and its length
+        # (S, H, W), and last frame's pair, overwritten next frame.
+        self._albedo: tuple[np.ndarray, np.ndarray] | None = None
+        self._albedo_spare: tuple[np.ndarray, np.ndarray] | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
         self.stage_cpu_seconds: dict[str, float] = {}
@@ -303,6 +308,7 @@ class Denoiser:
         """Drop all history: the next frame is processed cold."""
         self._history = None
         self._taa_previous = None
+        self._albedo = None
         self._signal_names = None
         self._frames_processed = 0
 
@@ -317,6 +323,7 @@ class Denoiser:
         """
         run = self._start_frame(frame)
         self._accumulate_temporally(run)
+        self._accumulate_albedo(run)
         work = run.work
         filtered = self._filter_spatially(run, "accumulated", work["moments"],
                                           work["history_length"], run.iterations)
@@ -661,6 +668,7 @@ class Denoiser:
                 )
 
         self._accumulate_temporally(run, combine)
+        self._accumulate_albedo(run)
         own_history = self._pass_history(run, protected=(combined,) if forward else ())
         filtered = None
         if forward is not None:
@@ -708,6 +716,9 @@ class Denoiser:
                 state[key] = self._history[key].copy()
         if self._taa_previous is not None:
             state["taa_previous"] = self._taa_previous.copy()
+        if self._albedo is not None:
+            state["albedo_history"] = self._albedo[0].copy()
+            state["albedo_length"] = self._albedo[1].copy()
         return state
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -755,8 +766,20 @@ class Denoiser:
             taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
             if history is not None and taa_previous.shape[1:] != history["prev_depth"].shape:
                 raise ValueError("denoiser state taa_previous does not match the history shape")
+        albedo = None
+        if "albedo_history" in state and "albedo_length" in state and history is not None:
+            colour = np.array(state["albedo_history"], dtype=F32, copy=True, order="C")
+            length = np.array(state["albedo_length"], dtype=F32, copy=True, order="C")
+            height, width = history["prev_depth"].shape
+            expected = (len(history["history_length"]), 3, height, width)
+            if colour.shape != expected or length.shape != (expected[0], height, width):
+                raise ValueError("denoiser state albedo_history does not match the history")
+            if not (np.isfinite(colour).all() and np.isfinite(length).all()):
+                raise ValueError("denoiser state albedo_history has non-finite values")
+            albedo = (colour, length)
         self._history = history
         self._taa_previous = taa_previous
+        self._albedo = albedo
         self._signal_names = names
         self._frames_processed = frames
 
@@ -847,6 +870,42 @@ class Denoiser:
             sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
             scratch, work["antilag_lambda"], temporal.gradients,
         )
+
+    def _accumulate_albedo(self, run: _FrameRun) -> None:
+        """With ``temporal_albedo``: each signal's demodulation colour becomes its running
+        mean over frames (``filters.albedo_history``), kept as history; ``run.frame``'s
+        signals take it, so the composition remodulates by it. Runs after the temporal
+        phase (demodulation used this frame's colour) and before the history is stored
+        (last frame's depth and mesh id)."""
+        p = self.params
+        if not p.temporal_albedo:
+            return
+        frame = run.frame
+        s, h, w = len(run.names), frame.height, frame.width
+        shape = (s, 3, h, w)
+        spare = self._albedo_spare
+        if spare is None or spare[0].shape != shape:
+            spare = (np.empty(shape, dtype=F32), np.empty((s, h, w), dtype=F32))
+        history, previous = self._albedo, self._history
+        if history is None or history[0].shape != shape or previous is None or not p.temporal:
+            # No history: a length-0 plane rejects every tap.
+            history = (np.zeros(shape, dtype=F32), np.zeros((s, h, w), dtype=F32))
+            prev_depth, prev_mesh_id = run.depth, frame.mesh_id
+        else:
+            prev_depth, prev_mesh_id = previous["prev_depth"], previous["prev_mesh_id"]
+        colour, length = spare
+        signals = []
+        for index, signal in enumerate(frame.signals):
+            accumulate_albedo(
+                signal.albedo, history[0][index], history[1][index], run.motion, run.depth,
+                frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
+                *self._rules[signal.guide_albedo], colour[index], length[index],
+            )
+            signals.append(dataclasses.replace(signal, albedo=colour[index]))
+        self._albedo_spare = history
+        self._albedo = (colour, length)
+        run.frame = dataclasses.replace(frame, signals=signals)
+        run.lap("albedo")
 
     def _spread_fireflies(self, temporal: TemporalState,
                           signals: list[Signal]) -> dict[str, int]:

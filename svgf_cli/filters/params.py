@@ -146,6 +146,14 @@ class SVGFParams:
         " modulated by that albedo, and dividing by it amplifies the light (0 ="
         " albedo_epsilon).",
     )
+    temporal_albedo: bool = _p(
+        False,
+        "Remodulate each signal by its demodulation colour's running mean over frames"
+        " (reprojected, clamped to the current 3x3 range): at 1 spp a jittered renderer's"
+        " colour at a texture edge is one texture or the other from frame to frame, the"
+        " reference their mean (off: point-sampled colours, as svgf trace writes, only"
+        " blur).",
+    )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
         0.0,

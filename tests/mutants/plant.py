@@ -541,6 +541,30 @@ MUTANTS: tuple[Mutant, ...] = (
           "    if False:\n        from svgf_cli.io.source import SourceChannel"),),
         WRITE_TESTS,
     ),
+    Mutant(
+        "albedo-history-unclamped", "filters",
+        "temporal albedo: the resampled mean is not clamped to the current 3x3 range",
+        "svgf_cli/filters/albedo_history.py",
+        (("            m_r = min(max(h_r / total, lo_r), hi_r)\n",
+          "            m_r = h_r / total\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-history-no-mode-guard", "filters",
+        "temporal albedo: a running mean in another mode than the current colour is kept",
+        "svgf_cli/filters/albedo_history.py",
+        (("            if now != mean:\n", "            if False:\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-history-not-composed", "filters",
+        "temporal albedo: the running mean is computed but the output is remodulated by"
+        " this frame's colour",
+        "svgf_cli/filters/denoiser.py",
+        (("        run.frame = dataclasses.replace(frame, signals=signals)\n",
+          "        run.frame = frame\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
 )
 
 

@@ -1,0 +1,147 @@
+"""Temporal demodulation colour: remodulate with the colour's running mean over frames.
+
+A renderer that jitters its camera samples over the pixel filter (Cycles, Arnold, Karma at
+1 spp) writes, per pixel, the colour of one sample of the filter footprint. Where the
+footprint straddles a texture edge, that colour is one texture or the other from frame to
+frame, while the reference (many samples) is their filtered mean. Demodulation by the
+sample's own colour is exact (the illumination of that sample), and temporal accumulation
+and the a-trous average the illumination; remodulating by this frame's single colour sample
+then puts the edge noise back, and no amount of history removes it. Remodulating by the
+colour's own temporal mean does: it converges to the footprint's mean colour.
+
+:func:`accumulate_albedo` keeps, per signal, a running mean of the demodulation colour:
+
+* resampled at the backprojected position ``(x + motion.x, y + motion.y)`` from the 2x2
+  bilinear taps that are in the image, not background and of the same mesh id (weights
+  renormalised; rejected below a sum of 0.01), with the history length resampled likewise;
+* clamped per channel to the current frame's 3x3 range ``[min, max]`` over foreground pixels
+  (the footprint's mean lies within the samples around it; a texture that changed, or a
+  surface disoccluded on the same mesh, is pulled to the current colours);
+* blended: ``h = min(cap, h_prev + 1)``, ``a = lerp(a_hist, a, max(alpha, 1/h))``
+  (paper equation 6 applied to the colour); without history ``a`` and ``h = 1``;
+* kept only where it classifies as the current colour does (reflectance or not,
+  ``modulate.effective_albedo``): the remodulation must undo the demodulation's mode.
+
+A renderer that samples pixel centres (``svgf trace``) writes a noise-free colour; there the
+running mean only adds the resampling blur, hence the option (``--temporal-albedo``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import FASTMATH
+from svgf_cli.filters.modulate import clean_albedo, effective_albedo
+
+F32 = np.float32
+_ZERO = F32(0.0)
+_ONE = F32(1.0)
+_MIN_WEIGHT = F32(0.01)
+_JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+
+
+@njit(parallel=True, **_JIT)
+def accumulate_albedo(
+    albedo: np.ndarray,
+    history: np.ndarray,
+    history_length: np.ndarray,
+    motion: np.ndarray,
+    depth: np.ndarray,
+    mesh_id: np.ndarray,
+    prev_depth: np.ndarray,
+    prev_mesh_id: np.ndarray,
+    alpha: np.float32,
+    cap: np.float32,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
+    out: np.ndarray,
+    out_length: np.ndarray,
+) -> None:
+    """One signal's running mean colour (module docstring): ``out = lerp(clamp(a_hist,
+    min3x3, max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``.
+
+    ``albedo``, ``history`` and ``out`` are (3, H, W); ``history_length`` and ``out_length``
+    (H, W) (0 = no history); ``motion`` (2, H, W); ``prev_depth`` / ``prev_mesh_id`` last
+    frame's. Background pixels (depth <= 0) keep their colour with length 0.
+    """
+    height, width = depth.shape
+    for y in prange(height):
+        for x in range(width):
+            a_r = clean_albedo(albedo[0, y, x])
+            a_g = clean_albedo(albedo[1, y, x])
+            a_b = clean_albedo(albedo[2, y, x])
+            out[0, y, x] = a_r
+            out[1, y, x] = a_g
+            out[2, y, x] = a_b
+            out_length[y, x] = _ZERO
+            if depth[y, x] <= _ZERO:
+                continue
+            out_length[y, x] = _ONE
+            px = F32(x) + motion[0, y, x]
+            py = F32(y) + motion[1, y, x]
+            if not (abs(px) < F32(1e7) and abs(py) < F32(1e7)):  # NaN or far outside
+                continue
+            x0 = int(np.floor(px))
+            y0 = int(np.floor(py))
+            fx = px - F32(x0)
+            fy = py - F32(y0)
+            mesh = mesh_id[y, x]
+            total = _ZERO
+            h_r = _ZERO
+            h_g = _ZERO
+            h_b = _ZERO
+            h_len = _ZERO
+            for dy in range(2):
+                ty = y0 + dy
+                wy = fy if dy == 1 else _ONE - fy
+                for dx in range(2):
+                    tx = x0 + dx
+                    wx = fx if dx == 1 else _ONE - fx
+                    if tx < 0 or ty < 0 or tx >= width or ty >= height:
+                        continue
+                    if prev_depth[ty, tx] <= _ZERO or prev_mesh_id[ty, tx] != mesh:
+                        continue
+                    w = wx * wy
+                    total += w
+                    h_r += w * history[0, ty, tx]
+                    h_g += w * history[1, ty, tx]
+                    h_b += w * history[2, ty, tx]
+                    h_len += w * history_length[ty, tx]
+            if total < _MIN_WEIGHT:
+                continue
+            h_len /= total
+            if h_len <= _ZERO:
+                continue
+            # The current 3x3 range over foreground pixels (the centre is one).
+            lo_r, lo_g, lo_b = a_r, a_g, a_b
+            hi_r, hi_g, hi_b = a_r, a_g, a_b
+            for yy in range(max(y - 1, 0), min(y + 2, height)):
+                for xx in range(max(x - 1, 0), min(x + 2, width)):
+                    if depth[yy, xx] <= _ZERO:
+                        continue
+                    q_r = clean_albedo(albedo[0, yy, xx])
+                    q_g = clean_albedo(albedo[1, yy, xx])
+                    q_b = clean_albedo(albedo[2, yy, xx])
+                    lo_r, hi_r = min(lo_r, q_r), max(hi_r, q_r)
+                    lo_g, hi_g = min(lo_g, q_g), max(hi_g, q_g)
+                    lo_b, hi_b = min(lo_b, q_b), max(hi_b, q_b)
+            length = min(cap, h_len + _ONE)
+            blend = max(alpha, _ONE / length)
+            m_r = min(max(h_r / total, lo_r), hi_r)
+            m_g = min(max(h_g / total, lo_g), hi_g)
+            m_b = min(max(h_b / total, lo_b), hi_b)
+            m_r += blend * (a_r - m_r)
+            m_g += blend * (a_g - m_g)
+            m_b += blend * (a_b - m_b)
+            now, _, _, _ = effective_albedo(a_r, a_g, a_b, black, max_reflectance,
+                                            relative_floor)
+            mean, _, _, _ = effective_albedo(m_r, m_g, m_b, black, max_reflectance,
+                                             relative_floor)
+            if now != mean:
+                continue  # another mode: the remodulation must undo this frame's
+            out[0, y, x] = m_r
+            out[1, y, x] = m_g
+            out[2, y, x] = m_b
+            out_length[y, x] = length
