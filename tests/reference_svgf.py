@@ -1635,3 +1635,25 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
             out[:, y, x] = mean
             length[y, x] = n
     return out, length
+
+
+def combine_albedo(forward: np.ndarray, forward_length: np.ndarray, reverse: np.ndarray,
+                   reverse_length: np.ndarray, albedo: np.ndarray, alpha: float,
+                   black: float) -> np.ndarray:
+    """``filters.albedo_history.combine_albedo``: both passes' colour means weighted by
+    their effective sample counts ``n(h)`` (:func:`effective_count`),
+    ``(n_f a_f + n_r a_r) / (n_f + n_r)``; the reverse mean where either count is 0 or the
+    combination is in another mode than this frame's colour."""
+    out = np.asarray(reverse, dtype=F64).copy()
+    mode_now = effective_albedo(clean_albedo(albedo), black)[0]
+    height, width = albedo.shape[1:]
+    for y in range(height):
+        for x in range(width):
+            n_f = effective_count(float(forward_length[y, x]), alpha)
+            n_r = effective_count(float(reverse_length[y, x]), alpha)
+            if n_f <= 0.0 or n_r <= 0.0:
+                continue
+            mean = (n_f * forward[:, y, x] + n_r * reverse[:, y, x]) / (n_f + n_r)
+            if effective_albedo(mean[:, None, None], black)[0][0, 0] == mode_now[y, x]:
+                out[:, y, x] = mean
+    return out

@@ -6,7 +6,9 @@ that changes mode; then what it is for: a colour that flips between two textures
 to frame (one sample of a footprint on a texture edge) converges to their mean, a colour that
 does not change stays exact, and a history outside the current 3x3 range is pulled into it.
 In the Denoiser: the output is remodulated by the running mean, and a state round trip
-continues bit-identically.
+continues bit-identically. A bidirectional run combines both passes' means by their
+effective sample counts (``combine_albedo``, against its reference), also through the
+half-float spill.
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ import numpy as np
 import pytest
 import reference_svgf as ref
 
-from svgf_cli.filters.albedo_history import accumulate_albedo
+from svgf_cli.filters.albedo_history import accumulate_albedo, combine_albedo
+from svgf_cli.filters.bidirectional import effective_counts
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
+from svgf_cli.filters.two_pass import denoise_bidirectional
 from svgf_cli.frame import Frame, Signal
 
 F32 = np.float32
@@ -166,3 +170,46 @@ def test_state_round_trip_continues_bit_identically() -> None:
     resumed = [second.process(_frame(c, 1.5)).color for c in colours[3:]]
     for got, want in zip(resumed, outputs[3:], strict=True):
         np.testing.assert_array_equal(got, want)
+
+
+def test_combine_albedo_matches_the_float64_reference() -> None:
+    rng = np.random.default_rng(9)
+    height, width = 9, 11
+    forward = rng.uniform(0.05, 0.9, (3, height, width)).astype(F32)
+    reverse = rng.uniform(0.05, 0.9, (3, height, width)).astype(F32)
+    albedo = rng.uniform(0.05, 0.9, (3, height, width)).astype(F32)
+    forward_length = rng.integers(0, 40, (height, width)).astype(F32) * F32(0.75)
+    reverse_length = rng.integers(0, 40, (height, width)).astype(F32) * F32(0.75)
+    forward[:, 2, 3] = [1.04, 0.2, 0.2]  # the mean of 1.04 and 1.06 ...
+    reverse[:, 2, 3] = [0.2, 0.2, 1.06]  # ... classifies as a reflectance, the colour not
+    albedo[:, 2, 3] = [1.1, 1.1, 1.1]
+    forward_length[2, 3] = reverse_length[2, 3] = 4.0
+    counts = effective_counts(0.2, 32)
+    out = np.empty_like(forward)
+    combine_albedo(forward, forward_length, reverse, reverse_length, albedo, counts, BLACK,
+                   MAX_REFLECTANCE, FLOOR, out)
+    want = ref.combine_albedo(forward, forward_length, reverse, reverse_length, albedo, 0.2,
+                              float(BLACK))
+    np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-7)
+    np.testing.assert_array_equal(out[:, 2, 3], reverse[:, 2, 3])
+    both = (forward_length > 0) & (reverse_length > 0)
+    assert not np.allclose(out[:, both], reverse[:, both])
+    # In place over the forward means (as the Denoiser calls it).
+    combine_albedo(forward, forward_length, reverse, reverse_length, albedo, counts, BLACK,
+                   MAX_REFLECTANCE, FLOOR, forward)
+    np.testing.assert_array_equal(forward, out)
+
+
+def test_a_bidirectional_run_remodulates_by_both_passes_means() -> None:
+    params = resolve_params("default", temporal_albedo=True)
+    frames = [_frame(c, 2.0) for c in _edge_colours(8)]
+    outputs = [o.color for o in denoise_bidirectional(frames, params)]
+    # Every frame, the first and last included, sees about half its frames at 0.1 and
+    # half at 0.7 on the edge column: output near 2 * 0.4 (one pass alone: 0.2 or 1.4 on
+    # the end frame).
+    for output in (outputs[0], outputs[3], outputs[-1]):
+        assert np.all(np.abs(output[0, 2:6, 5] - 0.8) < 0.15)
+    # Spilled as a file run spills (half floats): the same within half rounding.
+    spilled = [o.color for o in denoise_bidirectional(frames, params, half=True)]
+    for got, want in zip(spilled, outputs, strict=True):
+        np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-4)

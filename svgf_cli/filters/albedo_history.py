@@ -145,3 +145,60 @@ def accumulate_albedo(
             out[1, y, x] = m_g
             out[2, y, x] = m_b
             out_length[y, x] = length
+
+
+@njit(inline="always", **_JIT)
+def _effective_count(table: np.ndarray, h: np.float32) -> np.float32:
+    """``n(h)`` of ``bidirectional.effective_counts``: linear between whole counts, 0 at
+    ``h <= 0``, the last entry beyond the table."""
+    last = table.shape[0] - 1
+    hh = min(max(h, _ZERO), F32(last))
+    below = min(np.int64(hh), last - 1) if last > 0 else np.int64(0)
+    frac = hh - F32(below)
+    upper = min(below + 1, last)
+    return table[below] + frac * (table[upper] - table[below])
+
+
+@njit(parallel=True, **_JIT)
+def combine_albedo(
+    forward: np.ndarray,
+    forward_length: np.ndarray,
+    reverse: np.ndarray,
+    reverse_length: np.ndarray,
+    albedo: np.ndarray,
+    counts: np.ndarray,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
+    out: np.ndarray,
+) -> None:
+    """A bidirectional run's colour mean of one signal: both passes' running means (each
+    over its side's frames and this one) weighted by their effective sample counts,
+    ``a = (n_f a_f + n_r a_r) / (n_f + n_r)`` with ``n = counts(h)``
+    (``bidirectional.effective_counts``); the reverse mean alone where the forward pass has
+    none, or where the combination classifies otherwise than this frame's colour
+    (``albedo``). (3, H, W) colours, (H, W) lengths; ``out`` may be ``forward``."""
+    height, width = albedo.shape[1], albedo.shape[2]
+    for y in prange(height):
+        for x in range(width):
+            r_r = reverse[0, y, x]
+            r_g = reverse[1, y, x]
+            r_b = reverse[2, y, x]
+            n_f = _effective_count(counts, forward_length[y, x])
+            n_r = _effective_count(counts, reverse_length[y, x])
+            m_r, m_g, m_b = r_r, r_g, r_b
+            if n_f > _ZERO and n_r > _ZERO:
+                share = n_f / (n_f + n_r)
+                m_r += share * (forward[0, y, x] - r_r)
+                m_g += share * (forward[1, y, x] - r_g)
+                m_b += share * (forward[2, y, x] - r_b)
+                now, _, _, _ = effective_albedo(
+                    clean_albedo(albedo[0, y, x]), clean_albedo(albedo[1, y, x]),
+                    clean_albedo(albedo[2, y, x]), black, max_reflectance, relative_floor)
+                mean, _, _, _ = effective_albedo(m_r, m_g, m_b, black, max_reflectance,
+                                                 relative_floor)
+                if now != mean:
+                    m_r, m_g, m_b = r_r, r_g, r_b
+            out[0, y, x] = m_r
+            out[1, y, x] = m_g
+            out[2, y, x] = m_b

@@ -35,7 +35,7 @@ from typing import TypeVar
 import numpy as np
 
 from svgf_cli.filters import modulate, values
-from svgf_cli.filters.albedo_history import accumulate_albedo
+from svgf_cli.filters.albedo_history import accumulate_albedo, combine_albedo
 from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import (
@@ -289,6 +289,8 @@ class Denoiser:
         # (S, H, W), and last frame's pair, overwritten next frame.
         self._albedo: tuple[np.ndarray, np.ndarray] | None = None
         self._albedo_spare: tuple[np.ndarray, np.ndarray] | None = None
+        # A bidirectional reverse pass: where the forward pass's colour means are put.
+        self._forward_albedo: tuple[np.ndarray, np.ndarray] | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
         self.stage_cpu_seconds: dict[str, float] = {}
@@ -596,10 +598,16 @@ class Denoiser:
         kept: list[Kept | SideHistory] = []
 
         def capture(temporal: TemporalState) -> None:
+            albedo = albedo_length = None
+            if self.params.temporal_albedo:
+                self._accumulate_albedo(run)
+                albedo, albedo_length = self._albedo or (None, None)
             side = SideHistory(temporal.history_illumination, temporal.history_moments,
-                               temporal.history_length)
+                               temporal.history_length, albedo, albedo_length)
             kept.append(keep(side) if keep is not None else SideHistory(
-                side.colour.copy(), side.moments.copy(), side.length.copy()))
+                side.colour.copy(), side.moments.copy(), side.length.copy(),
+                None if albedo is None else albedo.copy(),
+                None if albedo_length is None else albedo_length.copy()))
 
         self._accumulate_temporally(run, capture)
         self._store_history(run, self._pass_history(run))
@@ -611,8 +619,15 @@ class Denoiser:
         (a file run unpacks the spilled state there) is combined in place; any other is
         copied in first. Their contents do not outlive the next :meth:`reverse_step`."""
         work = self._workspace(height, width, num_signals)
+        albedo = albedo_length = None
+        if self.params.temporal_albedo:
+            shape = (num_signals, 3, height, width)
+            if self._forward_albedo is None or self._forward_albedo[0].shape != shape:
+                self._forward_albedo = (np.zeros(shape, dtype=F32),
+                                        np.zeros((num_signals, height, width), dtype=F32))
+            albedo, albedo_length = self._forward_albedo
         return SideHistory(work[self._combined_name()], work["combined_moments"],
-                           work["combined_length"])
+                           work["combined_length"], albedo, albedo_length)
 
     def _combined_name(self) -> str:
         # A spare buffer that is neither the pass's own accumulation nor the demodulated
@@ -636,9 +651,13 @@ class Denoiser:
         combine = None
         if forward is not None:
             into = self.forward_buffers(len(run.names), frame.height, frame.width)
-            for given, buffer in ((forward.colour, into.colour),
-                                  (forward.moments, into.moments),
-                                  (forward.length, into.length)):
+            pairs = [(forward.colour, into.colour), (forward.moments, into.moments),
+                     (forward.length, into.length)]
+            if forward.albedo is not None and forward.albedo_length is not None:
+                assert into.albedo is not None and into.albedo_length is not None
+                pairs += [(forward.albedo, into.albedo),
+                          (forward.albedo_length, into.albedo_length)]
+            for given, buffer in pairs:
                 if given is not buffer:
                     if given.shape != buffer.shape:
                         raise ValueError(f"forward history of shape {given.shape}, expected "
@@ -669,6 +688,8 @@ class Denoiser:
 
         self._accumulate_temporally(run, combine)
         self._accumulate_albedo(run)
+        if forward is not None and forward.albedo is not None:
+            self._combine_albedo(run, into)
         own_history = self._pass_history(run, protected=(combined,) if forward else ())
         filtered = None
         if forward is not None:
@@ -906,6 +927,24 @@ class Denoiser:
         self._albedo = (colour, length)
         run.frame = dataclasses.replace(frame, signals=signals)
         run.lap("albedo")
+
+    def _combine_albedo(self, run: _FrameRun, forward: SideHistory) -> None:
+        """A bidirectional output frame: remodulate by both passes' colour means weighted by
+        their effective sample counts (``albedo_history.combine_albedo``), written over the
+        forward pass's (``forward_buffers``: dead after this frame)."""
+        assert self._albedo is not None
+        assert forward.albedo is not None and forward.albedo_length is not None
+        reverse, reverse_length = self._albedo
+        frame = run.frame
+        signals = []
+        for index, signal in enumerate(frame.signals):
+            combine_albedo(
+                forward.albedo[index], forward.albedo_length[index], reverse[index],
+                reverse_length[index], signal.albedo, self._colour_counts,
+                *self._rules[signal.guide_albedo], forward.albedo[index],
+            )
+            signals.append(dataclasses.replace(signal, albedo=forward.albedo[index]))
+        run.frame = dataclasses.replace(frame, signals=signals)
 
     def _spread_fireflies(self, temporal: TemporalState,
                           signals: list[Signal]) -> dict[str, int]:

@@ -553,7 +553,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-history-no-mode-guard", "filters",
         "temporal albedo: a running mean in another mode than the current colour is kept",
         "svgf_cli/filters/albedo_history.py",
-        (("            if now != mean:\n", "            if False:\n"),),
+        (("            if now != mean:\n                continue  # another mode",
+          "            if False:\n                continue  # another mode"),),
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
@@ -561,9 +562,27 @@ MUTANTS: tuple[Mutant, ...] = (
         "temporal albedo: the running mean is computed but the output is remodulated by"
         " this frame's colour",
         "svgf_cli/filters/denoiser.py",
-        (("        run.frame = dataclasses.replace(frame, signals=signals)\n",
-          "        run.frame = frame\n"),),
+        (("        run.frame = dataclasses.replace(frame, signals=signals)\n"
+          "        run.lap(\"albedo\")",
+          "        run.frame = frame\n        run.lap(\"albedo\")"),),
         ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-bidirectional-reverse-only", "filters",
+        "temporal albedo: a bidirectional output is remodulated by the reverse pass's mean"
+        " alone",
+        "svgf_cli/filters/denoiser.py",
+        (("        if forward is not None and forward.albedo is not None:\n",
+          "        if False:\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-not-spilled", "filters",
+        "temporal albedo: the forward pass's colour means are left out of the spill",
+        "svgf_cli/filters/bidirectional.py",
+        (("        if history.albedo is not None and history.albedo_length is not None:\n",
+          "        if False:\n"),),
+        ("tests/test_filters_albedo_history.py", "tests/test_bidir_runs.py"),
     ),
 )
 
