@@ -213,3 +213,25 @@ def test_a_bidirectional_run_remodulates_by_both_passes_means() -> None:
     spilled = [o.color for o in denoise_bidirectional(frames, params, half=True)]
     for got, want in zip(spilled, outputs, strict=True):
         np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-4)
+
+
+def _pair(colour: np.ndarray, light: float) -> Frame:
+    """Direct and indirect light over one colour array (as a reader gives them)."""
+    single = _frame(colour, light)
+    radiance = single.signals[0].radiance
+    return Frame.direct_indirect(radiance * F32(0.75), radiance * F32(0.25), albedo=colour,
+                                 normal=single.normal, depth=single.depth,
+                                 motion=single.motion, mesh_id=single.mesh_id)
+
+
+def test_signals_sharing_a_colour_share_one_mean_also_bidirectionally() -> None:
+    params = resolve_params("default", temporal_albedo=True)
+    frames = [_pair(c, 2.0) for c in _edge_colours(8)]
+    denoiser = Denoiser(params)
+    for frame in frames[:3]:
+        denoiser.process(frame)
+    state = denoiser.state()
+    assert state["albedo_history"].shape[0] == 1
+    np.testing.assert_array_equal(state["albedo_slots"], [0, 0])
+    outputs = [o.color for o in denoise_bidirectional(frames, params, half=True)]
+    assert np.all(np.abs(outputs[-1][0, 2:6, 5] - 0.8) < 0.15)

@@ -129,8 +129,9 @@ class SideHistory:
     """One pass's history at a frame, resampled at the frame's pixels after anti-lag and
     before the blend: per signal the colour (S, 3, H, W), the luminance moments
     (S, 2, H, W) and the history length (S, H, W), 0 where the pass has none. With
-    ``temporal_albedo`` also each signal's running mean colour (S, 3, H, W) over the pass's
-    frames and this one, and its length (S, H, W) (``filters.albedo_history``)."""
+    ``temporal_albedo`` also the running mean (U, 3, H, W) over the pass's frames and this
+    one of each of the U distinct demodulation colours, and its length (U, H, W)
+    (``filters.albedo_history``)."""
 
     colour: np.ndarray
     moments: np.ndarray
@@ -379,8 +380,8 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
     variance is small against ``m1^2``, and its range where it is large) and
     ``<name>.h`` (float32). With ``half`` the first five are float16 scaled by their own
     maximum (relative rounding <= 2^-11 for any value above 1e-8 of it); else float32.
-    With a running mean colour also ``<name>.aR/aG/aB`` (as the colour) and ``<name>.ah``
-    (float32).
+    With running mean colours also ``albedo.<k>.R/G/B`` (as the colour) and ``albedo.<k>.h``
+    (float32) for each of them.
     """
     planes: dict[str, np.ndarray] = {}
     factors: dict[str, float] = {}
@@ -396,15 +397,16 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
                 planes[channel] = np.array(plane, dtype=F32)
                 factors[channel] = 1.0
         planes[f"{name}.h"] = np.array(history.length[s], dtype=F32)
-        if history.albedo is not None and history.albedo_length is not None:
-            for key, plane in zip(("aR", "aG", "aB"), history.albedo[s], strict=True):
-                channel = f"{name}.{key}"
+    if history.albedo is not None and history.albedo_length is not None:
+        for k in range(history.albedo.shape[0]):
+            for key, plane in zip("RGB", history.albedo[k], strict=True):
+                channel = f"albedo.{k}.{key}"
                 if half:
                     planes[channel], factors[channel] = _scaled_half(plane)
                 else:
                     planes[channel] = np.array(plane, dtype=F32)
                     factors[channel] = 1.0
-            planes[f"{name}.ah"] = np.array(history.albedo_length[s], dtype=F32)
+            planes[f"albedo.{k}.h"] = np.array(history.albedo_length[k], dtype=F32)
     return planes, factors
 
 
@@ -433,15 +435,18 @@ def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
         moments[s, 1] += moments[s, 0] * moments[s, 0]
         length[s] = planes[f"{name}.h"]
     albedo = albedo_length = None
-    if f"{names[0]}.ah" in planes:
+    colours = 0
+    while f"albedo.{colours}.h" in planes:
+        colours += 1
+    if colours:
         if (out is not None and out.albedo is not None and out.albedo_length is not None
-                and out.albedo_length.shape == (count, height, width)):
+                and out.albedo_length.shape == (colours, height, width)):
             albedo, albedo_length = out.albedo, out.albedo_length
         else:
-            albedo = np.empty((count, 3, height, width), dtype=F32)
-            albedo_length = np.empty((count, height, width), dtype=F32)
-        for s, name in enumerate(names):
-            for c, key in enumerate(("aR", "aG", "aB")):
-                restored(f"{name}.{key}", albedo[s, c])
-            albedo_length[s] = planes[f"{name}.ah"]
+            albedo = np.empty((colours, 3, height, width), dtype=F32)
+            albedo_length = np.empty((colours, height, width), dtype=F32)
+        for k in range(colours):
+            for c, key in enumerate("RGB"):
+                restored(f"albedo.{k}.{key}", albedo[k, c])
+            albedo_length[k] = planes[f"albedo.{k}.h"]
     return SideHistory(colour, moments, length, albedo, albedo_length)

@@ -285,9 +285,11 @@ class Denoiser:
         # as scratch; _store_history adopts them).
         self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
-        # temporal_albedo: each signal's running mean colour (S, 3, H, W) and its length
-        # (S, H, W), and last frame's pair, overwritten next frame.
+        # temporal_albedo: the running mean (U, 3, H, W) and length (U, H, W) of each
+        # distinct demodulation colour (signals sharing one share a mean), which colour each
+        # signal has (``_albedo_slots``), and last frame's pair, overwritten next frame.
         self._albedo: tuple[np.ndarray, np.ndarray] | None = None
+        self._albedo_slots: tuple[int, ...] = ()
         self._albedo_spare: tuple[np.ndarray, np.ndarray] | None = None
         # A bidirectional reverse pass: where the forward pass's colour means are put.
         self._forward_albedo: tuple[np.ndarray, np.ndarray] | None = None
@@ -311,6 +313,7 @@ class Denoiser:
         self._history = None
         self._taa_previous = None
         self._albedo = None
+        self._albedo_slots = ()
         self._signal_names = None
         self._frames_processed = 0
 
@@ -621,11 +624,10 @@ class Denoiser:
         work = self._workspace(height, width, num_signals)
         albedo = albedo_length = None
         if self.params.temporal_albedo:
-            shape = (num_signals, 3, height, width)
-            if self._forward_albedo is None or self._forward_albedo[0].shape != shape:
-                self._forward_albedo = (np.zeros(shape, dtype=F32),
-                                        np.zeros((num_signals, height, width), dtype=F32))
-            albedo, albedo_length = self._forward_albedo
+            # One per distinct colour, as this pass has them (all signals' before its first
+            # frame); a forward history of another count is copied into fresh buffers.
+            albedo, albedo_length = self._forward_albedo_buffers(
+                len(set(self._albedo_slots)) or num_signals, height, width)
         return SideHistory(work[self._combined_name()], work["combined_moments"],
                            work["combined_length"], albedo, albedo_length)
 
@@ -654,7 +656,8 @@ class Denoiser:
             pairs = [(forward.colour, into.colour), (forward.moments, into.moments),
                      (forward.length, into.length)]
             if forward.albedo is not None and forward.albedo_length is not None:
-                assert into.albedo is not None and into.albedo_length is not None
+                into.albedo, into.albedo_length = self._forward_albedo_buffers(
+                    *forward.albedo_length.shape)
                 pairs += [(forward.albedo, into.albedo),
                           (forward.albedo_length, into.albedo_length)]
             for given, buffer in pairs:
@@ -740,6 +743,7 @@ class Denoiser:
         if self._albedo is not None:
             state["albedo_history"] = self._albedo[0].copy()
             state["albedo_length"] = self._albedo[1].copy()
+            state["albedo_slots"] = np.array(self._albedo_slots, dtype=np.int64)
         return state
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -787,20 +791,10 @@ class Denoiser:
             taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
             if history is not None and taa_previous.shape[1:] != history["prev_depth"].shape:
                 raise ValueError("denoiser state taa_previous does not match the history shape")
-        albedo = None
-        if "albedo_history" in state and "albedo_length" in state and history is not None:
-            colour = np.array(state["albedo_history"], dtype=F32, copy=True, order="C")
-            length = np.array(state["albedo_length"], dtype=F32, copy=True, order="C")
-            height, width = history["prev_depth"].shape
-            expected = (len(history["history_length"]), 3, height, width)
-            if colour.shape != expected or length.shape != (expected[0], height, width):
-                raise ValueError("denoiser state albedo_history does not match the history")
-            if not (np.isfinite(colour).all() and np.isfinite(length).all()):
-                raise ValueError("denoiser state albedo_history has non-finite values")
-            albedo = (colour, length)
+        albedo, slots = _albedo_state(state, history)
         self._history = history
         self._taa_previous = taa_previous
-        self._albedo = albedo
+        self._albedo, self._albedo_slots = albedo, slots
         self._signal_names = names
         self._frames_processed = frames
 
@@ -894,56 +888,75 @@ class Denoiser:
 
     def _accumulate_albedo(self, run: _FrameRun) -> None:
         """With ``temporal_albedo``: each signal's demodulation colour becomes its running
-        mean over frames (``filters.albedo_history``), kept as history; ``run.frame``'s
-        signals take it, so the composition remodulates by it. Runs after the temporal
-        phase (demodulation used this frame's colour) and before the history is stored
-        (last frame's depth and mesh id)."""
+        mean over frames (``filters.albedo_history``), kept as history, one per distinct
+        colour (:func:`_colour_slots`); ``run.frame``'s signals take it, so the composition
+        remodulates by it. Runs after the temporal phase (demodulation used this frame's
+        colour) and before the history is stored (last frame's depth and mesh id)."""
         p = self.params
         if not p.temporal_albedo:
             return
         frame = run.frame
-        s, h, w = len(run.names), frame.height, frame.width
-        shape = (s, 3, h, w)
+        slots, sources = _colour_slots(frame.signals)
+        count, h, w = len(sources), frame.height, frame.width
+        shape = (count, 3, h, w)
         spare = self._albedo_spare
         if spare is None or spare[0].shape != shape:
-            spare = (np.empty(shape, dtype=F32), np.empty((s, h, w), dtype=F32))
+            spare = (np.empty(shape, dtype=F32), np.empty((count, h, w), dtype=F32))
         history, previous = self._albedo, self._history
-        if history is None or history[0].shape != shape or previous is None or not p.temporal:
+        if (history is None or slots != self._albedo_slots or previous is None
+                or not p.temporal):
             # No history: a length-0 plane rejects every tap.
-            history = (np.zeros(shape, dtype=F32), np.zeros((s, h, w), dtype=F32))
+            history = (np.zeros(shape, dtype=F32), np.zeros((count, h, w), dtype=F32))
             prev_depth, prev_mesh_id = run.depth, frame.mesh_id
         else:
             prev_depth, prev_mesh_id = previous["prev_depth"], previous["prev_mesh_id"]
         colour, length = spare
-        signals = []
-        for index, signal in enumerate(frame.signals):
+        for slot, source in enumerate(sources):
+            signal = frame.signals[source]
             accumulate_albedo(
-                signal.albedo, history[0][index], history[1][index], run.motion, run.depth,
+                signal.albedo, history[0][slot], history[1][slot], run.motion, run.depth,
                 frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
-                *self._rules[signal.guide_albedo], colour[index], length[index],
+                *self._rules[signal.guide_albedo], colour[slot], length[slot],
             )
-            signals.append(dataclasses.replace(signal, albedo=colour[index]))
         self._albedo_spare = history
-        self._albedo = (colour, length)
+        self._albedo, self._albedo_slots = (colour, length), slots
+        signals = [dataclasses.replace(signal, albedo=colour[slot])
+                   for signal, slot in zip(frame.signals, slots, strict=True)]
         run.frame = dataclasses.replace(frame, signals=signals)
         run.lap("albedo")
+
+    def _forward_albedo_buffers(self, count: int, height: int,
+                                width: int) -> tuple[np.ndarray, np.ndarray]:
+        """Where a bidirectional reverse pass puts the forward pass's ``count`` colour
+        means (kept from frame to frame)."""
+        shape = (count, 3, height, width)
+        if self._forward_albedo is None or self._forward_albedo[0].shape != shape:
+            self._forward_albedo = (np.zeros(shape, dtype=F32),
+                                    np.zeros((count, height, width), dtype=F32))
+        return self._forward_albedo
 
     def _combine_albedo(self, run: _FrameRun, forward: SideHistory) -> None:
         """A bidirectional output frame: remodulate by both passes' colour means weighted by
         their effective sample counts (``albedo_history.combine_albedo``), written over the
-        forward pass's (``forward_buffers``: dead after this frame)."""
+        forward pass's (``forward_buffers``: dead after this frame). A forward history with
+        another set of colours (it cannot happen with one reader) is not combined."""
         assert self._albedo is not None
         assert forward.albedo is not None and forward.albedo_length is not None
         reverse, reverse_length = self._albedo
+        if forward.albedo.shape != reverse.shape:
+            return
         frame = run.frame
-        signals = []
-        for index, signal in enumerate(frame.signals):
+        # The signals already hold views of the reverse means: the slots are the pass's.
+        slots = self._albedo_slots
+        for slot in range(reverse.shape[0]):
+            signal = frame.signals[slots.index(slot)]
             combine_albedo(
-                forward.albedo[index], forward.albedo_length[index], reverse[index],
-                reverse_length[index], signal.albedo, self._colour_counts,
-                *self._rules[signal.guide_albedo], forward.albedo[index],
+                forward.albedo[slot], forward.albedo_length[slot], reverse[slot],
+                reverse_length[slot], signal.albedo, self._colour_counts,
+                *self._rules[signal.guide_albedo], forward.albedo[slot],
             )
-            signals.append(dataclasses.replace(signal, albedo=forward.albedo[index]))
+        signals = [dataclasses.replace(signal, albedo=forward.albedo[slot])
+                   for signal, slot in zip(frame.signals, slots, strict=True)]
         run.frame = dataclasses.replace(frame, signals=signals)
 
     def _spread_fireflies(self, temporal: TemporalState,
@@ -1091,6 +1104,43 @@ class Denoiser:
             history["history_illumination"], history["history_moments"],
             history["history_length"], history["history_mode"],
         )
+
+
+def _colour_slots(signals: list[Signal]) -> tuple[tuple[int, ...], list[int]]:
+    """Which running mean each signal's demodulation colour has, and the first signal of each:
+    signals that share one colour array (a reader gives direct and indirect light the same
+    colour pass) and its demodulation rule (``guide_albedo``) share a mean."""
+    slots: list[int] = []
+    sources: list[int] = []
+    keys: list[tuple[int, bool]] = []
+    for index, signal in enumerate(signals):
+        key = (id(signal.albedo), signal.guide_albedo)
+        if key not in keys:
+            keys.append(key)
+            sources.append(index)
+        slots.append(keys.index(key))
+    return tuple(slots), sources
+
+
+def _albedo_state(state: dict[str, np.ndarray], history: dict[str, np.ndarray] | None,
+                  ) -> tuple[tuple[np.ndarray, np.ndarray] | None, tuple[int, ...]]:
+    """The temporal albedo's history in a saved state (``albedo_history``, ``_length``,
+    ``_slots``), checked against the history; ``(None, ())`` when it has none."""
+    keys = ("albedo_history", "albedo_length", "albedo_slots")
+    if history is None or not all(key in state for key in keys):
+        return None, ()
+    colour = np.array(state["albedo_history"], dtype=F32, copy=True, order="C")
+    length = np.array(state["albedo_length"], dtype=F32, copy=True, order="C")
+    slots = tuple(int(v) for v in np.asarray(state["albedo_slots"]).ravel())
+    height, width = history["prev_depth"].shape
+    count = colour.shape[0] if colour.ndim == 4 else -1
+    if (colour.shape != (count, 3, height, width) or length.shape != (count, height, width)
+            or len(slots) != len(history["history_length"])
+            or sorted(set(slots)) != list(range(count))):
+        raise ValueError("denoiser state albedo_history does not match the history")
+    if not (np.isfinite(colour).all() and np.isfinite(length).all()):
+        raise ValueError("denoiser state albedo_history has non-finite values")
+    return (colour, length), slots
 
 
 def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:

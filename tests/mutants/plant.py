@@ -580,8 +580,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-not-spilled", "filters",
         "temporal albedo: the forward pass's colour means are left out of the spill",
         "svgf_cli/filters/bidirectional.py",
-        (("        if history.albedo is not None and history.albedo_length is not None:\n",
-          "        if False:\n"),),
+        (("    if history.albedo is not None and history.albedo_length is not None:\n",
+          "    if False:\n"),),
         ("tests/test_filters_albedo_history.py", "tests/test_bidir_runs.py"),
     ),
 )
