@@ -38,7 +38,35 @@ F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _MIN_WEIGHT = F32(0.01)
+# The 3x3 range's bound where a pixel is background (finite: fast-math assumes no inf).
+_FAR = F32(3e38)
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+
+
+@njit(inline="always", **_JIT)
+def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, lo: np.ndarray,
+               hi: np.ndarray, column_lo: np.ndarray, column_hi: np.ndarray) -> None:
+    """``lo[c, x]``, ``hi[c, x]``: the (cleaned) colour's 3x3 minimum and maximum over
+    foreground pixels around ``(x, y)``; separable (three rows, then three taps), so every
+    loop runs over a row. Where no pixel is foreground, +-``_FAR``."""
+    height, width = depth.shape
+    y0, y1 = max(y - 1, 0), min(y + 2, height)
+    for c in range(3):
+        column_lo[:] = _FAR
+        column_hi[:] = -_FAR
+        for yy in range(y0, y1):
+            row = albedo[c, yy]
+            z = depth[yy]
+            for x in range(width):
+                v = clean_albedo(row[x])
+                inside = z[x] > _ZERO
+                column_lo[x] = min(column_lo[x], v if inside else _FAR)
+                column_hi[x] = max(column_hi[x], v if inside else -_FAR)
+        out_lo, out_hi = lo[c], hi[c]
+        for x in range(width):
+            left, right = max(x - 1, 0), min(x + 1, width - 1)
+            out_lo[x] = min(column_lo[left], min(column_lo[x], column_lo[right]))
+            out_hi[x] = max(column_hi[left], max(column_hi[x], column_hi[right]))
 
 
 @njit(parallel=True, **_JIT)
@@ -59,8 +87,8 @@ def accumulate_albedo(
     out: np.ndarray,
     out_length: np.ndarray,
 ) -> None:
-    """One signal's running mean colour (module docstring): ``out = lerp(clamp(a_hist,
-    min3x3, max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``.
+    """One colour's running mean (module docstring): ``out = lerp(clamp(a_hist, min3x3,
+    max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``.
 
     ``albedo``, ``history`` and ``out`` are (3, H, W); ``history_length`` and ``out_length``
     (H, W) (0 = no history); ``motion`` (2, H, W); ``prev_depth`` / ``prev_mesh_id`` last
@@ -68,6 +96,11 @@ def accumulate_albedo(
     """
     height, width = depth.shape
     for y in prange(height):
+        lo = np.empty((3, width), dtype=F32)
+        hi = np.empty((3, width), dtype=F32)
+        column_lo = np.empty(width, dtype=F32)
+        column_hi = np.empty(width, dtype=F32)
+        _row_range(albedo, depth, y, lo, hi, column_lo, column_hi)
         for x in range(width):
             a_r = clean_albedo(albedo[0, y, x])
             a_g = clean_albedo(albedo[1, y, x])
@@ -114,24 +147,11 @@ def accumulate_albedo(
             h_len /= total
             if h_len <= _ZERO:
                 continue
-            # The current 3x3 range over foreground pixels (the centre is one).
-            lo_r, lo_g, lo_b = a_r, a_g, a_b
-            hi_r, hi_g, hi_b = a_r, a_g, a_b
-            for yy in range(max(y - 1, 0), min(y + 2, height)):
-                for xx in range(max(x - 1, 0), min(x + 2, width)):
-                    if depth[yy, xx] <= _ZERO:
-                        continue
-                    q_r = clean_albedo(albedo[0, yy, xx])
-                    q_g = clean_albedo(albedo[1, yy, xx])
-                    q_b = clean_albedo(albedo[2, yy, xx])
-                    lo_r, hi_r = min(lo_r, q_r), max(hi_r, q_r)
-                    lo_g, hi_g = min(lo_g, q_g), max(hi_g, q_g)
-                    lo_b, hi_b = min(lo_b, q_b), max(hi_b, q_b)
             length = min(cap, h_len + _ONE)
             blend = max(alpha, _ONE / length)
-            m_r = min(max(h_r / total, lo_r), hi_r)
-            m_g = min(max(h_g / total, lo_g), hi_g)
-            m_b = min(max(h_b / total, lo_b), hi_b)
+            m_r = min(max(h_r / total, lo[0, x]), hi[0, x])
+            m_g = min(max(h_g / total, lo[1, x]), hi[1, x])
+            m_b = min(max(h_b / total, lo[2, x]), hi[2, x])
             m_r += blend * (a_r - m_r)
             m_g += blend * (a_g - m_g)
             m_b += blend * (a_b - m_b)
