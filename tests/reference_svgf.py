@@ -1592,9 +1592,11 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
     image, not background and of the same mesh id, renormalised (rejected below 0.01); the
     resampled mean clamped per channel to the current 3x3 range of foreground pixels;
     ``h = min(cap, h_prev + 1)``, ``a = lerp(a_hist, a, max(alpha, 1/h))`` (equation 6);
-    kept only where it is in the same mode as the current colour (``effective_albedo``).
-    Returns ``(colour (3, H, W), length (H, W))``; without history (or in the background)
-    the current colour with length 1 (0 in the background)."""
+    without history the mean of the 3x3 pixels of the same mesh id weighted by a Gaussian of
+    sigma 0.5 px, ``exp(-d^2 / (2 0.5^2))`` at distance ``d``, with ``h = 1``; either kept
+    only where it is in the same mode as the current colour (``effective_albedo``, else the
+    current colour with ``h = 1``). Returns ``(colour (3, H, W), length (H, W))``; in the
+    background the current colour with length 0."""
     a = clean_albedo(albedo)
     hist = np.asarray(history, dtype=F64)
     h_prev = np.asarray(history_length, dtype=F64)
@@ -1609,7 +1611,7 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
                 continue
             px, py = x + float(motion[0, y, x]), y + float(motion[1, y, x])
             if not (abs(px) < 1e7 and abs(py) < 1e7):
-                continue
+                px = py = -2.0  # no tap in the image
             x0, y0 = math.floor(px), math.floor(py)
             fx, fy = px - x0, py - y0
             total, colour, h = 0.0, np.zeros(3), 0.0
@@ -1622,14 +1624,22 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
                     total += wx * wy
                     colour += wx * wy * hist[:, ty, tx]
                     h += wx * wy * h_prev[ty, tx]
-            if total < 0.01 or h / total <= 0.0:
-                continue
             y_lo, y_hi = max(y - 1, 0), min(y + 2, height)
             x_lo, x_hi = max(x - 1, 0), min(x + 2, width)
-            window = a[:, y_lo:y_hi, x_lo:x_hi][:, z[y_lo:y_hi, x_lo:x_hi] > 0.0]
-            mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
-            n = min(cap, h / total + 1.0)
-            mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
+            if total < 0.01 or h / total <= 0.0:
+                n, weights, mean = 1.0, 0.0, np.zeros(3)
+                for yy in range(y_lo, y_hi):
+                    for xx in range(x_lo, x_hi):
+                        if z[yy, xx] > 0.0 and mesh_id[yy, xx] == mesh_id[y, x]:
+                            w = math.exp(-((yy - y) ** 2 + (xx - x) ** 2) / (2 * 0.5 ** 2))
+                            weights += w
+                            mean += w * a[:, yy, xx]
+                mean /= weights
+            else:
+                window = a[:, y_lo:y_hi, x_lo:x_hi][:, z[y_lo:y_hi, x_lo:x_hi] > 0.0]
+                mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
+                n = min(cap, h / total + 1.0)
+                mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
             if effective_albedo(mean[:, None, None], black)[0][0, 0] != mode_now[y, x]:
                 continue
             out[:, y, x] = mean

@@ -18,7 +18,11 @@ colour's own temporal mean does: it converges to the footprint's mean colour.
   (the footprint's mean lies within the samples around it; a texture that changed, or a
   surface disoccluded on the same mesh, is pulled to the current colours);
 * blended: ``h = min(cap, h_prev + 1)``, ``a = lerp(a_hist, a, max(alpha, 1/h))``
-  (paper equation 6 applied to the colour); without history ``a`` and ``h = 1``;
+  (paper equation 6 applied to the colour);
+* without history (the first frame, a disocclusion) ``h = 1`` and the colour's mean over the
+  3x3 pixels of the same mesh id weighted by a Gaussian of sigma 0.5 px (1, ``e^-2``,
+  ``e^-4``: the width-2 Gaussian pixel filter of Arnold, RenderMan and Karma), the best
+  estimate of the footprint's mean a single frame has;
 * kept only where it classifies as the current colour does (reflectance or not,
   ``modulate.effective_albedo``): the remodulation must undo the demodulation's mode.
 
@@ -40,6 +44,9 @@ _ONE = F32(1.0)
 _MIN_WEIGHT = F32(0.01)
 # The 3x3 range's bound where a pixel is background (finite: fast-math assumes no inf).
 _FAR = F32(3e38)
+# Weights of a Gaussian of sigma 0.5 px at the edge and corner neighbours.
+_EDGE = F32(np.exp(-2.0))
+_CORNER = F32(np.exp(-4.0))
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
@@ -69,6 +76,31 @@ def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, lo: np.ndarray,
             out_hi[x] = max(column_hi[left], max(column_hi[x], column_hi[right]))
 
 
+@njit(inline="always", **_JIT)
+def _gaussian_mean(albedo: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray, x: int,
+                   y: int) -> tuple[np.float32, np.float32, np.float32]:
+    """The (cleaned) colour's mean over the 3x3 foreground pixels of ``(x, y)``'s mesh id,
+    weighted by a Gaussian of sigma 0.5 px: 1, ``e^-2`` at the 4 edge neighbours, ``e^-4``
+    at the corners (the width-2 Gaussian pixel filter of Arnold, RenderMan and Karma)."""
+    height, width = depth.shape
+    mesh = mesh_id[y, x]
+    total = _ZERO
+    m_r = _ZERO
+    m_g = _ZERO
+    m_b = _ZERO
+    for yy in range(max(y - 1, 0), min(y + 2, height)):
+        for xx in range(max(x - 1, 0), min(x + 2, width)):
+            if depth[yy, xx] <= _ZERO or mesh_id[yy, xx] != mesh:
+                continue
+            away = abs(yy - y) + abs(xx - x)
+            w = _ONE if away == 0 else (_EDGE if away == 1 else _CORNER)
+            total += w
+            m_r += w * clean_albedo(albedo[0, yy, xx])
+            m_g += w * clean_albedo(albedo[1, yy, xx])
+            m_b += w * clean_albedo(albedo[2, yy, xx])
+    return m_r / total, m_g / total, m_b / total
+
+
 @njit(parallel=True, **_JIT)
 def accumulate_albedo(
     albedo: np.ndarray,
@@ -88,7 +120,8 @@ def accumulate_albedo(
     out_length: np.ndarray,
 ) -> None:
     """One colour's running mean (module docstring): ``out = lerp(clamp(a_hist, min3x3,
-    max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``.
+    max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``; without history the
+    3x3 Gaussian mean of the colour over its mesh id, ``h = 1``.
 
     ``albedo``, ``history`` and ``out`` are (3, H, W); ``history_length`` and ``out_length``
     (H, W) (0 = no history); ``motion`` (2, H, W); ``prev_depth`` / ``prev_mesh_id`` last
@@ -115,7 +148,7 @@ def accumulate_albedo(
             px = F32(x) + motion[0, y, x]
             py = F32(y) + motion[1, y, x]
             if not (abs(px) < F32(1e7) and abs(py) < F32(1e7)):  # NaN or far outside
-                continue
+                px = py = F32(-2.0)  # no tap is in the image
             x0 = int(np.floor(px))
             y0 = int(np.floor(py))
             fx = px - F32(x0)
@@ -142,19 +175,19 @@ def accumulate_albedo(
                     h_g += w * history[1, ty, tx]
                     h_b += w * history[2, ty, tx]
                     h_len += w * history_length[ty, tx]
-            if total < _MIN_WEIGHT:
-                continue
-            h_len /= total
-            if h_len <= _ZERO:
-                continue
-            length = min(cap, h_len + _ONE)
-            blend = max(alpha, _ONE / length)
-            m_r = min(max(h_r / total, lo[0, x]), hi[0, x])
-            m_g = min(max(h_g / total, lo[1, x]), hi[1, x])
-            m_b = min(max(h_b / total, lo[2, x]), hi[2, x])
-            m_r += blend * (a_r - m_r)
-            m_g += blend * (a_g - m_g)
-            m_b += blend * (a_b - m_b)
+            if total >= _MIN_WEIGHT and h_len > _ZERO:
+                length = min(cap, h_len / total + _ONE)
+                blend = max(alpha, _ONE / length)
+                m_r = min(max(h_r / total, lo[0, x]), hi[0, x])
+                m_g = min(max(h_g / total, lo[1, x]), hi[1, x])
+                m_b = min(max(h_b / total, lo[2, x]), hi[2, x])
+                m_r += blend * (a_r - m_r)
+                m_g += blend * (a_g - m_g)
+                m_b += blend * (a_b - m_b)
+            else:
+                # No history: the footprint's mean from the samples around it.
+                length = _ONE
+                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y)
             now, _, _, _ = effective_albedo(a_r, a_g, a_b, black, max_reflectance,
                                             relative_floor)
             mean, _, _, _ = effective_albedo(m_r, m_g, m_b, black, max_reflectance,

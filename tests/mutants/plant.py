@@ -568,6 +568,15 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
+        "albedo-history-no-first-estimate", "filters",
+        "temporal albedo: without history the colour is this frame's sample, not the 3x3"
+        " Gaussian mean",
+        "svgf_cli/filters/albedo_history.py",
+        (("                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y)\n",
+          "                m_r, m_g, m_b = a_r, a_g, a_b\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
         "albedo-bidirectional-reverse-only", "filters",
         "temporal albedo: a bidirectional output is remodulated by the reverse pass's mean"
         " alone",
