@@ -1588,15 +1588,17 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
                       prev_depth: np.ndarray, prev_mesh_id: np.ndarray, alpha: float,
                       cap: float, black: float) -> tuple[np.ndarray, np.ndarray]:
     """``filters.albedo_history.accumulate_albedo`` of one signal: the running mean of its
-    (cleaned) demodulation colour. The bilinear taps at ``(x + mx, y + my)`` that are in the
-    image, not background and of the same mesh id, renormalised (rejected below 0.01); the
-    resampled mean clamped per channel to the current 3x3 range of foreground pixels;
+    (cleaned) demodulation colour, over colours that are reflectances only (``demodulated``:
+    ``effective_albedo``; a pixel whose colour is not one keeps it, ``h = 1``). The
+    bilinear taps at ``(x + mx, y + my)`` that are in the image, not background, of the same
+    mesh id and whose mean is a reflectance, renormalised (rejected below 0.01); the
+    resampled mean clamped per channel to the current 3x3 range of foreground reflectances;
     ``h = min(cap, h_prev + 1)``, ``a = lerp(a_hist, a, max(alpha, 1/h))`` (equation 6);
-    without history the mean of the 3x3 pixels of the same mesh id weighted by a Gaussian of
-    sigma 0.5 px, ``exp(-d^2 / (2 0.5^2))`` at distance ``d``, with ``h = 1``; either kept
-    only where it is in the same mode as the current colour (``effective_albedo``, else the
-    current colour with ``h = 1``). Returns ``(colour (3, H, W), length (H, W))``; in the
-    background the current colour with length 0."""
+    without history the mean of the 3x3 reflectances of the same mesh id weighted by a
+    Gaussian of sigma 0.5 px, ``exp(-d^2 / (2 0.5^2))`` at distance ``d``, with ``h = 1``;
+    either kept only where it is a reflectance (else the current colour with ``h = 1``).
+    Returns ``(colour (3, H, W), length (H, W))``; in the background the current colour with
+    length 0."""
     a = clean_albedo(albedo)
     hist = np.asarray(history, dtype=F64)
     h_prev = np.asarray(history_length, dtype=F64)
@@ -1604,10 +1606,11 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
     height, width = z.shape
     out = a.copy()
     length = np.where(z > 0.0, 1.0, 0.0)
-    mode_now = effective_albedo(a, black)[0]
+    reflectance = ~effective_albedo(a, black)[0]
+    hist_reflectance = ~effective_albedo(hist, black)[0]
     for y in range(height):
         for x in range(width):
-            if z[y, x] <= 0.0:
+            if z[y, x] <= 0.0 or not reflectance[y, x]:
                 continue
             px, py = x + float(motion[0, y, x]), y + float(motion[1, y, x])
             if not (abs(px) < 1e7 and abs(py) < 1e7):
@@ -1621,6 +1624,8 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
                         continue
                     if prev_depth[ty, tx] <= 0.0 or prev_mesh_id[ty, tx] != mesh_id[y, x]:
                         continue
+                    if not hist_reflectance[ty, tx]:
+                        continue
                     total += wx * wy
                     colour += wx * wy * hist[:, ty, tx]
                     h += wx * wy * h_prev[ty, tx]
@@ -1630,18 +1635,20 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
                 n, weights, mean = 1.0, 0.0, np.zeros(3)
                 for yy in range(y_lo, y_hi):
                     for xx in range(x_lo, x_hi):
-                        if z[yy, xx] > 0.0 and mesh_id[yy, xx] == mesh_id[y, x]:
+                        if (z[yy, xx] > 0.0 and mesh_id[yy, xx] == mesh_id[y, x]
+                                and reflectance[yy, xx]):
                             w = math.exp(-((yy - y) ** 2 + (xx - x) ** 2) / (2 * 0.5 ** 2))
                             weights += w
                             mean += w * a[:, yy, xx]
                 mean /= weights
             else:
-                window = a[:, y_lo:y_hi, x_lo:x_hi][:, z[y_lo:y_hi, x_lo:x_hi] > 0.0]
+                usable = (z > 0.0) & reflectance
+                window = a[:, y_lo:y_hi, x_lo:x_hi][:, usable[y_lo:y_hi, x_lo:x_hi]]
                 mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
                 n = min(cap, h / total + 1.0)
                 mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
-            if effective_albedo(mean[:, None, None], black)[0][0, 0] != mode_now[y, x]:
-                continue
+            if effective_albedo(mean[:, None, None], black)[0][0, 0]:
+                continue  # not a reflectance
             out[:, y, x] = mean
             length[y, x] = n
     return out, length

@@ -120,6 +120,29 @@ def test_a_history_outside_the_current_range_is_clamped_into_it() -> None:
     assert np.all(out_length == 11.0)
 
 
+def test_only_reflectances_are_averaged() -> None:
+    depth, mesh, motion = _flat(3, 4)
+    current = np.full((3, 3, 4), 0.5, dtype=F32)
+    current[:, :, 0] = [[4.0], [4.0], [4.0]]  # not a reflectance (radiance mode)
+    current[:, 1, 2] = [0.0015, 0.0, 0.0]
+    current[:, 1, 3] = [0.0, 0.0, 0.0015]
+    history = np.full((3, 3, 4), 0.5, dtype=F32)
+    history[:, :, 1] = 3.0  # a mean of colours that were not reflectances
+    history[:, 1, 2] = [0.0, 0.0, 0.0015]
+    length = np.ones((3, 4), dtype=F32)
+    out, out_length = _run(current, history, length, motion, depth, mesh, depth, mesh)
+    # Radiance-mode pixels keep their colour and restart.
+    np.testing.assert_array_equal(out[:, :, 0], current[:, :, 0])
+    assert np.all(out_length[:, 0] == 1.0)
+    # Column 1's history is no reflectance: no tap, so the first frame's estimate (the
+    # column-0 neighbours left out), h = 1.
+    assert np.all(out_length[:, 1] == 1.0)
+    assert np.all(out[:, :, 1] < 0.51)
+    # (1, 2): two reflectances whose blend (0.00075, 0, 0.00075) is none: the colour stays.
+    np.testing.assert_array_equal(out[:, 1, 2], current[:, 1, 2])
+    assert out_length[1, 2] == 1.0
+
+
 def test_without_history_the_colour_is_the_gaussian_mean_of_its_surface() -> None:
     depth, mesh, motion = _flat(4, 5)
     mesh[:, 3:] = 2  # another object: never mixed in

@@ -23,8 +23,13 @@ colour's own temporal mean does: it converges to the footprint's mean colour.
   3x3 pixels of the same mesh id weighted by a Gaussian of sigma 0.5 px (1, ``e^-2``,
   ``e^-4``: the width-2 Gaussian pixel filter of Arnold, RenderMan and Karma), the best
   estimate of the footprint's mean a single frame has;
-* kept only where it classifies as the current colour does (reflectance or not,
-  ``modulate.effective_albedo``): the remodulation must undo the demodulation's mode.
+* only over colours that are reflectances (demodulated: ``modulate.effective_albedo``):
+  a pixel whose colour is not one is remodulated by 1 whatever it is, so it keeps its
+  colour and restarts; history taps, the 3x3 range and the first frame's mean leave such
+  colours out, and a mean that is not one is not kept. A G-buffer albedo that follows a
+  specular bounce (Cycles' ``Denoising Albedo``) is a reflectance in some samples of a
+  pixel and not in others (below ``guide_albedo_floor``): the samples filtered as radiance
+  must not darken or lighten the colour the demodulated ones are remodulated by.
 
 A renderer that samples pixel centres (``svgf trace``) writes a noise-free colour; there the
 running mean only adds the resampling blur, hence the option (``--temporal-albedo``).
@@ -51,22 +56,33 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_
 
 
 @njit(inline="always", **_JIT)
-def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, lo: np.ndarray,
-               hi: np.ndarray, column_lo: np.ndarray, column_hi: np.ndarray) -> None:
-    """``lo[c, x]``, ``hi[c, x]``: the (cleaned) colour's 3x3 minimum and maximum over
-    foreground pixels around ``(x, y)``; separable (three rows, then three taps), so every
-    loop runs over a row. Where no pixel is foreground, +-``_FAR``."""
+def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, black: np.float32,
+               max_reflectance: np.float32, relative_floor: np.float32, lo: np.ndarray,
+               hi: np.ndarray, column_lo: np.ndarray, column_hi: np.ndarray,
+               usable: np.ndarray) -> None:
+    """``lo[c, x]``, ``hi[c, x]``: the (cleaned) colour's 3x3 minimum and maximum over the
+    foreground pixels around ``(x, y)`` whose colour is a reflectance (demodulated,
+    ``effective_albedo``); separable (three rows, then three taps), so every loop runs over
+    a row. Where there is none, +-``_FAR``. ``usable`` is (3, W) scratch."""
     height, width = depth.shape
     y0, y1 = max(y - 1, 0), min(y + 2, height)
+    for yy in range(y0, y1):
+        z = depth[yy]
+        flags = usable[yy - y0]
+        for x in range(width):
+            demodulated, _, _, _ = effective_albedo(
+                clean_albedo(albedo[0, yy, x]), clean_albedo(albedo[1, yy, x]),
+                clean_albedo(albedo[2, yy, x]), black, max_reflectance, relative_floor)
+            flags[x] = z[x] > _ZERO and demodulated
     for c in range(3):
         column_lo[:] = _FAR
         column_hi[:] = -_FAR
         for yy in range(y0, y1):
             row = albedo[c, yy]
-            z = depth[yy]
+            flags = usable[yy - y0]
             for x in range(width):
                 v = clean_albedo(row[x])
-                inside = z[x] > _ZERO
+                inside = flags[x]
                 column_lo[x] = min(column_lo[x], v if inside else _FAR)
                 column_hi[x] = max(column_hi[x], v if inside else -_FAR)
         out_lo, out_hi = lo[c], hi[c]
@@ -78,10 +94,12 @@ def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, lo: np.ndarray,
 
 @njit(inline="always", **_JIT)
 def _gaussian_mean(albedo: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray, x: int,
-                   y: int) -> tuple[np.float32, np.float32, np.float32]:
-    """The (cleaned) colour's mean over the 3x3 foreground pixels of ``(x, y)``'s mesh id,
-    weighted by a Gaussian of sigma 0.5 px: 1, ``e^-2`` at the 4 edge neighbours, ``e^-4``
-    at the corners (the width-2 Gaussian pixel filter of Arnold, RenderMan and Karma)."""
+                   y: int, black: np.float32, max_reflectance: np.float32,
+                   relative_floor: np.float32) -> tuple[np.float32, np.float32, np.float32]:
+    """The (cleaned) colour's mean over the 3x3 foreground pixels of ``(x, y)``'s mesh id
+    whose colour is a reflectance (the centre's is), weighted by a Gaussian of sigma 0.5 px:
+    1, ``e^-2`` at the 4 edge neighbours, ``e^-4`` at the corners (the width-2 Gaussian
+    pixel filter of Arnold, RenderMan and Karma)."""
     height, width = depth.shape
     mesh = mesh_id[y, x]
     total = _ZERO
@@ -92,12 +110,19 @@ def _gaussian_mean(albedo: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray, x
         for xx in range(max(x - 1, 0), min(x + 2, width)):
             if depth[yy, xx] <= _ZERO or mesh_id[yy, xx] != mesh:
                 continue
+            q_r = clean_albedo(albedo[0, yy, xx])
+            q_g = clean_albedo(albedo[1, yy, xx])
+            q_b = clean_albedo(albedo[2, yy, xx])
+            demodulated, _, _, _ = effective_albedo(q_r, q_g, q_b, black, max_reflectance,
+                                                    relative_floor)
+            if not demodulated:
+                continue
             away = abs(yy - y) + abs(xx - x)
             w = _ONE if away == 0 else (_EDGE if away == 1 else _CORNER)
             total += w
-            m_r += w * clean_albedo(albedo[0, yy, xx])
-            m_g += w * clean_albedo(albedo[1, yy, xx])
-            m_b += w * clean_albedo(albedo[2, yy, xx])
+            m_r += w * q_r
+            m_g += w * q_g
+            m_b += w * q_b
     return m_r / total, m_g / total, m_b / total
 
 
@@ -133,7 +158,9 @@ def accumulate_albedo(
         hi = np.empty((3, width), dtype=F32)
         column_lo = np.empty(width, dtype=F32)
         column_hi = np.empty(width, dtype=F32)
-        _row_range(albedo, depth, y, lo, hi, column_lo, column_hi)
+        usable = np.empty((3, width), dtype=np.bool_)
+        _row_range(albedo, depth, y, black, max_reflectance, relative_floor, lo, hi,
+                   column_lo, column_hi, usable)
         for x in range(width):
             a_r = clean_albedo(albedo[0, y, x])
             a_g = clean_albedo(albedo[1, y, x])
@@ -145,6 +172,10 @@ def accumulate_albedo(
             if depth[y, x] <= _ZERO:
                 continue
             out_length[y, x] = _ONE
+            now, _, _, _ = effective_albedo(a_r, a_g, a_b, black, max_reflectance,
+                                            relative_floor)
+            if not now:
+                continue  # remodulated by 1 whatever the colour: no mean
             px = F32(x) + motion[0, y, x]
             py = F32(y) + motion[1, y, x]
             if not (abs(px) < F32(1e7) and abs(py) < F32(1e7)):  # NaN or far outside
@@ -169,6 +200,11 @@ def accumulate_albedo(
                         continue
                     if prev_depth[ty, tx] <= _ZERO or prev_mesh_id[ty, tx] != mesh:
                         continue
+                    kept, _, _, _ = effective_albedo(
+                        history[0, ty, tx], history[1, ty, tx], history[2, ty, tx], black,
+                        max_reflectance, relative_floor)
+                    if not kept:
+                        continue  # a mean of samples that were not demodulated
                     w = wx * wy
                     total += w
                     h_r += w * history[0, ty, tx]
@@ -187,12 +223,11 @@ def accumulate_albedo(
             else:
                 # No history: the footprint's mean from the samples around it.
                 length = _ONE
-                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y)
-            now, _, _, _ = effective_albedo(a_r, a_g, a_b, black, max_reflectance,
-                                            relative_floor)
+                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y, black,
+                                               max_reflectance, relative_floor)
             mean, _, _, _ = effective_albedo(m_r, m_g, m_b, black, max_reflectance,
                                              relative_floor)
-            if now != mean:
+            if not mean:
                 continue  # another mode: the remodulation must undo this frame's
             out[0, y, x] = m_r
             out[1, y, x] = m_g

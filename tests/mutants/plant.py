@@ -551,9 +551,9 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "albedo-history-no-mode-guard", "filters",
-        "temporal albedo: a running mean in another mode than the current colour is kept",
+        "temporal albedo: a running mean that is not a reflectance is kept",
         "svgf_cli/filters/albedo_history.py",
-        (("            if now != mean:\n                continue  # another mode",
+        (("            if not mean:\n                continue  # another mode",
           "            if False:\n                continue  # another mode"),),
         ("tests/test_filters_albedo_history.py",),
     ),
@@ -568,11 +568,20 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
+        "albedo-history-mixes-modes", "filters",
+        "temporal albedo: history taps whose mean is not a reflectance are resampled too",
+        "svgf_cli/filters/albedo_history.py",
+        (("                    if not kept:\n                        continue  # a mean",
+          "                    if False:\n                        continue  # a mean"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
         "albedo-history-no-first-estimate", "filters",
         "temporal albedo: without history the colour is this frame's sample, not the 3x3"
         " Gaussian mean",
         "svgf_cli/filters/albedo_history.py",
-        (("                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y)\n",
+        (("                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y, black,\n"
+          "                                               max_reflectance, relative_floor)\n",
           "                m_r, m_g, m_b = a_r, a_g, a_b\n"),),
         ("tests/test_filters_albedo_history.py",),
     ),
