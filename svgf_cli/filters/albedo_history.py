@@ -56,30 +56,20 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_
 
 
 @njit(inline="always", **_JIT)
-def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, black: np.float32,
-               max_reflectance: np.float32, relative_floor: np.float32, lo: np.ndarray,
-               hi: np.ndarray, column_lo: np.ndarray, column_hi: np.ndarray,
-               usable: np.ndarray) -> None:
+def _row_range(albedo: np.ndarray, usable: np.ndarray, y: int, lo: np.ndarray,
+               hi: np.ndarray, column_lo: np.ndarray, column_hi: np.ndarray) -> None:
     """``lo[c, x]``, ``hi[c, x]``: the (cleaned) colour's 3x3 minimum and maximum over the
-    foreground pixels around ``(x, y)`` whose colour is a reflectance (demodulated,
-    ``effective_albedo``); separable (three rows, then three taps), so every loop runs over
-    a row. Where there is none, +-``_FAR``. ``usable`` is (3, W) scratch."""
-    height, width = depth.shape
+    pixels around ``(x, y)`` that are ``usable`` (foreground reflectances:
+    :func:`_reflectances`); separable (three rows, then three taps), so every loop runs over
+    a row. Where there is none, +-``_FAR``."""
+    height, width = usable.shape
     y0, y1 = max(y - 1, 0), min(y + 2, height)
-    for yy in range(y0, y1):
-        z = depth[yy]
-        flags = usable[yy - y0]
-        for x in range(width):
-            demodulated, _, _, _ = effective_albedo(
-                clean_albedo(albedo[0, yy, x]), clean_albedo(albedo[1, yy, x]),
-                clean_albedo(albedo[2, yy, x]), black, max_reflectance, relative_floor)
-            flags[x] = z[x] > _ZERO and demodulated
     for c in range(3):
         column_lo[:] = _FAR
         column_hi[:] = -_FAR
         for yy in range(y0, y1):
             row = albedo[c, yy]
-            flags = usable[yy - y0]
+            flags = usable[yy]
             for x in range(width):
                 v = clean_albedo(row[x])
                 inside = flags[x]
@@ -93,14 +83,13 @@ def _row_range(albedo: np.ndarray, depth: np.ndarray, y: int, black: np.float32,
 
 
 @njit(inline="always", **_JIT)
-def _gaussian_mean(albedo: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray, x: int,
-                   y: int, black: np.float32, max_reflectance: np.float32,
-                   relative_floor: np.float32) -> tuple[np.float32, np.float32, np.float32]:
-    """The (cleaned) colour's mean over the 3x3 foreground pixels of ``(x, y)``'s mesh id
-    whose colour is a reflectance (the centre's is), weighted by a Gaussian of sigma 0.5 px:
+def _gaussian_mean(albedo: np.ndarray, usable: np.ndarray, mesh_id: np.ndarray, x: int,
+                   y: int) -> tuple[np.float32, np.float32, np.float32]:
+    """The (cleaned) colour's mean over the 3x3 ``usable`` pixels (foreground reflectances;
+    the centre is one) of ``(x, y)``'s mesh id, weighted by a Gaussian of sigma 0.5 px:
     1, ``e^-2`` at the 4 edge neighbours, ``e^-4`` at the corners (the width-2 Gaussian
     pixel filter of Arnold, RenderMan and Karma)."""
-    height, width = depth.shape
+    height, width = usable.shape
     mesh = mesh_id[y, x]
     total = _ZERO
     m_r = _ZERO
@@ -108,15 +97,11 @@ def _gaussian_mean(albedo: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray, x
     m_b = _ZERO
     for yy in range(max(y - 1, 0), min(y + 2, height)):
         for xx in range(max(x - 1, 0), min(x + 2, width)):
-            if depth[yy, xx] <= _ZERO or mesh_id[yy, xx] != mesh:
+            if not usable[yy, xx] or mesh_id[yy, xx] != mesh:
                 continue
             q_r = clean_albedo(albedo[0, yy, xx])
             q_g = clean_albedo(albedo[1, yy, xx])
             q_b = clean_albedo(albedo[2, yy, xx])
-            demodulated, _, _, _ = effective_albedo(q_r, q_g, q_b, black, max_reflectance,
-                                                    relative_floor)
-            if not demodulated:
-                continue
             away = abs(yy - y) + abs(xx - x)
             w = _ONE if away == 0 else (_EDGE if away == 1 else _CORNER)
             total += w
@@ -127,6 +112,22 @@ def _gaussian_mean(albedo: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray, x
 
 
 @njit(parallel=True, **_JIT)
+def _reflectances(albedo: np.ndarray, depth: np.ndarray, black: np.float32,
+                  max_reflectance: np.float32, relative_floor: np.float32,
+                  out: np.ndarray) -> None:
+    """``out[y, x]``: the pixel is foreground and its (cleaned) colour a reflectance
+    (demodulated: ``effective_albedo``)."""
+    height, width = depth.shape
+    for y in prange(height):
+        z = depth[y]
+        flags = out[y]
+        for x in range(width):
+            demodulated, _, _, _ = effective_albedo(
+                clean_albedo(albedo[0, y, x]), clean_albedo(albedo[1, y, x]),
+                clean_albedo(albedo[2, y, x]), black, max_reflectance, relative_floor)
+            flags[x] = z[x] > _ZERO and demodulated
+
+
 def accumulate_albedo(
     albedo: np.ndarray,
     history: np.ndarray,
@@ -146,21 +147,46 @@ def accumulate_albedo(
 ) -> None:
     """One colour's running mean (module docstring): ``out = lerp(clamp(a_hist, min3x3,
     max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``; without history the
-    3x3 Gaussian mean of the colour over its mesh id, ``h = 1``.
+    3x3 Gaussian mean of the colour over its mesh id, ``h = 1``; over reflectances only.
 
     ``albedo``, ``history`` and ``out`` are (3, H, W); ``history_length`` and ``out_length``
     (H, W) (0 = no history); ``motion`` (2, H, W); ``prev_depth`` / ``prev_mesh_id`` last
     frame's. Background pixels (depth <= 0) keep their colour with length 0.
     """
+    usable = np.empty(depth.shape, dtype=np.bool_)
+    _reflectances(albedo, depth, black, max_reflectance, relative_floor, usable)
+    _accumulate_rows(albedo, usable, history, history_length, motion, depth, mesh_id,
+                     prev_depth, prev_mesh_id, alpha, cap, black, max_reflectance,
+                     relative_floor, out, out_length)
+
+
+@njit(parallel=True, **_JIT)
+def _accumulate_rows(
+    albedo: np.ndarray,
+    usable: np.ndarray,
+    history: np.ndarray,
+    history_length: np.ndarray,
+    motion: np.ndarray,
+    depth: np.ndarray,
+    mesh_id: np.ndarray,
+    prev_depth: np.ndarray,
+    prev_mesh_id: np.ndarray,
+    alpha: np.float32,
+    cap: np.float32,
+    black: np.float32,
+    max_reflectance: np.float32,
+    relative_floor: np.float32,
+    out: np.ndarray,
+    out_length: np.ndarray,
+) -> None:
+    """All rows of :func:`accumulate_albedo` (``usable``: :func:`_reflectances`)."""
     height, width = depth.shape
     for y in prange(height):
         lo = np.empty((3, width), dtype=F32)
         hi = np.empty((3, width), dtype=F32)
         column_lo = np.empty(width, dtype=F32)
         column_hi = np.empty(width, dtype=F32)
-        usable = np.empty((3, width), dtype=np.bool_)
-        _row_range(albedo, depth, y, black, max_reflectance, relative_floor, lo, hi,
-                   column_lo, column_hi, usable)
+        _row_range(albedo, usable, y, lo, hi, column_lo, column_hi)
         for x in range(width):
             a_r = clean_albedo(albedo[0, y, x])
             a_g = clean_albedo(albedo[1, y, x])
@@ -172,9 +198,7 @@ def accumulate_albedo(
             if depth[y, x] <= _ZERO:
                 continue
             out_length[y, x] = _ONE
-            now, _, _, _ = effective_albedo(a_r, a_g, a_b, black, max_reflectance,
-                                            relative_floor)
-            if not now:
+            if not usable[y, x]:
                 continue  # remodulated by 1 whatever the colour: no mean
             px = F32(x) + motion[0, y, x]
             py = F32(y) + motion[1, y, x]
@@ -223,8 +247,7 @@ def accumulate_albedo(
             else:
                 # No history: the footprint's mean from the samples around it.
                 length = _ONE
-                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y, black,
-                                               max_reflectance, relative_floor)
+                m_r, m_g, m_b = _gaussian_mean(albedo, usable, mesh_id, x, y)
             mean, _, _, _ = effective_albedo(m_r, m_g, m_b, black, max_reflectance,
                                              relative_floor)
             if not mean:

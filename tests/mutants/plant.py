@@ -580,8 +580,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "temporal albedo: without history the colour is this frame's sample, not the 3x3"
         " Gaussian mean",
         "svgf_cli/filters/albedo_history.py",
-        (("                m_r, m_g, m_b = _gaussian_mean(albedo, depth, mesh_id, x, y, black,\n"
-          "                                               max_reflectance, relative_floor)\n",
+        (("                m_r, m_g, m_b = _gaussian_mean(albedo, usable, mesh_id, x, y)\n",
           "                m_r, m_g, m_b = a_r, a_g, a_b\n"),),
         ("tests/test_filters_albedo_history.py",),
     ),
