@@ -11,12 +11,14 @@ the first four frames' trimmed relMSE over the sequence mean (forward / bidirect
 
 Run: ``.venv/bin/python bench/bidirectional_ratios.py [--consistency-sigma K] [SEQUENCE ...]``
 (``--consistency-sigma`` overrides the consistency test's threshold, e.g. 1e9 to measure the
-run without it).
+run without it; ``--set NAME=VALUE`` overrides a parameter of the default preset, e.g.
+``--set temporal_albedo=True``).
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import sys
 from pathlib import Path
 
@@ -87,10 +89,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sequences", nargs="*", default=list(SEQUENCES))
     parser.add_argument("--consistency-sigma", type=float, default=None)
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a default-preset parameter (Python literal), e.g."
+                        " temporal_albedo=True; repeatable")
     args = parser.parse_args()
     if args.consistency_sigma is not None:
         denoiser_module.CONSISTENCY_SIGMA = args.consistency_sigma
-    params = resolve_params("default")
+    overrides = {}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        overrides[name] = ast.literal_eval(value)
+    params = resolve_params("default", **overrides)
     print("| sequence | relMSE (trimmed) fwd / bidir (ratio) | FLIP | temporal | RMSE ratio "
           "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean |")
     print("|---|---|---|---|---|---|---|---|---|---|")

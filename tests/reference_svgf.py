@@ -1580,3 +1580,97 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
                                        state.radiance_mode, dict(own.counts)))
         later = frame
     return outputs[::-1]
+
+
+# --------------------------------------------------------------------------- temporal albedo
+def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: np.ndarray,
+                      motion: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray,
+                      prev_depth: np.ndarray, prev_mesh_id: np.ndarray, alpha: float,
+                      cap: float, black: float) -> tuple[np.ndarray, np.ndarray]:
+    """``filters.albedo_history.accumulate_albedo`` of one signal: the running mean of its
+    (cleaned) demodulation colour, over colours that are reflectances only (``demodulated``:
+    ``effective_albedo``; a pixel whose colour is not one keeps it, ``h = 1``). The
+    bilinear taps at ``(x + mx, y + my)`` that are in the image, not background, of the same
+    mesh id and whose mean is a reflectance, renormalised (rejected below 0.01); the
+    resampled mean clamped per channel to the current 3x3 range of foreground reflectances;
+    ``h = min(cap, h_prev + 1)``, ``a = lerp(a_hist, a, max(alpha, 1/h))`` (equation 6);
+    without history the mean of the 3x3 reflectances of the same mesh id weighted by a
+    Gaussian of sigma 0.5 px, ``exp(-d^2 / (2 0.5^2))`` at distance ``d``, with ``h = 1``;
+    either kept only where it is a reflectance (else the current colour with ``h = 1``).
+    Returns ``(colour (3, H, W), length (H, W))``; in the background the current colour with
+    length 0."""
+    a = clean_albedo(albedo)
+    hist = np.asarray(history, dtype=F64)
+    h_prev = np.asarray(history_length, dtype=F64)
+    z = np.asarray(depth, dtype=F64)
+    height, width = z.shape
+    out = a.copy()
+    length = np.where(z > 0.0, 1.0, 0.0)
+    reflectance = ~effective_albedo(a, black)[0]
+    hist_reflectance = ~effective_albedo(hist, black)[0]
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0.0 or not reflectance[y, x]:
+                continue
+            px, py = x + float(motion[0, y, x]), y + float(motion[1, y, x])
+            if not (abs(px) < 1e7 and abs(py) < 1e7):
+                px = py = -2.0  # no tap in the image
+            x0, y0 = math.floor(px), math.floor(py)
+            fx, fy = px - x0, py - y0
+            total, colour, h = 0.0, np.zeros(3), 0.0
+            for ty, wy in ((y0, 1.0 - fy), (y0 + 1, fy)):
+                for tx, wx in ((x0, 1.0 - fx), (x0 + 1, fx)):
+                    if not (0 <= tx < width and 0 <= ty < height):
+                        continue
+                    if prev_depth[ty, tx] <= 0.0 or prev_mesh_id[ty, tx] != mesh_id[y, x]:
+                        continue
+                    if not hist_reflectance[ty, tx]:
+                        continue
+                    total += wx * wy
+                    colour += wx * wy * hist[:, ty, tx]
+                    h += wx * wy * h_prev[ty, tx]
+            y_lo, y_hi = max(y - 1, 0), min(y + 2, height)
+            x_lo, x_hi = max(x - 1, 0), min(x + 2, width)
+            if total < 0.01 or h / total <= 0.0:
+                n, weights, mean = 1.0, 0.0, np.zeros(3)
+                for yy in range(y_lo, y_hi):
+                    for xx in range(x_lo, x_hi):
+                        if (z[yy, xx] > 0.0 and mesh_id[yy, xx] == mesh_id[y, x]
+                                and reflectance[yy, xx]):
+                            w = math.exp(-((yy - y) ** 2 + (xx - x) ** 2) / (2 * 0.5 ** 2))
+                            weights += w
+                            mean += w * a[:, yy, xx]
+                mean /= weights
+            else:
+                usable = (z > 0.0) & reflectance
+                window = a[:, y_lo:y_hi, x_lo:x_hi][:, usable[y_lo:y_hi, x_lo:x_hi]]
+                mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
+                n = min(cap, h / total + 1.0)
+                mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
+            if effective_albedo(mean[:, None, None], black)[0][0, 0]:
+                continue  # not a reflectance
+            out[:, y, x] = mean
+            length[y, x] = n
+    return out, length
+
+
+def combine_albedo(forward: np.ndarray, forward_length: np.ndarray, reverse: np.ndarray,
+                   reverse_length: np.ndarray, albedo: np.ndarray, alpha: float,
+                   black: float) -> np.ndarray:
+    """``filters.albedo_history.combine_albedo``: both passes' colour means weighted by
+    their effective sample counts ``n(h)`` (:func:`effective_count`),
+    ``(n_f a_f + n_r a_r) / (n_f + n_r)``; the reverse mean where either count is 0 or the
+    combination is in another mode than this frame's colour."""
+    out = np.asarray(reverse, dtype=F64).copy()
+    mode_now = effective_albedo(clean_albedo(albedo), black)[0]
+    height, width = albedo.shape[1:]
+    for y in range(height):
+        for x in range(width):
+            n_f = effective_count(float(forward_length[y, x]), alpha)
+            n_r = effective_count(float(reverse_length[y, x]), alpha)
+            if n_f <= 0.0 or n_r <= 0.0:
+                continue
+            mean = (n_f * forward[:, y, x] + n_r * reverse[:, y, x]) / (n_f + n_r)
+            if effective_albedo(mean[:, None, None], black)[0][0, 0] == mode_now[y, x]:
+                out[:, y, x] = mean
+    return out

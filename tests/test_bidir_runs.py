@@ -62,6 +62,22 @@ def test_chunks_with_warmup_all_equal_one_run(
     assert list(scratch.iterdir()) == []  # every run removed its scratch folder
 
 
+def test_temporal_albedo_chunks_with_warmup_all_equal_one_run(
+    sequence: Path, scratch: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    tmp_path_factory: pytest.TempPathFactory, one_run: dict[int, ExrImage],
+) -> None:
+    # The colour means travel through the spill and the reverse pass's state.
+    whole = {f: read_exr(p) for f, p in reference_run(
+        tmp_path_factory, sequence, "--float", "--bidirectional", "--temporal-albedo",
+        "--scratch-dir", scratch).items()}
+    code, _, err = run_cli(_args(sequence, tmp_path, scratch, "--temporal-albedo",
+                                 "--chunk-size", "4", "--warmup", "all"), capsys)
+    assert code == 0, err
+    for f in FRAMES:
+        assert read_exr(tmp_path / f"o.{f:04d}.exr").same_pixels(whole[f]), f
+    assert any(not whole[f].same_pixels(one_run[f]) for f in FRAMES)
+
+
 def test_it_differs_from_the_causal_run_most_on_the_first_frame(
     sequence: Path, tmp_path_factory: pytest.TempPathFactory, one_run: dict[int, ExrImage],
 ) -> None:

@@ -128,11 +128,16 @@ def effective_counts(alpha: float, cap: int) -> np.ndarray:
 class SideHistory:
     """One pass's history at a frame, resampled at the frame's pixels after anti-lag and
     before the blend: per signal the colour (S, 3, H, W), the luminance moments
-    (S, 2, H, W) and the history length (S, H, W), 0 where the pass has none."""
+    (S, 2, H, W) and the history length (S, H, W), 0 where the pass has none. With
+    ``temporal_albedo`` also the running mean (U, 3, H, W) over the pass's frames and this
+    one of each of the U distinct demodulation colours, and its length (U, H, W)
+    (``filters.albedo_history``)."""
 
     colour: np.ndarray
     moments: np.ndarray
     length: np.ndarray
+    albedo: np.ndarray | None = None
+    albedo_length: np.ndarray | None = None
 
 
 @njit(inline="always", **_JIT)
@@ -375,6 +380,8 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
     variance is small against ``m1^2``, and its range where it is large) and
     ``<name>.h`` (float32). With ``half`` the first five are float16 scaled by their own
     maximum (relative rounding <= 2^-11 for any value above 1e-8 of it); else float32.
+    With running mean colours also ``albedo.<k>.R/G/B`` (as the colour) and ``albedo.<k>.h``
+    (float32) for each of them.
     """
     planes: dict[str, np.ndarray] = {}
     factors: dict[str, float] = {}
@@ -390,6 +397,16 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
                 planes[channel] = np.array(plane, dtype=F32)
                 factors[channel] = 1.0
         planes[f"{name}.h"] = np.array(history.length[s], dtype=F32)
+    if history.albedo is not None and history.albedo_length is not None:
+        for k in range(history.albedo.shape[0]):
+            for key, plane in zip("RGB", history.albedo[k], strict=True):
+                channel = f"albedo.{k}.{key}"
+                if half:
+                    planes[channel], factors[channel] = _scaled_half(plane)
+                else:
+                    planes[channel] = np.array(plane, dtype=F32)
+                    factors[channel] = 1.0
+            planes[f"albedo.{k}.h"] = np.array(history.albedo_length[k], dtype=F32)
     return planes, factors
 
 
@@ -417,4 +434,19 @@ def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
         np.multiply(moments[s, 1], moments[s, 1], out=moments[s, 1])
         moments[s, 1] += moments[s, 0] * moments[s, 0]
         length[s] = planes[f"{name}.h"]
-    return SideHistory(colour, moments, length)
+    albedo = albedo_length = None
+    colours = 0
+    while f"albedo.{colours}.h" in planes:
+        colours += 1
+    if colours:
+        if (out is not None and out.albedo is not None and out.albedo_length is not None
+                and out.albedo_length.shape == (colours, height, width)):
+            albedo, albedo_length = out.albedo, out.albedo_length
+        else:
+            albedo = np.empty((colours, 3, height, width), dtype=F32)
+            albedo_length = np.empty((colours, height, width), dtype=F32)
+        for k in range(colours):
+            for c, key in enumerate("RGB"):
+                restored(f"albedo.{k}.{key}", albedo[k, c])
+            albedo_length[k] = planes[f"albedo.{k}.h"]
+    return SideHistory(colour, moments, length, albedo, albedo_length)

@@ -35,6 +35,7 @@ from typing import TypeVar
 import numpy as np
 
 from svgf_cli.filters import modulate, values
+from svgf_cli.filters.albedo_history import accumulate_albedo, combine_albedo
 from svgf_cli.filters.antilag import antilag, cell_shape, scratch_shape
 from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
 from svgf_cli.filters.bidirectional import (
@@ -284,6 +285,14 @@ class Denoiser:
         # as scratch; _store_history adopts them).
         self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
+        # temporal_albedo: the running mean (U, 3, H, W) and length (U, H, W) of each
+        # distinct demodulation colour (signals sharing one share a mean), which colour each
+        # signal has (``_albedo_slots``), and last frame's pair, overwritten next frame.
+        self._albedo: tuple[np.ndarray, np.ndarray] | None = None
+        self._albedo_slots: tuple[int, ...] = ()
+        self._albedo_spare: tuple[np.ndarray, np.ndarray] | None = None
+        # A bidirectional reverse pass: where the forward pass's colour means are put.
+        self._forward_albedo: tuple[np.ndarray, np.ndarray] | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
         self.stage_cpu_seconds: dict[str, float] = {}
@@ -303,6 +312,8 @@ class Denoiser:
         """Drop all history: the next frame is processed cold."""
         self._history = None
         self._taa_previous = None
+        self._albedo = None
+        self._albedo_slots = ()
         self._signal_names = None
         self._frames_processed = 0
 
@@ -317,6 +328,7 @@ class Denoiser:
         """
         run = self._start_frame(frame)
         self._accumulate_temporally(run)
+        self._accumulate_albedo(run)
         work = run.work
         filtered = self._filter_spatially(run, "accumulated", work["moments"],
                                           work["history_length"], run.iterations)
@@ -589,10 +601,16 @@ class Denoiser:
         kept: list[Kept | SideHistory] = []
 
         def capture(temporal: TemporalState) -> None:
+            albedo = albedo_length = None
+            if self.params.temporal_albedo:
+                self._accumulate_albedo(run)
+                albedo, albedo_length = self._albedo or (None, None)
             side = SideHistory(temporal.history_illumination, temporal.history_moments,
-                               temporal.history_length)
+                               temporal.history_length, albedo, albedo_length)
             kept.append(keep(side) if keep is not None else SideHistory(
-                side.colour.copy(), side.moments.copy(), side.length.copy()))
+                side.colour.copy(), side.moments.copy(), side.length.copy(),
+                None if albedo is None else albedo.copy(),
+                None if albedo_length is None else albedo_length.copy()))
 
         self._accumulate_temporally(run, capture)
         self._store_history(run, self._pass_history(run))
@@ -604,8 +622,14 @@ class Denoiser:
         (a file run unpacks the spilled state there) is combined in place; any other is
         copied in first. Their contents do not outlive the next :meth:`reverse_step`."""
         work = self._workspace(height, width, num_signals)
+        albedo = albedo_length = None
+        if self.params.temporal_albedo:
+            # One per distinct colour, as this pass has them (all signals' before its first
+            # frame); a forward history of another count is copied into fresh buffers.
+            albedo, albedo_length = self._forward_albedo_buffers(
+                len(set(self._albedo_slots)) or num_signals, height, width)
         return SideHistory(work[self._combined_name()], work["combined_moments"],
-                           work["combined_length"])
+                           work["combined_length"], albedo, albedo_length)
 
     def _combined_name(self) -> str:
         # A spare buffer that is neither the pass's own accumulation nor the demodulated
@@ -629,9 +653,14 @@ class Denoiser:
         combine = None
         if forward is not None:
             into = self.forward_buffers(len(run.names), frame.height, frame.width)
-            for given, buffer in ((forward.colour, into.colour),
-                                  (forward.moments, into.moments),
-                                  (forward.length, into.length)):
+            pairs = [(forward.colour, into.colour), (forward.moments, into.moments),
+                     (forward.length, into.length)]
+            if forward.albedo is not None and forward.albedo_length is not None:
+                into.albedo, into.albedo_length = self._forward_albedo_buffers(
+                    *forward.albedo_length.shape)
+                pairs += [(forward.albedo, into.albedo),
+                          (forward.albedo_length, into.albedo_length)]
+            for given, buffer in pairs:
                 if given is not buffer:
                     if given.shape != buffer.shape:
                         raise ValueError(f"forward history of shape {given.shape}, expected "
@@ -661,6 +690,9 @@ class Denoiser:
                 )
 
         self._accumulate_temporally(run, combine)
+        self._accumulate_albedo(run)
+        if forward is not None and forward.albedo is not None:
+            self._combine_albedo(run, into)
         own_history = self._pass_history(run, protected=(combined,) if forward else ())
         filtered = None
         if forward is not None:
@@ -708,6 +740,10 @@ class Denoiser:
                 state[key] = self._history[key].copy()
         if self._taa_previous is not None:
             state["taa_previous"] = self._taa_previous.copy()
+        if self._albedo is not None:
+            state["albedo_history"] = self._albedo[0].copy()
+            state["albedo_length"] = self._albedo[1].copy()
+            state["albedo_slots"] = np.array(self._albedo_slots, dtype=np.int64)
         return state
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -755,8 +791,10 @@ class Denoiser:
             taa_previous = np.array(state["taa_previous"], dtype=F32, copy=True, order="C")
             if history is not None and taa_previous.shape[1:] != history["prev_depth"].shape:
                 raise ValueError("denoiser state taa_previous does not match the history shape")
+        albedo, slots = _albedo_state(state, history)
         self._history = history
         self._taa_previous = taa_previous
+        self._albedo, self._albedo_slots = albedo, slots
         self._signal_names = names
         self._frames_processed = frames
 
@@ -847,6 +885,79 @@ class Denoiser:
             sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
             scratch, work["antilag_lambda"], temporal.gradients,
         )
+
+    def _accumulate_albedo(self, run: _FrameRun) -> None:
+        """With ``temporal_albedo``: each signal's demodulation colour becomes its running
+        mean over frames (``filters.albedo_history``), kept as history, one per distinct
+        colour (:func:`_colour_slots`); ``run.frame``'s signals take it, so the composition
+        remodulates by it. Runs after the temporal phase (demodulation used this frame's
+        colour) and before the history is stored (last frame's depth and mesh id)."""
+        p = self.params
+        if not p.temporal_albedo:
+            return
+        frame = run.frame
+        slots, sources = _colour_slots(frame.signals)
+        count, h, w = len(sources), frame.height, frame.width
+        shape = (count, 3, h, w)
+        spare = self._albedo_spare
+        if spare is None or spare[0].shape != shape:
+            spare = (np.empty(shape, dtype=F32), np.empty((count, h, w), dtype=F32))
+        history, previous = self._albedo, self._history
+        if (history is None or slots != self._albedo_slots or previous is None
+                or not p.temporal):
+            # No history: a length-0 plane rejects every tap.
+            history = (np.zeros(shape, dtype=F32), np.zeros((count, h, w), dtype=F32))
+            prev_depth, prev_mesh_id = run.depth, frame.mesh_id
+        else:
+            prev_depth, prev_mesh_id = previous["prev_depth"], previous["prev_mesh_id"]
+        colour, length = spare
+        for slot, source in enumerate(sources):
+            signal = frame.signals[source]
+            accumulate_albedo(
+                signal.albedo, history[0][slot], history[1][slot], run.motion, run.depth,
+                frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
+                *self._rules[signal.guide_albedo], colour[slot], length[slot],
+            )
+        self._albedo_spare = history
+        self._albedo, self._albedo_slots = (colour, length), slots
+        signals = [dataclasses.replace(signal, albedo=colour[slot])
+                   for signal, slot in zip(frame.signals, slots, strict=True)]
+        run.frame = dataclasses.replace(frame, signals=signals)
+        run.lap("albedo")
+
+    def _forward_albedo_buffers(self, count: int, height: int,
+                                width: int) -> tuple[np.ndarray, np.ndarray]:
+        """Where a bidirectional reverse pass puts the forward pass's ``count`` colour
+        means (kept from frame to frame)."""
+        shape = (count, 3, height, width)
+        if self._forward_albedo is None or self._forward_albedo[0].shape != shape:
+            self._forward_albedo = (np.zeros(shape, dtype=F32),
+                                    np.zeros((count, height, width), dtype=F32))
+        return self._forward_albedo
+
+    def _combine_albedo(self, run: _FrameRun, forward: SideHistory) -> None:
+        """A bidirectional output frame: remodulate by both passes' colour means weighted by
+        their effective sample counts (``albedo_history.combine_albedo``), written over the
+        forward pass's (``forward_buffers``: dead after this frame). A forward history with
+        another set of colours (it cannot happen with one reader) is not combined."""
+        assert self._albedo is not None
+        assert forward.albedo is not None and forward.albedo_length is not None
+        reverse, reverse_length = self._albedo
+        if forward.albedo.shape != reverse.shape:
+            return
+        frame = run.frame
+        # The signals already hold views of the reverse means: the slots are the pass's.
+        slots = self._albedo_slots
+        for slot in range(reverse.shape[0]):
+            signal = frame.signals[slots.index(slot)]
+            combine_albedo(
+                forward.albedo[slot], forward.albedo_length[slot], reverse[slot],
+                reverse_length[slot], signal.albedo, self._colour_counts,
+                *self._rules[signal.guide_albedo], forward.albedo[slot],
+            )
+        signals = [dataclasses.replace(signal, albedo=forward.albedo[slot])
+                   for signal, slot in zip(frame.signals, slots, strict=True)]
+        run.frame = dataclasses.replace(frame, signals=signals)
 
     def _spread_fireflies(self, temporal: TemporalState,
                           signals: list[Signal]) -> dict[str, int]:
@@ -993,6 +1104,43 @@ class Denoiser:
             history["history_illumination"], history["history_moments"],
             history["history_length"], history["history_mode"],
         )
+
+
+def _colour_slots(signals: list[Signal]) -> tuple[tuple[int, ...], list[int]]:
+    """Which running mean each signal's demodulation colour has, and the first signal of each:
+    signals that share one colour array (a reader gives direct and indirect light the same
+    colour pass) and its demodulation rule (``guide_albedo``) share a mean."""
+    slots: list[int] = []
+    sources: list[int] = []
+    keys: list[tuple[int, bool]] = []
+    for index, signal in enumerate(signals):
+        key = (id(signal.albedo), signal.guide_albedo)
+        if key not in keys:
+            keys.append(key)
+            sources.append(index)
+        slots.append(keys.index(key))
+    return tuple(slots), sources
+
+
+def _albedo_state(state: dict[str, np.ndarray], history: dict[str, np.ndarray] | None,
+                  ) -> tuple[tuple[np.ndarray, np.ndarray] | None, tuple[int, ...]]:
+    """The temporal albedo's history in a saved state (``albedo_history``, ``_length``,
+    ``_slots``), checked against the history; ``(None, ())`` when it has none."""
+    keys = ("albedo_history", "albedo_length", "albedo_slots")
+    if history is None or not all(key in state for key in keys):
+        return None, ()
+    colour = np.array(state["albedo_history"], dtype=F32, copy=True, order="C")
+    length = np.array(state["albedo_length"], dtype=F32, copy=True, order="C")
+    slots = tuple(int(v) for v in np.asarray(state["albedo_slots"]).ravel())
+    height, width = history["prev_depth"].shape
+    count = colour.shape[0] if colour.ndim == 4 else -1
+    if (colour.shape != (count, 3, height, width) or length.shape != (count, height, width)
+            or len(slots) != len(history["history_length"])
+            or sorted(set(slots)) != list(range(count))):
+        raise ValueError("denoiser state albedo_history does not match the history")
+    if not (np.isfinite(colour).all() and np.isfinite(length).all()):
+        raise ValueError("denoiser state albedo_history has non-finite values")
+    return (colour, length), slots
 
 
 def _add(counts: dict[str, int], kind: str, plane: str, value: int) -> None:

@@ -146,6 +146,14 @@ class SVGFParams:
         " modulated by that albedo, and dividing by it amplifies the light (0 ="
         " albedo_epsilon).",
     )
+    temporal_albedo: bool = _p(
+        False,
+        "Remodulate each signal by its demodulation colour's running mean over frames"
+        " (reprojected, clamped to the current 3x3 range; without history a 3x3 Gaussian"
+        " mean): at 1 spp a pixel's colour is one sample of a texture edge, a renderer's"
+        " reference the pixel-filtered mean (off: svgf trace's references are point"
+        " samples, which the mean only blurs).",
+    )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
         0.0,

@@ -541,6 +541,66 @@ MUTANTS: tuple[Mutant, ...] = (
           "    if False:\n        from svgf_cli.io.source import SourceChannel"),),
         WRITE_TESTS,
     ),
+    Mutant(
+        "albedo-history-unclamped", "filters",
+        "temporal albedo: the resampled mean is not clamped to the current 3x3 range",
+        "svgf_cli/filters/albedo_history.py",
+        (("            m_r = min(max(h_r / total, lo[0, x]), hi[0, x])\n",
+          "            m_r = h_r / total\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-history-no-mode-guard", "filters",
+        "temporal albedo: a running mean that is not a reflectance is kept",
+        "svgf_cli/filters/albedo_history.py",
+        (("            if not mean:\n                continue  # another mode",
+          "            if False:\n                continue  # another mode"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-history-not-composed", "filters",
+        "temporal albedo: the running mean is computed but the output is remodulated by"
+        " this frame's colour",
+        "svgf_cli/filters/denoiser.py",
+        (("        run.frame = dataclasses.replace(frame, signals=signals)\n"
+          "        run.lap(\"albedo\")",
+          "        run.frame = frame\n        run.lap(\"albedo\")"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-history-mixes-modes", "filters",
+        "temporal albedo: history taps whose mean is not a reflectance are resampled too",
+        "svgf_cli/filters/albedo_history.py",
+        (("                    if not kept:\n                        continue  # a mean",
+          "                    if False:\n                        continue  # a mean"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-history-no-first-estimate", "filters",
+        "temporal albedo: without history the colour is this frame's sample, not the 3x3"
+        " Gaussian mean",
+        "svgf_cli/filters/albedo_history.py",
+        (("                m_r, m_g, m_b = _gaussian_mean(albedo, usable, mesh_id, x, y)\n",
+          "                m_r, m_g, m_b = a_r, a_g, a_b\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-bidirectional-reverse-only", "filters",
+        "temporal albedo: a bidirectional output is remodulated by the reverse pass's mean"
+        " alone",
+        "svgf_cli/filters/denoiser.py",
+        (("        if forward is not None and forward.albedo is not None:\n",
+          "        if False:\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "albedo-not-spilled", "filters",
+        "temporal albedo: the forward pass's colour means are left out of the spill",
+        "svgf_cli/filters/bidirectional.py",
+        (("    if history.albedo is not None and history.albedo_length is not None:\n",
+          "    if False:\n"),),
+        ("tests/test_filters_albedo_history.py", "tests/test_bidir_runs.py"),
+    ),
 )
 
 
