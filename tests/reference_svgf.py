@@ -1166,6 +1166,9 @@ class ReferenceDenoiser:
         self.history: History | None = None
         self.taa_previous: np.ndarray | None = None
         self.last_reprojected: Reprojected | None = None  # for tests and diagnosis
+        # temporal_albedo: each signal's colour mean (S, 3, H, W) and its length (S, H, W)
+        self.albedo_mean: np.ndarray | None = None
+        self.albedo_length: np.ndarray | None = None
 
     def before_accumulation(self, temporal: TemporalState) -> int | None:
         """Adjust the reprojected history before it is blended: the optional history clamp,
@@ -1255,6 +1258,9 @@ class ReferenceDenoiser:
             illumination, reprojected.illumination, reprojected.moments,
             reprojected.history_length, geom.depth, p.alpha, p.moments_alpha, p.history_cap,
             clean.weights)
+        if p.temporal_albedo:
+            # Demodulated by this frame's colour; remodulated by its running mean.
+            clean.albedo = self.temporal_albedo(clean, geom)
 
         accumulation = colour
         colour, variance_before_atrous, colour_history = self.filter_spatially(
@@ -1271,6 +1277,29 @@ class ReferenceDenoiser:
     def before_blend(self, state: FrameState) -> None:
         """Called with the frame's state after the anti-lag hook, before the blend (also on
         a frame without history); a bidirectional run reads the resampled history here."""
+
+    def temporal_albedo(self, clean: CleanFrame, geom: Geometry) -> np.ndarray:
+        """Each signal's colour as its running mean over the frames
+        (:func:`accumulate_albedo`, against last frame's depth and mesh id; without history
+        every tap is rejected), kept for the next frame; returns the means (S, 3, H, W)."""
+        p = self.params
+        count = len(clean.names)
+        shape = (count, 3, *geom.depth.shape)
+        if (p.temporal and self.history is not None and self.albedo_mean is not None
+                and self.albedo_length is not None and self.albedo_mean.shape == shape):
+            means, lengths = self.albedo_mean, self.albedo_length
+            prev_depth, prev_mesh_id = self.history.depth, self.history.mesh_id
+        else:
+            means, lengths = np.zeros(shape), np.zeros((count, *geom.depth.shape))
+            prev_depth, prev_mesh_id = geom.depth, clean.mesh_id
+        results = [accumulate_albedo(clean.albedo[index], means[index], lengths[index],
+                                     clean.motion, geom.depth, clean.mesh_id, prev_depth,
+                                     prev_mesh_id, p.alpha, p.history_cap,
+                                     demodulation_floor(p, clean, index))
+                   for index in range(count)]
+        self.albedo_mean = np.stack([colour for colour, _ in results])
+        self.albedo_length = np.stack([length for _, length in results])
+        return self.albedo_mean.copy()
 
     def pass_history(self, clean: CleanFrame, geom: Geometry, accumulation: np.ndarray,
                      moments: np.ndarray, length: np.ndarray, radiance_mode: np.ndarray,
@@ -1539,10 +1568,14 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
                             antilag_sigma=params.antilag_sigma * PASS_ANTILAG_SIGMA_SCALE)
     forward = _Capturing(passes)
     kept = []
+    kept_albedo = []  # temporal_albedo: the forward pass's colour means and lengths
     for frame in frames:
         forward.process(frame)
         assert forward.state is not None
         kept.append(forward.state.history)
+        if params.temporal_albedo:
+            assert forward.albedo_mean is not None and forward.albedo_length is not None
+            kept_albedo.append((forward.albedo_mean.copy(), forward.albedo_length.copy()))
     reverse = _Capturing(passes)
     outputs: list[ReferenceOutput] = []
     later: Frame | None = None
@@ -1576,6 +1609,16 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
              effective_count(params.history_cap, params.moments_alpha) for s in frame.signals])
         filtered, variance, _ = reverse.filter_spatially(
             state.clean, state.geom, colour, moments, length, state.radiance_mode)
+        if params.temporal_albedo:
+            # Remodulated by both passes' colour means, weighted by their sample counts.
+            assert reverse.albedo_mean is not None and reverse.albedo_length is not None
+            forward_mean, forward_length_albedo = kept_albedo[len(frames) - 1 - len(outputs)]
+            state.clean.albedo = np.stack([
+                combine_albedo(forward_mean[index], forward_length_albedo[index],
+                               reverse.albedo_mean[index], reverse.albedo_length[index],
+                               reverse.albedo_mean[index], params.alpha,
+                               demodulation_floor(params, state.clean, index))
+                for index in range(len(frame.signals))])
         outputs.append(reverse.compose(state.clean, state.geom, filtered, variance, length,
                                        state.radiance_mode, dict(own.counts)))
         later = frame

@@ -151,8 +151,8 @@ class SVGFParams:
         "Remodulate each signal by its demodulation colour's running mean over frames"
         " (reprojected, clamped to the current 3x3 range; without history a 3x3 Gaussian"
         " mean): at 1 spp a pixel's colour is one sample of a texture edge, a renderer's"
-        " reference the pixel-filtered mean (off: svgf trace's references are point"
-        " samples, which the mean only blurs).",
+        " reference the pixel-filtered mean (off for a renderer whose references are point"
+        " samples, as svgf trace's are by default: the mean only blurs them).",
     )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
@@ -204,7 +204,7 @@ PRESETS: dict[str, SVGFParams] = {
                           glossy_sigma_luminance=1.0, glossy_emitter_radiance=True,
                           mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
-                          atrous_iterations=AUTO_ITERATIONS),
+                          temporal_albedo=True, atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,
