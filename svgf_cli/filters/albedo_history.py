@@ -155,9 +155,13 @@ def accumulate_albedo(
     """
     usable = np.empty(depth.shape, dtype=np.bool_)
     _reflectances(albedo, depth, black, max_reflectance, relative_floor, usable)
-    _accumulate_rows(albedo, usable, history, history_length, motion, depth, mesh_id,
-                     prev_depth, prev_mesh_id, alpha, cap, black, max_reflectance,
-                     relative_floor, out, out_length)
+    # Which history means are reflectances (last frame's foreground): once per pixel, not
+    # once per tap that reads them.
+    kept = np.empty(prev_depth.shape, dtype=np.bool_)
+    _reflectances(history, prev_depth, black, max_reflectance, relative_floor, kept)
+    _accumulate_rows(albedo, usable, history, kept, history_length, motion, depth, mesh_id,
+                     prev_mesh_id, alpha, cap, black, max_reflectance, relative_floor, out,
+                     out_length)
 
 
 @njit(parallel=True, **_JIT)
@@ -165,11 +169,11 @@ def _accumulate_rows(
     albedo: np.ndarray,
     usable: np.ndarray,
     history: np.ndarray,
+    kept: np.ndarray,
     history_length: np.ndarray,
     motion: np.ndarray,
     depth: np.ndarray,
     mesh_id: np.ndarray,
-    prev_depth: np.ndarray,
     prev_mesh_id: np.ndarray,
     alpha: np.float32,
     cap: np.float32,
@@ -179,7 +183,8 @@ def _accumulate_rows(
     out: np.ndarray,
     out_length: np.ndarray,
 ) -> None:
-    """All rows of :func:`accumulate_albedo` (``usable``: :func:`_reflectances`)."""
+    """All rows of :func:`accumulate_albedo` (``usable``: :func:`_reflectances` of the
+    colour, ``kept`` of the history on last frame's depth)."""
     height, width = depth.shape
     for y in prange(height):
         lo = np.empty((3, width), dtype=F32)
@@ -222,13 +227,10 @@ def _accumulate_rows(
                     wx = fx if dx == 1 else _ONE - fx
                     if tx < 0 or ty < 0 or tx >= width or ty >= height:
                         continue
-                    if prev_depth[ty, tx] <= _ZERO or prev_mesh_id[ty, tx] != mesh:
+                    # Last frame's foreground, the same mesh, a mean that is a reflectance
+                    # (not one of samples that were not demodulated).
+                    if not kept[ty, tx] or prev_mesh_id[ty, tx] != mesh:
                         continue
-                    kept, _, _, _ = effective_albedo(
-                        history[0, ty, tx], history[1, ty, tx], history[2, ty, tx], black,
-                        max_reflectance, relative_floor)
-                    if not kept:
-                        continue  # a mean of samples that were not demodulated
                     w = wx * wy
                     total += w
                     h_r += w * history[0, ty, tx]

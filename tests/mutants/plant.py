@@ -571,8 +571,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-history-mixes-modes", "filters",
         "temporal albedo: history taps whose mean is not a reflectance are resampled too",
         "svgf_cli/filters/albedo_history.py",
-        (("                    if not kept:\n                        continue  # a mean",
-          "                    if False:\n                        continue  # a mean"),),
+        (("    _reflectances(history, prev_depth, black, max_reflectance, relative_floor, kept)",
+          "    np.copyto(kept, prev_depth > 0)"),),
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
