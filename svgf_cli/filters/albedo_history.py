@@ -40,6 +40,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from svgf_cli.filters.bidirectional import effective_count_at
 from svgf_cli.filters.fastmath import FASTMATH
 from svgf_cli.filters.modulate import clean_albedo, effective_albedo
 
@@ -260,18 +261,6 @@ def _accumulate_rows(
             out_length[y, x] = length
 
 
-@njit(inline="always", **_JIT)
-def _effective_count(table: np.ndarray, h: np.float32) -> np.float32:
-    """``n(h)`` of ``bidirectional.effective_counts``: linear between whole counts, 0 at
-    ``h <= 0``, the last entry beyond the table."""
-    last = table.shape[0] - 1
-    hh = min(max(h, _ZERO), F32(last))
-    below = min(np.int64(hh), last - 1) if last > 0 else np.int64(0)
-    frac = hh - F32(below)
-    upper = min(below + 1, last)
-    return table[below] + frac * (table[upper] - table[below])
-
-
 @njit(parallel=True, **_JIT)
 def combine_albedo(
     forward: np.ndarray,
@@ -297,8 +286,8 @@ def combine_albedo(
             r_r = reverse[0, y, x]
             r_g = reverse[1, y, x]
             r_b = reverse[2, y, x]
-            n_f = _effective_count(counts, forward_length[y, x])
-            n_r = _effective_count(counts, reverse_length[y, x])
+            n_f = effective_count_at(counts, forward_length[y, x])
+            n_r = effective_count_at(counts, reverse_length[y, x])
             m_r, m_g, m_b = r_r, r_g, r_b
             if n_f > _ZERO and n_r > _ZERO:
                 share = n_f / (n_f + n_r)

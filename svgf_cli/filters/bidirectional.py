@@ -141,7 +141,7 @@ class SideHistory:
 
 
 @njit(inline="always", **_JIT)
-def _count(table: np.ndarray, h: np.float32) -> np.float32:
+def effective_count_at(table: np.ndarray, h: np.float32) -> np.float32:
     """``n(h)``: linear between whole counts, 0 at h <= 0, the last entry beyond the table."""
     last = table.shape[0] - 1
     hh = min(max(h, _ZERO), F32(last))
@@ -156,8 +156,8 @@ def _side_weights(
     table: np.ndarray, hf: np.float32, hr: np.float32, surface: bool,
 ) -> tuple[np.float32, np.float32, np.float32]:
     """``(n_f, n_r, 1) / (1 + n_f + n_r)`` with ``n = n(h)`` of ``table`` (0 off surfaces)."""
-    nf = _count(table, hf) if surface else _ZERO
-    nr = _count(table, hr) if surface else _ZERO
+    nf = effective_count_at(table, hf) if surface else _ZERO
+    nr = effective_count_at(table, hr) if surface else _ZERO
     inv = _ONE / (_ONE + nf + nr)
     return nf * inv, nr * inv, inv
 
@@ -327,8 +327,8 @@ def consistent_lengths(
             r1, r2 = reverse_moments[s, 0, y], reverse_moments[s, 1, y]
             red, green, blue = current[s, 0, y], current[s, 1, y], current[s, 2, y]
             for x in range(width):  # table look-ups apart: the loop below vectorizes
-                nf[x] = _count(counts, hf_row[x])
-                nr[x] = _count(counts, hr_row[x])
+                nf[x] = effective_count_at(counts, hf_row[x])
+                nr[x] = effective_count_at(counts, hr_row[x])
             for x in range(width):
                 both = (z[x] > _ZERO) & (nf[x] > _ZERO) & (nr[x] > _ZERO)
                 var = max(max(f2[x] - f1[x] * f1[x], r2[x] - r1[x] * r1[x]), _ZERO)
@@ -385,27 +385,25 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
     """
     planes: dict[str, np.ndarray] = {}
     factors: dict[str, float] = {}
+
+    def put(channel: str, plane: np.ndarray) -> None:
+        if half:
+            planes[channel], factors[channel] = _scaled_half(plane)
+        else:
+            planes[channel] = np.array(plane, dtype=F32)
+            factors[channel] = 1.0
+
     for s, name in enumerate(names):
         m1 = history.moments[s, 0]
         spread = np.sqrt(np.maximum(history.moments[s, 1] - m1 * m1, F32(0.0)))
         for key, plane in (("R", history.colour[s, 0]), ("G", history.colour[s, 1]),
                            ("B", history.colour[s, 2]), ("m1", m1), ("sd", spread)):
-            channel = f"{name}.{key}"
-            if half:
-                planes[channel], factors[channel] = _scaled_half(plane)
-            else:
-                planes[channel] = np.array(plane, dtype=F32)
-                factors[channel] = 1.0
+            put(f"{name}.{key}", plane)
         planes[f"{name}.h"] = np.array(history.length[s], dtype=F32)
     if history.albedo is not None and history.albedo_length is not None:
         for k in range(history.albedo.shape[0]):
             for key, plane in zip("RGB", history.albedo[k], strict=True):
-                channel = f"albedo.{k}.{key}"
-                if half:
-                    planes[channel], factors[channel] = _scaled_half(plane)
-                else:
-                    planes[channel] = np.array(plane, dtype=F32)
-                    factors[channel] = 1.0
+                put(f"albedo.{k}.{key}", plane)
             planes[f"albedo.{k}.h"] = np.array(history.albedo_length[k], dtype=F32)
     return planes, factors
 
