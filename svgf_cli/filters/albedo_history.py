@@ -38,13 +38,15 @@ running mean only adds the resampling blur, hence the option (``--temporal-albed
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.bidirectional import effective_count_at
 from svgf_cli.filters.fastmath import FASTMATH
 from svgf_cli.filters.modulate import clean_albedo, effective_albedo
+from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
+U = np.uint64
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _MIN_WEIGHT = F32(0.01)
@@ -162,7 +164,7 @@ def accumulate_albedo(
     _reflectances(history, prev_depth, black, max_reflectance, relative_floor, kept)
     _accumulate_rows(albedo, usable, history, kept, history_length, motion, depth, mesh_id,
                      prev_mesh_id, alpha, cap, black, max_reflectance, relative_floor, out,
-                     out_length)
+                     out_length, np.int64(get_num_threads()))
 
 
 @njit(parallel=True, **_JIT)
@@ -183,38 +185,46 @@ def _accumulate_rows(
     relative_floor: np.float32,
     out: np.ndarray,
     out_length: np.ndarray,
+    threads: int,
 ) -> None:
     """All rows of :func:`accumulate_albedo` (``usable``: :func:`_reflectances` of the
     colour, ``kept`` of the history on last frame's depth)."""
     height, width = depth.shape
-    for y in prange(height):
+    # Rows spread over the threads (``rows``): a sky or background band is nearly free.
+    for i in prange(balanced_row_count(height, threads)):
+        y = balanced_row(i, height, threads)
+        if y >= height:
+            continue
         lo = np.empty((3, width), dtype=F32)
         hi = np.empty((3, width), dtype=F32)
         column_lo = np.empty(width, dtype=F32)
         column_hi = np.empty(width, dtype=F32)
         _row_range(albedo, usable, y, lo, hi, column_lo, column_hi)
+        # Unsigned indices from here: numba then skips its negative-index wrap-around.
+        uy = U(y)
         for x in range(width):
-            a_r = clean_albedo(albedo[0, y, x])
-            a_g = clean_albedo(albedo[1, y, x])
-            a_b = clean_albedo(albedo[2, y, x])
-            out[0, y, x] = a_r
-            out[1, y, x] = a_g
-            out[2, y, x] = a_b
-            out_length[y, x] = _ZERO
-            if depth[y, x] <= _ZERO:
+            ux = U(x)
+            a_r = clean_albedo(albedo[0, uy, ux])
+            a_g = clean_albedo(albedo[1, uy, ux])
+            a_b = clean_albedo(albedo[2, uy, ux])
+            out[0, uy, ux] = a_r
+            out[1, uy, ux] = a_g
+            out[2, uy, ux] = a_b
+            out_length[uy, ux] = _ZERO
+            if depth[uy, ux] <= _ZERO:
                 continue
-            out_length[y, x] = _ONE
-            if not usable[y, x]:
+            out_length[uy, ux] = _ONE
+            if not usable[uy, ux]:
                 continue  # remodulated by 1 whatever the colour: no mean
-            px = F32(x) + motion[0, y, x]
-            py = F32(y) + motion[1, y, x]
+            px = F32(x) + motion[0, uy, ux]
+            py = F32(y) + motion[1, uy, ux]
             if not (abs(px) < F32(1e7) and abs(py) < F32(1e7)):  # NaN or far outside
                 px = py = F32(-2.0)  # no tap is in the image
             x0 = int(np.floor(px))
             y0 = int(np.floor(py))
             fx = px - F32(x0)
             fy = py - F32(y0)
-            mesh = mesh_id[y, x]
+            mesh = mesh_id[uy, ux]
             total = _ZERO
             h_r = _ZERO
             h_g = _ZERO
@@ -230,20 +240,22 @@ def _accumulate_rows(
                         continue
                     # Last frame's foreground, the same mesh, a mean that is a reflectance
                     # (not one of samples that were not demodulated).
-                    if not kept[ty, tx] or prev_mesh_id[ty, tx] != mesh:
+                    qy, qx = U(ty), U(tx)
+                    if not kept[qy, qx] or prev_mesh_id[qy, qx] != mesh:
                         continue
                     w = wx * wy
                     total += w
-                    h_r += w * history[0, ty, tx]
-                    h_g += w * history[1, ty, tx]
-                    h_b += w * history[2, ty, tx]
-                    h_len += w * history_length[ty, tx]
+                    h_r += w * history[0, qy, qx]
+                    h_g += w * history[1, qy, qx]
+                    h_b += w * history[2, qy, qx]
+                    h_len += w * history_length[qy, qx]
             if total >= _MIN_WEIGHT and h_len > _ZERO:
-                length = min(cap, h_len / total + _ONE)
+                inv = _ONE / total
+                length = min(cap, h_len * inv + _ONE)
                 blend = max(alpha, _ONE / length)
-                m_r = min(max(h_r / total, lo[0, x]), hi[0, x])
-                m_g = min(max(h_g / total, lo[1, x]), hi[1, x])
-                m_b = min(max(h_b / total, lo[2, x]), hi[2, x])
+                m_r = min(max(h_r * inv, lo[0, x]), hi[0, x])
+                m_g = min(max(h_g * inv, lo[1, x]), hi[1, x])
+                m_b = min(max(h_b * inv, lo[2, x]), hi[2, x])
                 m_r += blend * (a_r - m_r)
                 m_g += blend * (a_g - m_g)
                 m_b += blend * (a_b - m_b)
@@ -255,10 +267,10 @@ def _accumulate_rows(
                                              relative_floor)
             if not mean:
                 continue  # another mode: the remodulation must undo this frame's
-            out[0, y, x] = m_r
-            out[1, y, x] = m_g
-            out[2, y, x] = m_b
-            out_length[y, x] = length
+            out[0, uy, ux] = m_r
+            out[1, uy, ux] = m_g
+            out[2, uy, ux] = m_b
+            out_length[uy, ux] = length
 
 
 @njit(parallel=True, **_JIT)
