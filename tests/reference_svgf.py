@@ -1281,7 +1281,8 @@ class ReferenceDenoiser:
     def temporal_albedo(self, clean: CleanFrame, geom: Geometry) -> np.ndarray:
         """Each signal's colour as its running mean over the frames
         (:func:`accumulate_albedo`, against last frame's depth and mesh id; without history
-        every tap is rejected), kept for the next frame; returns the means (S, 3, H, W)."""
+        every tap is rejected), kept for the next frame; a glossy signal keeps its colour
+        (length 0). Returns the means (S, 3, H, W)."""
         p = self.params
         count = len(clean.names)
         shape = (count, 3, *geom.depth.shape)
@@ -1292,7 +1293,9 @@ class ReferenceDenoiser:
         else:
             means, lengths = np.zeros(shape), np.zeros((count, *geom.depth.shape))
             prev_depth, prev_mesh_id = geom.depth, clean.mesh_id
-        results = [accumulate_albedo(clean.albedo[index], means[index], lengths[index],
+        results = [(np.asarray(clean.albedo[index], dtype=F64), np.zeros(geom.depth.shape))
+                   if clean.glossy[index] else
+                   accumulate_albedo(clean.albedo[index], means[index], lengths[index],
                                      clean.motion, geom.depth, clean.mesh_id, prev_depth,
                                      prev_mesh_id, p.alpha, p.history_cap,
                                      demodulation_floor(p, clean, index))
@@ -1614,6 +1617,7 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
             assert reverse.albedo_mean is not None and reverse.albedo_length is not None
             forward_mean, forward_length_albedo = kept_albedo[len(frames) - 1 - len(outputs)]
             state.clean.albedo = np.stack([
+                reverse.albedo_mean[index] if state.clean.glossy[index] else
                 combine_albedo(forward_mean[index], forward_length_albedo[index],
                                reverse.albedo_mean[index], reverse.albedo_length[index],
                                reverse.albedo_mean[index], params.alpha,

@@ -281,3 +281,19 @@ def test_signals_sharing_a_colour_share_one_mean_also_bidirectionally() -> None:
     np.testing.assert_array_equal(state["albedo_slots"], [0, 0])
     outputs = [o.color for o in denoise_bidirectional(frames, params, half=True)]
     assert np.all(np.abs(outputs[-1][0, 2:6, 5] - 0.8) < 0.15)
+
+
+def test_a_glossy_signal_keeps_its_colour() -> None:
+    """Only the diffuse signal is remodulated by its running mean: a glossy signal over the
+    same flipping edge keeps this frame's colour (its light follows reflections, not the
+    texture), with or without the option."""
+    on = Denoiser(resolve_params("default", temporal_albedo=True), debug_layers=True)
+    off = Denoiser(resolve_params("default", temporal_albedo=False), debug_layers=True)
+    for colour in _edge_colours(8):
+        frame = _frame(colour, 2.0)
+        frame.signals.append(Signal("gloss", (colour * F32(0.5)).astype(F32), colour.copy(),
+                                    glossy=True))
+        with_mean, without = on.process(frame).layers, off.process(frame).layers
+    np.testing.assert_array_equal(with_mean["gloss.R"], without["gloss.R"])
+    name = frame.signals[0].name
+    assert np.abs(with_mean[f"{name}.R"] - without[f"{name}.R"]).max() > 0.1

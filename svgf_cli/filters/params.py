@@ -148,7 +148,8 @@ class SVGFParams:
     )
     temporal_albedo: bool = _p(
         False,
-        "Remodulate each signal by its demodulation colour's running mean over frames"
+        "Remodulate each signal (not glossy ones) by its demodulation colour's running mean"
+        " over frames"
         " (reprojected, clamped to the current 3x3 range; without history a 3x3 Gaussian"
         " mean): at 1 spp a pixel's colour is one sample of a texture edge, a renderer's"
         " reference the pixel-filtered mean (off for a renderer whose references are point"

@@ -568,6 +568,14 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
+        "albedo-history-glossy-averaged", "filters",
+        "temporal albedo: a glossy signal is remodulated by its colour's running mean too",
+        "svgf_cli/filters/denoiser.py",
+        (("        if signal.glossy:\n            slots.append(-1)",
+          "        if False:\n            slots.append(-1)"),),
+        ("tests/test_filters_albedo_history.py", "tests/test_reference_denoiser.py"),
+    ),
+    Mutant(
         "albedo-history-mixes-modes", "filters",
         "temporal albedo: history taps whose mean is not a reflectance are resampled too",
         "svgf_cli/filters/albedo_history.py",
