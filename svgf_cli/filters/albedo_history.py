@@ -43,13 +43,13 @@ from numba import get_num_threads, njit, prange
 from svgf_cli.filters.bidirectional import effective_count_at
 from svgf_cli.filters.fastmath import FASTMATH
 from svgf_cli.filters.modulate import clean_albedo, effective_albedo
+from svgf_cli.filters.reproject import MIN_BILINEAR_WEIGHT
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
 U = np.uint64
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
-_MIN_WEIGHT = F32(0.01)
 # The 3x3 range's bound where a pixel is background (finite: fast-math assumes no inf).
 _FAR = F32(3e38)
 # Weights of a Gaussian of sigma 0.5 px at the edge and corner neighbours.
@@ -249,7 +249,7 @@ def _accumulate_rows(
                     h_g += w * history[1, qy, qx]
                     h_b += w * history[2, qy, qx]
                     h_len += w * history_length[qy, qx]
-            if total >= _MIN_WEIGHT and h_len > _ZERO:
+            if total >= MIN_BILINEAR_WEIGHT and h_len > _ZERO:
                 inv = _ONE / total
                 length = min(cap, h_len * inv + _ONE)
                 blend = max(alpha, _ONE / length)

@@ -40,7 +40,9 @@ U = np.uint64
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 _NORMAL_SLACK = F32(0.01)
-_MIN_BILINEAR_WEIGHT = F32(0.01)
+# Renormalised bilinear taps whose weights sum below this are no history (also the
+# temporal albedo's, filters.albedo_history).
+MIN_BILINEAR_WEIGHT = F32(0.01)
 # History lengths are frame counts; resampling makes them fractional only where histories of
 # different lengths mix. Float32 rounding of the renormalised weights leaves a footprint of
 # equal counts up to a few ulps below them (3 -> 2.9999998 for ~9 % of sub-pixel positions),
@@ -259,7 +261,7 @@ def _reproject_rows(
                 # Every usable tap has the pixel's modes in every signal (the common case):
                 # one set of weights for all signals.
                 weight_sum = g00 + g10 + g01 + g11
-                if weight_sum >= _MIN_BILINEAR_WEIGHT:
+                if weight_sum >= MIN_BILINEAR_WEIGHT:
                     inv = _ONE / weight_sum
                     agreed[ux] = 1
                     tap_rows[0, ux], tap_rows[1, ux] = ya, yb
@@ -279,7 +281,7 @@ def _reproject_rows(
                 w01 = g01 if (t01 ^ m) & relevant == 0 else _ZERO
                 w11 = g11 if (t11 ^ m) & relevant == 0 else _ZERO
                 weight_sum = w00 + w10 + w01 + w11
-                if weight_sum >= _MIN_BILINEAR_WEIGHT:
+                if weight_sum >= MIN_BILINEAR_WEIGHT:
                     inv = _ONE / weight_sum
                     _bilinear(s, uy, ux, ya, yb, xa, xb, w00 * inv, w10 * inv, w01 * inv,
                               w11 * inv, prev_illumination, prev_moments, prev_history_length,
