@@ -309,6 +309,19 @@ class Denoiser:
         """The signals of the sequence so far (None before the first frame)."""
         return self._signal_names
 
+    def held_bytes(self) -> int:
+        """Bytes of the arrays this Denoiser keeps between frames (history, workspace,
+        colour means, TAA), each counted once: its share of a run's memory."""
+        arrays: list[np.ndarray] = []
+        for group in (self._history, self._fresh_history,
+                      self._work.planes if self._work is not None else None):
+            arrays += list(group.values()) if group is not None else []
+        for pair in (self._albedo, self._forward_albedo):
+            arrays += list(pair) if pair is not None else []
+        if self._taa_previous is not None:
+            arrays.append(self._taa_previous)
+        return sum({id(array): array.nbytes for array in arrays}.values())
+
     def reset(self) -> None:
         """Drop all history: the next frame is processed cold."""
         self._history = None
