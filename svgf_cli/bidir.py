@@ -13,9 +13,10 @@ Reuses the runner's parts (`ReadAhead`, `FrameFilter`, `WriteBehind`, the output
    deleted once read), unpacked into the reverse pass's combination buffers, combined in
    place with the reverse history, filtered and written like a causal run's output.
 
-Memory: one Denoiser (the forward state is unpacked into its combination buffers), two
-frames (the one filtered and the one read or written: the reverse pass reads a frame only
-once the frame before it is written) and one packed state, whatever the length; disk:
+Memory: one Denoiser (the forward state is unpacked into its combination buffers, which
+are let go between output frames), two frames (the reverse pass reads frame ``t - 1``
+only once the write of ``t + 1`` is done: the frame filtered or written, and the one read)
+and one packed state (let go plane by plane as it is unpacked), whatever the length; disk:
 one packed state per output frame between the passes (about 35 MB per 1080p frame with two
 signals). The scratch folder is removed however the run ends (success, error, SIGINT or
 SIGTERM: the runner's stop flag ends a pass between frames). Resume with ``--skip-existing``
@@ -213,10 +214,9 @@ def _reverse_pass(
     with (
         WriteBehind(frame_writer(config), progress, stats) as writes,
         _StateReads(scratch, written) as states,
-        # A frame is read once the frame before it (in this pass) is written: with its
-        # passthrough layers, a frame is the largest thing in flight, and with the
-        # Denoiser's buffers alive three of them would be the peak. Both still overlap
-        # the filtering.
+        # Frame t - 1 is read once the write of t + 1 is done: with its passthrough
+        # layers a frame is the largest thing in flight, and three of them beside the
+        # Denoiser's buffers were the peak. Reads and writes still overlap the filtering.
         ReadAhead(tasks, frame_reader(config, read), stats, after=writes.in_flight) as reads,
     ):
         states.prefetch()  # the first output frame's, while the reverse warm-up runs

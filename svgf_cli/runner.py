@@ -444,9 +444,10 @@ class ReadAhead:
     the caller's (a backward pass reads the tasks reversed). Read and wait seconds are added
     to ``stats``. With ``after``, a read starts only once the future ``after`` returns
     when the read is queued (None: at once) is done, e.g. the write in flight
-    (:meth:`WriteBehind.in_flight`): the frame being written and the one being read are
-    then never in memory together. Owns its thread: leaving the ``with`` block cancels a
-    read not yet started and waits for one under way.
+    (:meth:`WriteBehind.in_flight`: then a read overlaps at most the write of the frame
+    just filtered, never an older one, and two frames are in memory, not three). Owns its
+    thread: leaving the ``with`` block cancels a read not yet started and waits for one
+    under way.
     """
 
     def __init__(

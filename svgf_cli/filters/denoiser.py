@@ -13,7 +13,12 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
    remodulate, sum the signals, add emission, restore background -> optional TAA.
 
 All buffers are float32 structure-of-arrays planes (the mode mask uint16), allocated once per
-resolution and signal count and reused, so memory does not grow with the sequence length.
+resolution and signal count and reused, so memory does not grow with the sequence length;
+three exceptions are taken per frame and let go, so that nothing dead is held between
+frames, where a file run holds the most (frames being read and written): the temporal
+albedo's means (last frame's are dropped once this frame's are made), and a bidirectional
+reverse pass's combination buffers and forward colour means (``forward_buffers``, released
+once the output frame is composed).
 Scratch is shared between stages (names are roles; a buffer is taken on first use): the
 reprojected history is accumulated in place, the a-trous ping-pong reuses the demodulated
 illumination once it is dead, last frame's history (dead once reprojected) lends its planes

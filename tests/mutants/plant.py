@@ -618,7 +618,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "read-beside-write", "io",
-        "memory: the reverse pass reads the next frame while the one before is written",
+        "memory: the reverse pass reads a frame while two others are in memory",
         "svgf_cli/bidir.py",
         (("stats, after=writes.in_flight) as reads,", "stats) as reads,"),),
         ("tests/test_bidir_memory.py",),
