@@ -13,8 +13,10 @@ Reuses the runner's parts (`ReadAhead`, `FrameFilter`, `WriteBehind`, the output
    deleted once read), unpacked into the reverse pass's combination buffers, combined in
    place with the reverse history, filtered and written like a causal run's output.
 
-Memory: one Denoiser (the forward state is unpacked into its combination buffers), the
-frames in flight and one packed state, whatever the length; disk:
+Memory: one Denoiser (the forward state is unpacked into its combination buffers, which
+are let go between output frames), two frames (the reverse pass reads frame ``t - 1``
+only once the write of ``t + 1`` is done: the frame filtered or written, and the one read)
+and one packed state (let go plane by plane as it is unpacked), whatever the length; disk:
 one packed state per output frame between the passes (about 35 MB per 1080p frame with two
 signals). The scratch folder is removed however the run ends (success, error, SIGINT or
 SIGTERM: the runner's stop flag ends a pass between frames). Resume with ``--skip-existing``
@@ -210,9 +212,12 @@ def _reverse_pass(
     frames = FrameFilter(config, progress, stats, _make_reverse_pass)
     written = [t.frame for t in tasks if t.output is not None]
     with (
-        ReadAhead(tasks, frame_reader(config, read), stats) as reads,
-        _StateReads(scratch, written) as states,
         WriteBehind(frame_writer(config), progress, stats) as writes,
+        _StateReads(scratch, written) as states,
+        # Frame t - 1 is read once the write of t + 1 is done: with its passthrough
+        # layers a frame is the largest thing in flight, and three of them beside the
+        # Denoiser's buffers were the peak. Reads and writes still overlap the filtering.
+        ReadAhead(tasks, frame_reader(config, read), stats, after=writes.in_flight) as reads,
     ):
         states.prefetch()  # the first output frame's, while the reverse warm-up runs
         frame_started = time.perf_counter()

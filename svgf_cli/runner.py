@@ -23,7 +23,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -442,16 +442,22 @@ class ReadAhead:
     Iterating yields ``(task, result, read_seconds)``. While the caller works on one frame
     the next one is read, never more, so memory holds at most two read frames; the order is
     the caller's (a backward pass reads the tasks reversed). Read and wait seconds are added
-    to ``stats``. Owns its thread: leaving the ``with`` block cancels a read not yet started
-    and waits for one under way.
+    to ``stats``. With ``after``, a read starts only once the future ``after`` returns
+    when the read is queued (None: at once) is done, e.g. the write in flight
+    (:meth:`WriteBehind.in_flight`: then a read overlaps at most the write of the frame
+    just filtered, never an older one, and two frames are in memory, not three). Owns its
+    thread: leaving the ``with`` block cancels a read not yet started and waits for one
+    under way.
     """
 
     def __init__(
-        self, tasks: Sequence[FrameTask], read: Callable[[FrameTask], Any], stats: RunStats
+        self, tasks: Sequence[FrameTask], read: Callable[[FrameTask], Any], stats: RunStats,
+        after: Callable[[], Future[Any] | None] | None = None,
     ) -> None:
         self._tasks = tasks
         self._read = read
         self._stats = stats
+        self._after = after
         self._position = 0
         self._executor = ThreadPoolExecutor(
             1, thread_name_prefix="svgf-read", initializer=_block_signals
@@ -461,9 +467,12 @@ class ReadAhead:
     def _submit(self, position: int) -> Future[tuple[Any, float]] | None:
         if position >= len(self._tasks):
             return None
-        return self._executor.submit(self._timed_read, self._tasks[position])
+        waiting = self._after() if self._after is not None else None
+        return self._executor.submit(self._timed_read, self._tasks[position], waiting)
 
-    def _timed_read(self, task: FrameTask) -> tuple[Any, float]:
+    def _timed_read(self, task: FrameTask, waiting: Future[Any] | None) -> tuple[Any, float]:
+        if waiting is not None:
+            wait((waiting,))  # its outcome is its owner's to report
         started = time.perf_counter()
         result = self._read(task)
         return result, time.perf_counter() - started
@@ -677,6 +686,10 @@ class WriteBehind:
         """Queue ``output`` to ``task.output`` once the write in flight is finished."""
         self.finish()
         self._pending = (task, self._executor.submit(self._timed_write, task, output), started)
+
+    def in_flight(self) -> Future[tuple[float, list[str]]] | None:
+        """The write in flight, if any (not reported: :meth:`finish` does that)."""
+        return self._pending[1] if self._pending is not None else None
 
     def poll(self) -> None:
         """Report the write in flight if it is done (now rather than a frame later)."""

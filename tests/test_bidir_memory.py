@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import threading
+import time
 import weakref
 from pathlib import Path
 from typing import Any
@@ -18,12 +19,12 @@ import numpy as np
 import pytest
 from test_cli_support import exit_code, write_sequence
 
-from svgf_cli import heap
+from svgf_cli import bidir, heap
 from svgf_cli.filters.params import resolve_params
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.spill import ScratchFolder
 from svgf_cli.progress import Progress
-from svgf_cli.runner import FrameTask, RunConfig, _default_reader, run_sequence
+from svgf_cli.runner import FrameTask, RunConfig, _default_reader, frame_writer, run_sequence
 
 FRAMES = range(1, 9)
 
@@ -72,6 +73,49 @@ def test_a_bidirectional_run_holds_a_bounded_number_of_frames_and_states(
     assert 1 <= frames.most <= 2
     # A packed state is let go once unpacked, before the next one is read.
     assert states.most == 0
+
+
+def test_the_reverse_pass_never_reads_a_frame_beside_two_others(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A frame with its passthrough layers is the largest thing in flight: the reverse
+    pass reads frame ``t - 1`` only once the write of ``t + 1`` is done, so a read may
+    overlap the write of ``t`` (the frame just filtered) but never an older one."""
+    write_sequence(tmp_path / "seq", FRAMES)
+    lock = threading.Lock()
+    writing: set[int] = set()
+    reads: list[tuple[int, set[int]]] = []
+
+    def writer(config: RunConfig) -> Any:
+        write = frame_writer(config)
+
+        def slow_write(task: FrameTask, output: Any) -> Any:
+            with lock:
+                writing.add(task.frame)
+            try:
+                time.sleep(0.05)  # long enough for an ungated read to start meanwhile
+                return write(task, output)
+            finally:
+                with lock:
+                    writing.discard(task.frame)
+
+        return slow_write
+
+    def read(path: Path, mapping: Any, **kwargs: Any) -> Any:
+        with lock:
+            reads.append((int(Path(path).name.split(".")[1]), set(writing)))
+        return _default_reader(path, mapping, **kwargs)
+
+    monkeypatch.setattr(bidir, "frame_writer", writer)
+    config = RunConfig(params=resolve_params("default", bidirectional=True), preset="default",
+                       mapping=build_mapping("svgf"), scratch_dir=tmp_path / "scratch")
+    tasks = [FrameTask(f, tmp_path / "seq" / f"in.{f:04d}.exr", tmp_path / f"o.{f:04d}.exr")
+             for f in FRAMES]
+    quiet = Progress("lines", len(FRAMES), quiet=True, out=io.StringIO(), err=io.StringIO())
+    stats = run_sequence(tasks, config, quiet, read=read)
+    assert stats.frames_written == len(FRAMES)
+    assert len(reads) == 2 * len(FRAMES)  # both passes read every frame
+    assert all(written <= {frame + 1} for frame, written in reads), reads
 
 
 def _resident_bytes() -> int:

@@ -27,7 +27,7 @@ from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.invert_motion import NO_MOTION, invert_motion
 from svgf_cli.filters.params import resolve_params
-from svgf_cli.filters.two_pass import denoise_bidirectional
+from svgf_cli.filters.two_pass import ReversePass, denoise_bidirectional
 
 F32 = np.float32
 TOLERANCE = 2e-4
@@ -320,6 +320,30 @@ def test_bidirectional_denoiser_matches_the_float64_reference(case: str) -> None
     # Both directions reach every frame: the first frame holds the later frames' history.
     first = want[0].history_length
     assert first.max() >= 5 and np.mean(first[first > 0] > 1) > 0.8
+
+
+def test_a_reverse_pass_holds_no_combination_buffers_between_frames() -> None:
+    """Between output frames the reverse pass keeps its history and scratch, not the
+    buffers the forward state is combined in (nor the forward colour means): they are
+    taken again for the next output frame. What it keeps does not grow."""
+    params = resolve_params("default")
+    assert params.temporal_albedo
+    frames = scene_sequence(5)
+    forward = Denoiser(params)
+    kept = [forward.forward_step(frame) for frame in frames]
+    reverse = ReversePass(params)
+    held = []
+    for t in range(len(frames) - 1, -1, -1):
+        output = reverse.process(frames[t], kept[t] if t < len(frames) - 1 else None)
+        assert (output is None) == (t == len(frames) - 1)
+        held.append(reverse.denoiser.held_bytes())
+    assert held[1] == held[2] == held[3] == held[4]
+    frame = frames[0]
+    into = reverse.forward_buffers(len(frame.names), frame.height, frame.width)
+    assert into.albedo is not None and into.albedo_length is not None
+    combination = sum(plane.nbytes for plane in (into.colour, into.moments, into.length,
+                                                  into.albedo, into.albedo_length))
+    assert reverse.denoiser.held_bytes() - held[-1] == combination
 
 
 def test_bidirectional_refuses_taa() -> None:

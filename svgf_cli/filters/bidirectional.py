@@ -411,7 +411,9 @@ def pack_history(names: tuple[str, ...], history: SideHistory,
 def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
                    factors: dict[str, float], out: SideHistory | None = None) -> SideHistory:
     """Inverse of :func:`pack_history` (float32; ``m2 = sd^2 + m1^2``), into ``out`` when
-    it has the right shapes (a run reuses one set of buffers: no per-frame allocation)."""
+    it has the right shapes (a run unpacks into the buffers it combines in). Consumes
+    ``planes``: each packed plane is let go once restored, so the packed state and the
+    unpacked one are not both held whole."""
     height, width = planes[f"{names[0]}.h"].shape
     count = len(names)
     if out is not None and out.length.shape == (count, height, width):
@@ -422,7 +424,7 @@ def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
         length = np.empty((count, height, width), dtype=F32)
 
     def restored(channel: str, out: np.ndarray) -> None:
-        np.multiply(planes[channel], F32(factors.get(channel, 1.0)), out=out, dtype=F32)
+        np.multiply(planes.pop(channel), F32(factors.get(channel, 1.0)), out=out, dtype=F32)
 
     for s, name in enumerate(names):
         for c, key in enumerate("RGB"):
@@ -431,7 +433,7 @@ def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
         restored(f"{name}.sd", moments[s, 1])
         np.multiply(moments[s, 1], moments[s, 1], out=moments[s, 1])
         moments[s, 1] += moments[s, 0] * moments[s, 0]
-        length[s] = planes[f"{name}.h"]
+        length[s] = planes.pop(f"{name}.h")
     albedo = albedo_length = None
     colours = 0
     while f"albedo.{colours}.h" in planes:
@@ -446,5 +448,5 @@ def unpack_history(names: tuple[str, ...], planes: dict[str, np.ndarray],
         for k in range(colours):
             for c, key in enumerate("RGB"):
                 restored(f"albedo.{k}.{key}", albedo[k, c])
-            albedo_length[k] = planes[f"albedo.{k}.h"]
+            albedo_length[k] = planes.pop(f"albedo.{k}.h")
     return SideHistory(colour, moments, length, albedo, albedo_length)

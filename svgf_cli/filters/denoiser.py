@@ -13,7 +13,12 @@ Per frame, three phases (one method each, so a bidirectional run can drive them 
    remodulate, sum the signals, add emission, restore background -> optional TAA.
 
 All buffers are float32 structure-of-arrays planes (the mode mask uint16), allocated once per
-resolution and signal count and reused, so memory does not grow with the sequence length.
+resolution and signal count and reused, so memory does not grow with the sequence length;
+three exceptions are taken per frame and let go, so that nothing dead is held between
+frames, where a file run holds the most (frames being read and written): the temporal
+albedo's means (last frame's are dropped once this frame's are made), and a bidirectional
+reverse pass's combination buffers and forward colour means (``forward_buffers``, released
+once the output frame is composed).
 Scratch is shared between stages (names are roles; a buffer is taken on first use): the
 reprojected history is accumulated in place, the a-trous ping-pong reuses the demodulated
 illumination once it is dead, last frame's history (dead once reprojected) lends its planes
@@ -286,12 +291,13 @@ class Denoiser:
         self._fresh_history: dict[str, np.ndarray] | None = None
         self._taa_previous: np.ndarray | None = None
         # temporal_albedo: the running mean (U, 3, H, W) and length (U, H, W) of each
-        # distinct demodulation colour (signals sharing one share a mean), which colour each
-        # signal has (``_albedo_slots``), and last frame's pair, overwritten next frame.
+        # distinct demodulation colour (signals sharing one share a mean) and which colour
+        # each signal has (``_albedo_slots``). Each frame's means go to fresh arrays and
+        # last frame's are let go: no dead pair is held between frames.
         self._albedo: tuple[np.ndarray, np.ndarray] | None = None
         self._albedo_slots: tuple[int, ...] = ()
-        self._albedo_spare: tuple[np.ndarray, np.ndarray] | None = None
-        # A bidirectional reverse pass: where the forward pass's colour means are put.
+        # A bidirectional reverse pass: where the forward pass's colour means are put, from
+        # forward_buffers to the end of the output frame.
         self._forward_albedo: tuple[np.ndarray, np.ndarray] | None = None
         self._frames_processed = 0
         self.stage_seconds: dict[str, float] = {}
@@ -307,6 +313,19 @@ class Denoiser:
     def signal_names(self) -> tuple[str, ...] | None:
         """The signals of the sequence so far (None before the first frame)."""
         return self._signal_names
+
+    def held_bytes(self) -> int:
+        """Bytes of the arrays this Denoiser keeps between frames (history, workspace,
+        colour means, TAA), each counted once: its share of a run's memory."""
+        arrays: list[np.ndarray] = []
+        for group in (self._history, self._fresh_history,
+                      self._work.planes if self._work is not None else None):
+            arrays += list(group.values()) if group is not None else []
+        for pair in (self._albedo, self._forward_albedo):
+            arrays += list(pair) if pair is not None else []
+        if self._taa_previous is not None:
+            arrays.append(self._taa_previous)
+        return sum({id(array): array.nbytes for array in arrays}.values())
 
     def reset(self) -> None:
         """Drop all history: the next frame is processed cold."""
@@ -620,7 +639,8 @@ class Denoiser:
     def forward_buffers(self, num_signals: int, height: int, width: int) -> SideHistory:
         """The buffers :meth:`reverse_step` combines in. A forward history written into them
         (a file run unpacks the spilled state there) is combined in place; any other is
-        copied in first. Their contents do not outlive the next :meth:`reverse_step`."""
+        copied in first. They do not outlive the next :meth:`reverse_step` that outputs a
+        frame (it lets them go: :meth:`_release_forward_buffers`)."""
         work = self._workspace(height, width, num_signals)
         albedo = albedo_length = None
         if self.params.temporal_albedo:
@@ -705,7 +725,19 @@ class Denoiser:
         if filtered is None:
             self._frames_processed += 1
             return None
-        return self._finish_frame(run, filtered)
+        output = self._finish_frame(run, filtered)
+        self._release_forward_buffers(work)
+        return output
+
+    def _release_forward_buffers(self, work: _Workspace) -> None:
+        """Let the combination buffers (:meth:`forward_buffers`) go once the output frame is
+        composed: dead until the next output frame's forward state is unpacked, they are
+        not held between frames, where a file run holds the most (the frame being written,
+        the one being read and the next packed state). Allocated again by the next
+        :meth:`forward_buffers`: a mapping of its own each (``svgf_cli.heap``)."""
+        for name in (self._combined_name(), "combined_moments", "combined_length"):
+            work.planes.pop(name, None)
+        self._forward_albedo = None
 
     def _pass_history(self, run: _FrameRun, protected: tuple[str, ...] = ()) -> str:
         """The colour history a pass of a bidirectional run keeps (the workspace buffer's
@@ -901,9 +933,6 @@ class Denoiser:
             return  # only glossy signals: no colour to average
         count, h, w = len(sources), frame.height, frame.width
         shape = (count, 3, h, w)
-        spare = self._albedo_spare
-        if spare is None or spare[0].shape != shape:
-            spare = (np.empty(shape, dtype=F32), np.empty((count, h, w), dtype=F32))
         history, previous = self._albedo, self._history
         if (history is None or slots != self._albedo_slots or previous is None
                 or not p.temporal):
@@ -912,7 +941,9 @@ class Denoiser:
             prev_depth, prev_mesh_id = run.depth, frame.mesh_id
         else:
             prev_depth, prev_mesh_id = previous["prev_depth"], previous["prev_mesh_id"]
-        colour, length = spare
+        # Fresh (a mapping of its own, given back when freed: svgf_cli.heap), so that last
+        # frame's pair is not kept alive as the next frame's spare.
+        colour, length = np.empty(shape, dtype=F32), np.empty((count, h, w), dtype=F32)
         for slot, source in enumerate(sources):
             signal = frame.signals[source]
             accumulate_albedo(
@@ -920,7 +951,6 @@ class Denoiser:
                 frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
                 *self._rules[signal.guide_albedo], colour[slot], length[slot],
             )
-        self._albedo_spare = history
         self._albedo, self._albedo_slots = (colour, length), slots
         signals = [signal if slot < 0 else dataclasses.replace(signal, albedo=colour[slot])
                    for signal, slot in zip(frame.signals, slots, strict=True)]

@@ -609,6 +609,20 @@ MUTANTS: tuple[Mutant, ...] = (
           "    if False:\n"),),
         ("tests/test_filters_albedo_history.py", "tests/test_bidir_runs.py"),
     ),
+    Mutant(
+        "combination-buffers-kept", "filters",
+        "memory: the reverse pass keeps its combination buffers between output frames",
+        "svgf_cli/filters/denoiser.py",
+        (("        self._release_forward_buffers(work)\n", "        pass\n"),),
+        ("tests/test_filters_bidirectional.py",),
+    ),
+    Mutant(
+        "read-beside-write", "io",
+        "memory: the reverse pass reads a frame while two others are in memory",
+        "svgf_cli/bidir.py",
+        (("stats, after=writes.in_flight) as reads,", "stats) as reads,"),),
+        ("tests/test_bidir_memory.py",),
+    ),
 )
 
 
