@@ -24,7 +24,8 @@ Scenes: ``lag/cornell_lag.obj``/``.mtl`` (Lambertian) and ``lag/cornell_glossy.o
 
 Run: ``python testdata/make_lag.py`` (scene and animation files only) or ``python
 testdata/make_lag.py --render [--svgf PATH] [--only NAME ...]`` (also the EXR frames, with
-``nice -n 10``; ``make lag-fixtures`` does this). The render commands are printed and listed
+``nice -n 10``; ``make lag-fixtures`` does this). ``--resolution WxH --out DIR`` renders the
+same sequences at another size into ``DIR`` (validation beyond the bundled 128x72 frames). The render commands are printed and listed
 in ``lag/README.md``.
 """
 
@@ -218,15 +219,19 @@ def write_inputs() -> None:
         (folder / "anim.json").write_text(json.dumps(data, indent=2) + "\n")
 
 
-def trace_command(name: str, svgf: str) -> list[str]:
+def trace_command(name: str, svgf: str, resolution: str = RESOLUTION,
+                  out: Path | None = None) -> list[str]:
+    """The `svgf trace` command of one sequence; ``out`` (default: ``testdata/lag``) holds its
+    folder, so larger renders for validation stay out of the fixtures."""
     spec = SEQUENCES[name]
     rel = Path("testdata") / "lag"
+    frames = (out if out is not None else rel) / name
     command = [
-        svgf, "trace", str(rel / spec["scene"]), "-o", str(rel / name / "in.####.exr"),
-        "--frames", FRAMES, "--resolution", RESOLUTION, "--spp", "1",
+        svgf, "trace", str(rel / spec["scene"]), "-o", str(frames / "in.####.exr"),
+        "--frames", FRAMES, "--resolution", resolution, "--spp", "1",
         "--max-depth", str(MAX_DEPTH), "--seed", "0", "--animation", str(rel / name / "anim.json"),
         "--motion-next", "--gradient-samples", "--compression", "zip",
-        "--reference", str(rel / name / "ref.####.exr"), "--reference-spp", str(REFERENCE_SPP),
+        "--reference", str(frames / "ref.####.exr"), "--reference-spp", str(REFERENCE_SPP),
         "--reference-channels", "rgb", "--reference-half", "--overwrite", "-q",
     ]  # fmt: skip
     for layer in SKIP_LAYERS:
@@ -241,12 +246,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--render", action="store_true", help="also render the EXR frames")
     parser.add_argument("--svgf", default=str(HERE.parent / ".venv" / "bin" / "svgf"))
     parser.add_argument("--only", nargs="*", choices=sorted(SEQUENCES), default=None)
+    parser.add_argument("--resolution", default=RESOLUTION, metavar="WxH",
+                        help=f"render size (default {RESOLUTION}, the fixtures')")
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="render into DIR/<name>/ instead of testdata/lag/<name>/ (e.g. a "
+                        "larger validation set: --resolution 256x144 --out /tmp/lag256)")
     args = parser.parse_args(argv)
     write_inputs()
     if not args.render:
         return 0
     for name in args.only or list(SEQUENCES):
-        command = ["nice", "-n", "10", *trace_command(name, args.svgf)]
+        out = args.out.resolve() if args.out is not None else None
+        if out is not None:
+            (out / name).mkdir(parents=True, exist_ok=True)
+        command = ["nice", "-n", "10", *trace_command(name, args.svgf, args.resolution, out)]
         print(" ".join(command), flush=True)
         start = time.perf_counter()
         subprocess.run(command, check=True, cwd=HERE.parent)
