@@ -413,7 +413,7 @@ class Denoiser:
                 history["history_mode"], history["history_illumination"],
                 history["history_moments"], history["history_length"], F32(p.depth_tolerance),
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
-                history_length,
+                history_length, catmull_rom=p.history_catmull_rom,
             )
             self._lend_stale_history(run)
             temporal = TemporalState(

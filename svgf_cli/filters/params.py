@@ -43,6 +43,13 @@ class SVGFParams:
     normal_tolerance: float = _p(
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01)."
     )
+    history_catmull_rom: bool = _p(
+        False,
+        "Resample the reprojected colour history and moments with a Catmull-Rom spline over"
+        " the 4x4 taps (clamped to the bilinear taps' range) where all 16 pass the"
+        " reprojection tests, bilinear elsewhere: bilinear resampling blurs the history a"
+        " little more every frame.",
+    )
     bidirectional: bool = _p(
         False,
         "Offline: also run the filter backwards in time and combine both passes' histories"
