@@ -1346,7 +1346,8 @@ class ReferenceDenoiser:
                    accumulate_albedo(clean.albedo[index], means[index], lengths[index],
                                      clean.motion, geom.depth, clean.mesh_id, prev_depth,
                                      prev_mesh_id, p.alpha, p.history_cap,
-                                     demodulation_floor(p, clean, index))
+                                     demodulation_floor(p, clean, index),
+                                     p.albedo_catmull_rom)
                    for index in range(count)]
         self.albedo_mean = np.stack([colour for colour, _ in results])
         self.albedo_length = np.stack([length for _, length in results])
@@ -1681,7 +1682,8 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
 def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: np.ndarray,
                       motion: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray,
                       prev_depth: np.ndarray, prev_mesh_id: np.ndarray, alpha: float,
-                      cap: float, black: float) -> tuple[np.ndarray, np.ndarray]:
+                      cap: float, black: float,
+                      catmull_rom: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``filters.albedo_history.accumulate_albedo`` of one signal: the running mean of its
     (cleaned) demodulation colour, over colours that are reflectances only (``demodulated``:
     ``effective_albedo``; a pixel whose colour is not one keeps it, ``h = 1``). The
@@ -1693,7 +1695,9 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
     Gaussian of sigma 0.5 px, ``exp(-d^2 / (2 0.5^2))`` at distance ``d``, with ``h = 1``;
     either kept only where it is a reflectance (else the current colour with ``h = 1``).
     Returns ``(colour (3, H, W), length (H, W))``; in the background the current colour with
-    length 0."""
+    length 0. ``catmull_rom``: where the position is not a whole pixel and every tap with a
+    Catmull-Rom weight passes the taps' tests, the resampled mean is
+    :func:`catmull_rom_fetch` of each channel (the length stays bilinear)."""
     a = clean_albedo(albedo)
     hist = np.asarray(history, dtype=F64)
     h_prev = np.asarray(history_length, dtype=F64)
@@ -1713,13 +1717,15 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
             x0, y0 = math.floor(px), math.floor(py)
             fx, fy = px - x0, py - y0
             total, colour, h = 0.0, np.zeros(3), 0.0
+
+            def usable_tap(tx: int, ty: int, x: int = x, y: int = y) -> bool:
+                return (0 <= tx < width and 0 <= ty < height and prev_depth[ty, tx] > 0.0
+                        and prev_mesh_id[ty, tx] == mesh_id[y, x]
+                        and bool(hist_reflectance[ty, tx]))
+
             for ty, wy in ((y0, 1.0 - fy), (y0 + 1, fy)):
                 for tx, wx in ((x0, 1.0 - fx), (x0 + 1, fx)):
-                    if not (0 <= tx < width and 0 <= ty < height):
-                        continue
-                    if prev_depth[ty, tx] <= 0.0 or prev_mesh_id[ty, tx] != mesh_id[y, x]:
-                        continue
-                    if not hist_reflectance[ty, tx]:
+                    if not usable_tap(tx, ty):
                         continue
                     total += wx * wy
                     colour += wx * wy * hist[:, ty, tx]
@@ -1739,7 +1745,14 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
             else:
                 usable = (z > 0.0) & reflectance
                 window = a[:, y_lo:y_hi, x_lo:x_hi][:, usable[y_lo:y_hi, x_lo:x_hi]]
-                mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
+                resampled = colour / total
+                support = [(x0 - 1 + i, y0 - 1 + j) for j in range(4) for i in range(4)
+                           if (fx > 0 or i == 1) and (fy > 0 or j == 1)]
+                if catmull_rom and (fx > 0 or fy > 0) and all(usable_tap(tx, ty)
+                                                              for tx, ty in support):
+                    resampled = np.array([catmull_rom_fetch(hist[c], px, py)
+                                          for c in range(3)])
+                mean = np.clip(resampled, window.min(axis=1), window.max(axis=1))
                 n = min(cap, h / total + 1.0)
                 mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
             if effective_albedo(mean[:, None, None], black)[0][0, 0]:

@@ -919,6 +919,7 @@ class Denoiser:
                 signal.albedo, history[0][slot], history[1][slot], run.motion, run.depth,
                 frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
                 *self._rules[signal.guide_albedo], colour[slot], length[slot],
+                catmull_rom=p.albedo_catmull_rom,
             )
         self._albedo_spare = history
         self._albedo, self._albedo_slots = (colour, length), slots

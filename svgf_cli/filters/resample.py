@@ -28,7 +28,9 @@ variance stays non-negative).
 :func:`catmull_rom_weights` is the per-axis weight; :func:`catmull_rom_history` one
 signal's colour and moments at one pixel from the taps the reprojection chose
 (``reproject``: the spline is used only where every tap of the support passed the same
-consistency tests as the bilinear taps; elsewhere the renormalised bilinear fetch stays).
+consistency tests as the bilinear taps; elsewhere the renormalised bilinear fetch stays);
+:func:`clamped_catmull_rom` one channel of a (C, H, W) history at one position (the
+temporal albedo's colour means, ``albedo_history``, under the same rule with its tests).
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ from numba import njit
 from svgf_cli.filters.fastmath import FASTMATH
 
 F32 = np.float32
+U = np.uint64
+_ZERO = F32(0.0)
 _HALF = F32(0.5)
 _ONE = F32(1.0)
 _JIT = dict(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
@@ -68,7 +72,7 @@ def _clamped_fetch(
     support's indices, ``weights[0:4, x]`` the column weights and ``weights[4:8, x]`` the row
     weights. Indexes the 4-D array directly (a per-pixel view would cost an atomic
     reference-count update, contended between threads)."""
-    total = F32(0.0)
+    total = _ZERO
     for j in range(4):
         r = rows[j, x]
         across = (
@@ -104,3 +108,54 @@ def catmull_rom_history(
     m2 = _clamped_fetch(prev_moments, s, 1, rows, columns, weights, ux)
     out_moments[s, 0, uy, ux] = m1
     out_moments[s, 1, uy, ux] = max(m2, m1 * m1)
+
+
+@njit(**_JIT)
+def _row_sum(
+    history: np.ndarray, c: int, r: np.uint64, xa: np.uint64, xb: np.uint64, xc: np.uint64,
+    xd: np.uint64, wx0: np.float32, wx1: np.float32, wx2: np.float32, wx3: np.float32,
+) -> np.float32:
+    """One row of the 4x4 sum: ``sum_i wx_i history[c, r, x_i]``."""
+    return (wx0 * history[c, r, xa] + wx1 * history[c, r, xb] + wx2 * history[c, r, xc]
+            + wx3 * history[c, r, xd])
+
+
+@njit(**_JIT)
+def clamped_catmull_rom(
+    history: np.ndarray, x0: int, y0: int, fx: np.float32, fy: np.float32,
+) -> tuple[np.float32, np.float32, np.float32]:
+    """The three channels of ``history`` (a (3, H, W) array) at ``(x0 + fx, y0 + fy)``: the
+    Catmull-Rom sum over the support (one column where ``fx`` is 0, one row where ``fy``
+    is), clamped per channel to the range of the bilinear taps with weight. The caller
+    checked every tap is inside."""
+    wx0, wx1, wx2, wx3 = catmull_rom_weights(fx)
+    wy0, wy1, wy2, wy3 = catmull_rom_weights(fy)
+    # An axis without a fraction: every column (row) is the one tap, weights 0, 1, 0, 0.
+    xa = U(x0 - 1) if fx > _ZERO else U(x0)
+    xb = U(x0)
+    xc = U(x0 + 1) if fx > _ZERO else U(x0)
+    xd = U(x0 + 2) if fx > _ZERO else U(x0)
+    ya = U(y0 - 1) if fy > _ZERO else U(y0)
+    yb = U(y0)
+    yc = U(y0 + 1) if fy > _ZERO else U(y0)
+    yd = U(y0 + 2) if fy > _ZERO else U(y0)
+    out_r = _ZERO
+    out_g = _ZERO
+    out_b = _ZERO
+    for c in range(3):
+        total = (wy0 * _row_sum(history, c, ya, xa, xb, xc, xd, wx0, wx1, wx2, wx3)
+                 + wy1 * _row_sum(history, c, yb, xa, xb, xc, xd, wx0, wx1, wx2, wx3)
+                 + wy2 * _row_sum(history, c, yc, xa, xb, xc, xd, wx0, wx1, wx2, wx3)
+                 + wy3 * _row_sum(history, c, yd, xa, xb, xc, xd, wx0, wx1, wx2, wx3))
+        a = history[c, yb, xb]
+        b = history[c, yb, xc]
+        d = history[c, yc, xb]
+        e = history[c, yc, xc]
+        value = min(max(total, min(min(a, b), min(d, e))), max(max(a, b), max(d, e)))
+        if c == 0:
+            out_r = value
+        elif c == 1:
+            out_g = value
+        else:
+            out_b = value
+    return out_r, out_g, out_b
