@@ -65,7 +65,8 @@ def read_sequence(name: str, aovs: str) -> tuple[list, list[np.ndarray]]:
     index = 1
     while (folder / f"in.{index:04d}.exr").exists():
         frames.append(read_frame(folder / f"in.{index:04d}.exr", mapping).frame)
-        pixels = oiio.ImageBuf(str(reference_folder / f"ref.{index:04d}.exr")).get_pixels(oiio.FLOAT)
+        reference = reference_folder / f"ref.{index:04d}.exr"
+        pixels = oiio.ImageBuf(str(reference)).get_pixels(oiio.FLOAT)
         references.append(np.ascontiguousarray(pixels[..., :3].transpose(2, 0, 1)))
         index += 1
     return frames, references

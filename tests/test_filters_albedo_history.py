@@ -83,6 +83,32 @@ def test_kernel_matches_the_float64_reference(catmull_rom: bool) -> None:
         assert np.any(out != bilinear, axis=0).sum() >= 5
 
 
+def test_catmull_rom_support_across_a_mesh_edge_keeps_the_bilinear_fetch() -> None:
+    """Two meshes side by side, last frame's means very different across the edge, half-pixel
+    motion: next to the edge the spline's outer taps lie on the other mesh, so the pixel
+    keeps the bilinear fetch of its own mesh; away from the edge the spline applies."""
+    height, width = 8, 20
+    rng = np.random.default_rng(9)
+    depth, _, _ = _flat(height, width)
+    mesh = np.where(np.arange(width)[None, :] < 10, 1, 2).astype(np.int32).repeat(height, 0)
+    albedo = rng.uniform(0.05, 0.95, (3, height, width)).astype(F32)  # a wide 3x3 range
+    x = np.arange(width)
+    history = np.broadcast_to(0.3 + 0.2 * np.sin(x / 1.3), (3, height, width)).astype(F32)
+    history = np.where(mesh[None] == 2, F32(0.9), history).astype(F32)
+    length = np.full((height, width), 4.0, F32)
+    motion = np.zeros((2, height, width), F32)
+    motion[0] = 0.5
+    sharp, _ = _run(albedo, history, length, motion, depth, mesh, depth, mesh,
+                    catmull_rom=True)
+    bilinear, _ = _run(albedo, history, length, motion, depth, mesh, depth, mesh)
+    want, _ = ref.accumulate_albedo(albedo, history, length, motion, depth, mesh, depth, mesh,
+                                    0.2, 32.0, float(BLACK), True)
+    np.testing.assert_allclose(sharp, want, rtol=1e-5, atol=1e-6)
+    rows = slice(1, height - 1)
+    assert np.array_equal(sharp[:, rows, 8], bilinear[:, rows, 8])  # tap 10 on mesh 2
+    assert np.any(sharp[:, rows, 3:7] != bilinear[:, rows, 3:7])
+
+
 def test_catmull_rom_keeps_a_sharp_texture_under_sub_pixel_motion() -> None:
     """A noise-free stripe texture seen through half-pixel motion frame after frame: the
     bilinear mean washes the stripes out, the spline keeps them; a constant colour stays
