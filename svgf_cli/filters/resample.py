@@ -8,6 +8,9 @@ image that grows with its length (TAA's known softening). Measured on the bundle
 sequences with camera motion (the noise-free references accumulated through the frames'
 motion, docs/algorithm.md), the history's error against the current reference was 9-19 %
 lower with this fetch at alpha 0.2 and grew by 60-70 % from alpha 0.2 to 0.1 with bilinear.
+Bilinear's averaging also removes noise, which the spline keeps more of: it pays on a
+history with little noise (the temporal albedo's colour means: on in ``default``), not on
+the noisy colour accumulation (``history_catmull_rom``: off; docs/algorithm.md).
 
 The fetch is the Catmull-Rom spline (Keys' cubic convolution with ``a = -1/2``), separable
 over the 4x4 taps around the position ``(x0 + fx, y0 + fy)``: per axis, with ``t`` the
@@ -19,17 +22,17 @@ fraction, the weights of the taps at offsets -1, 0, 1, 2 are
 (they sum to 1; at ``t = 0`` they are 0, 1, 0, 0: an axis without a fraction uses the one
 column or row). The spline interpolates (a tap's own value at ``t = 0``) and reproduces
 linear ramps exactly, so it does not blur them; its negative lobes overshoot at edges, so the
-result is clamped per channel to the range of the inner 2x2 taps (the bilinear cell: the
-mpv/madVR "anti-ringing" bound, stricter than the range of all 16), which also keeps a colour
-that is non-negative non-negative and a constant history constant. The luminance moments are
-fetched the same way, and the second is raised to at least the square of the first (their
-variance stays non-negative).
+result is clamped per channel to the range of the inner 2x2 taps with weight (the bilinear
+cell: the "anti-ringing" bound of video scalers, stricter than the range of all 16), which
+also keeps a non-negative history non-negative and a constant one constant. The luminance
+moments are fetched the same way, and the second is raised to at least the square of the
+first (their variance stays non-negative).
 
 :func:`catmull_rom_weights` is the per-axis weight; :func:`catmull_rom_history` one
 signal's colour and moments at one pixel from the taps the reprojection chose
 (``reproject``: the spline is used only where every tap of the support passed the same
 consistency tests as the bilinear taps; elsewhere the renormalised bilinear fetch stays);
-:func:`clamped_catmull_rom` one channel of a (C, H, W) history at one position (the
+:func:`clamped_catmull_rom` the three channels of a (3, H, W) history at one position (the
 temporal albedo's colour means, ``albedo_history``, under the same rule with its tests).
 """
 
