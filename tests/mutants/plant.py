@@ -545,8 +545,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-history-unclamped", "filters",
         "temporal albedo: the resampled mean is not clamped to the current 3x3 range",
         "svgf_cli/filters/albedo_history.py",
-        (("            m_r = min(max(h_r * inv, lo[0, x]), hi[0, x])\n",
-          "            m_r = h_r * inv\n"),),
+        (("            m_r = min(max(h_r, lo[0, x]), hi[0, x])\n",
+          "            m_r = h_r\n"),),
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
