@@ -13,15 +13,17 @@ JIT compilation and the cold first frames; the timed frames are in steady state 
 pixels have history >= 4).
 
 Run: ``.venv/bin/python bench/bench_filters.py [--frames N] [--sizes 1280x720,1920x1080]
-[--signals 2|3]``
+[--signals 2|3] [--motion-offset DX] [--set NAME=VALUE]``
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import resource
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -40,8 +42,9 @@ class SceneCanvas:
     """An analytic scene rendered once on a canvas wider than the frame; frames are crops."""
 
     def __init__(self, width: int, height: int, pan: int, seed: int = 0,
-                 signals: int = 2) -> None:
+                 signals: int = 2, motion_offset: float = 0.0) -> None:
         self.width, self.height, self.pan, self.signals = width, height, pan, signals
+        self.motion_offset = motion_offset
         cw = width + pan
         y, x = np.mgrid[0:height, 0:cw].astype(np.float64)
         horizon = 0.3 * height
@@ -100,6 +103,7 @@ class SceneCanvas:
         indirect = albedo * crop(self.indirect) * spp[1]
         motion = np.zeros((2, h, w), dtype=F32)
         motion[0] = -1.0 if index % (self.pan + 1) else 0.0
+        motion += F32(self.motion_offset)
         if self.signals == 2:
             signals = [Signal("direct", np.ascontiguousarray(direct, dtype=F32), albedo),
                        Signal("indirect", np.ascontiguousarray(indirect, dtype=F32), albedo)]
@@ -120,11 +124,13 @@ class SceneCanvas:
 
 
 def bench_size(
-    width: int, height: int, frames: int, warmup: int, preset: str, signals: int = 2
+    width: int, height: int, frames: int, warmup: int, preset: str, signals: int = 2,
+    motion_offset: float = 0.0, overrides: dict[str, Any] | None = None,
 ) -> tuple[dict[str, float], dict[str, float]]:
     """(wall ms/frame per stage + summary, CPU ms/frame per stage)."""
-    canvas = SceneCanvas(width, height, pan=warmup + frames + 1, signals=signals)
-    denoiser = Denoiser(resolve_params(preset))
+    canvas = SceneCanvas(width, height, pan=warmup + frames + 1, signals=signals,
+                         motion_offset=motion_offset)
+    denoiser = Denoiser(resolve_params(preset, **(overrides or {})))
     for index in range(warmup):
         denoiser.process(canvas.frame(index))
     totals = dict.fromkeys(STAGES, 0.0)
@@ -193,7 +199,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--signals", type=int, choices=(2, 3), default=2,
                         help="2: direct + indirect; 3: Cycles lobes-split (diffuse_direct, "
                              "diffuse_indirect, specular)")
+    parser.add_argument("--motion-offset", type=float, default=0.0,
+                        help="added to both motion components: every history fetch at a"
+                        " sub-pixel position (the resampling's cost; the pan is whole pixels)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a parameter of the preset (Python literal); repeatable")
     args = parser.parse_args(argv)
+    overrides = {}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        overrides[name] = ast.literal_eval(value)
     kind = ("direct + indirect" if args.signals == 2
             else "diffuse_direct + diffuse_indirect + specular (lobes-split)")
     print(f"SVGF filter core, preset {args.preset}, {kind}, "
@@ -201,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     for size in args.sizes.split(","):
         width, height = (int(v) for v in size.lower().split("x"))
         result, cpu = bench_size(width, height, args.frames, args.warmup, args.preset,
-                                 args.signals)
+                                 args.signals, args.motion_offset, overrides)
         pixels = width * height
         print(f"{width}x{height}: CPU ms/frame  "
               + "  ".join(f"{s} {cpu.get(s, 0.0):7.1f}" for s in STAGES))

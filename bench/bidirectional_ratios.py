@@ -2,7 +2,8 @@
 
 For every sequence the causal Denoiser (``Denoiser.process`` frame by frame) and
 ``two_pass.denoise_bidirectional`` with the same parameters (the default preset) over the
-frames read as ``svgf denoise`` reads them; references ``ref.####.exr`` next to the inputs.
+frames read as ``svgf denoise`` reads them; references ``ref.####.exr`` next to the inputs
+(``seq_box``: testdata/seq's inputs against testdata/seq_box's box-filtered references).
 Prints per sequence the mean over frames of trimmed relMSE, FLIP and temporal error for
 both and their ratio (bidirectional / forward), the ratios of RMSE and untrimmed relMSE,
 the PSNR and SSIM differences, which metrics are worse than forward-only, and the worst of
@@ -48,19 +49,24 @@ from svgf_cli.io.layers import build_mapping  # noqa: E402
 SEQUENCES = {
     "seq": "svgf", "lag/camera": "svgf", "lag/shadow": "svgf", "lag/light_step": "svgf",
     "lag/light_slide_dim": "svgf", "lag/glossy": "svgf", "cycles/roll": "cycles",
-    "cycles/metal": "cycles",
+    "cycles/metal": "cycles", "seq_box": "svgf",
 }
+# Sequences whose references are another sequence's inputs filtered otherwise: testdata/seq's
+# inputs against references box-filtered over 4x4 sub-pixel samples (testdata/seq_box).
+INPUTS_OF = {"seq_box": "seq"}
 LOWER_IS_BETTER = ("relmse_trimmed", "flip", "temporal", "rmse", "relmse")
 
 
 def read_sequence(name: str, aovs: str) -> tuple[list, list[np.ndarray]]:
-    folder = REPO / "testdata" / name
+    folder = REPO / "testdata" / INPUTS_OF.get(name, name)
+    reference_folder = REPO / "testdata" / name
     mapping = build_mapping(aovs, None, None, "auto")
     frames, references = [], []
     index = 1
     while (folder / f"in.{index:04d}.exr").exists():
         frames.append(read_frame(folder / f"in.{index:04d}.exr", mapping).frame)
-        pixels = oiio.ImageBuf(str(folder / f"ref.{index:04d}.exr")).get_pixels(oiio.FLOAT)
+        reference = reference_folder / f"ref.{index:04d}.exr"
+        pixels = oiio.ImageBuf(str(reference)).get_pixels(oiio.FLOAT)
         references.append(np.ascontiguousarray(pixels[..., :3].transpose(2, 0, 1)))
         index += 1
     return frames, references

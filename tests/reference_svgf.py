@@ -656,7 +656,8 @@ class Reprojected:
     """Last frame's history resampled at this frame's pixels, per signal; a signal's
     ``history_length`` 0 means rejected (disocclusion, or no tap of its current mode).
     ``path`` (S, H, W) says which branch each signal took at each pixel: 0 rejected,
-    1 bilinear, 2 the 3x3 fallback (for tests that must exercise every branch)."""
+    1 bilinear, 2 the 3x3 fallback, 3 Catmull-Rom (for tests that must exercise every
+    branch)."""
 
     illumination: np.ndarray
     moments: np.ndarray
@@ -664,12 +665,39 @@ class Reprojected:
     path: np.ndarray
 
 
-REJECTED, BILINEAR, FALLBACK = 0, 1, 2
+REJECTED, BILINEAR, FALLBACK, CATMULL_ROM = 0, 1, 2, 3
+
+
+def catmull_rom_weights(t: float) -> tuple[float, float, float, float]:
+    """Catmull-Rom (Keys' cubic, a = -1/2) weights of the taps at offsets -1, 0, 1, 2 from
+    ``floor(p)`` for the fraction ``t``: ``k(1 + t), k(t), k(1 - t), k(2 - t)`` with
+    ``k(d) = 1.5 d^3 - 2.5 d^2 + 1`` for ``d <= 1`` and ``-0.5 d^3 + 2.5 d^2 - 4 d + 2``
+    for ``1 < d < 2``."""
+
+    def k(d: float) -> float:
+        if d <= 1.0:
+            return 1.5 * d**3 - 2.5 * d**2 + 1.0
+        return -0.5 * d**3 + 2.5 * d**2 - 4.0 * d + 2.0 if d < 2.0 else 0.0
+
+    return k(1.0 + t), k(t), k(1.0 - t), k(2.0 - t)
+
+
+def catmull_rom_fetch(plane: np.ndarray, px: float, py: float) -> float:
+    """The clamped Catmull-Rom value of ``plane`` (H, W) at ``(px, py)``: the 4x4 weighted
+    sum, clamped to the range of the bilinear taps that carry weight (one column where
+    ``px`` is whole, one row where ``py`` is). The caller checked the taps are inside."""
+    x0, y0 = math.floor(px), math.floor(py)
+    wx, wy = catmull_rom_weights(px - x0), catmull_rom_weights(py - y0)
+    total = sum(wy[j] * wx[i] * plane[y0 - 1 + j, x0 - 1 + i]
+                for j in range(4) for i in range(4) if wx[i] != 0.0 and wy[j] != 0.0)
+    inner = [plane[ty, tx] for ty in {y0, y0 + (py > y0)} for tx in {x0, x0 + (px > x0)}]
+    return float(np.clip(total, min(inner), max(inner)))
 
 
 def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray,
               radiance_mode: np.ndarray, prev: History, depth_tolerance: float,
-              depth_slack: float, normal_tolerance: float) -> Reprojected:
+              depth_slack: float, normal_tolerance: float,
+              catmull_rom: bool = False) -> Reprojected:
     """Resample ``prev`` at the backprojected positions, per signal (paper 4.1).
 
     Per surface pixel: ``P = (x + motion.x, y + motion.y)``. A previous pixel is a usable
@@ -681,6 +709,12 @@ def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray,
     ``floor(P + 0.5)``; with none, a disocclusion of that signal. Colour, moments and
     history length are resampled with the same weights; a history length within 1e-3 of a
     whole number of frames is that number. Non-finite motion is a disocclusion.
+
+    ``catmull_rom``: where ``P`` is not a whole pixel and every tap with a Catmull-Rom weight
+    (the 4x4 around ``floor(P)``; one column where ``P.x`` is whole, one row where ``P.y``
+    is) passes :func:`tap_consistent`, was not reset, and has every signal's current mode,
+    each signal's colour and moments are :func:`catmull_rom_fetch` and the second moment at
+    least the first squared; the history length stays bilinear.
     """
     z = geom.depth
     height, width = z.shape
@@ -710,6 +744,12 @@ def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray,
                     (x0, y0 + 1, (1 - fx) * fy), (x0 + 1, y0 + 1, fx * fy)]
             cx, cy = math.floor(px + 0.5), math.floor(py + 0.5)
             box = [(tx, ty) for ty in range(cy - 1, cy + 2) for tx in range(cx - 1, cx + 2)]
+            support = [(x0 - 1 + i, y0 - 1 + j) for j in range(4) for i in range(4)
+                       if (fx > 0 or i == 1) and (fy > 0 or j == 1)]
+            sharp = catmull_rom and (fx > 0 or fy > 0) and all(
+                consistent(tx, ty) and bool(prev.has_history[ty, tx])
+                and np.array_equal(prev.radiance_mode[:, ty, tx], mode_now[:, y, x])
+                for tx, ty in support)
             for s in range(num_signals):
 
                 def usable_tap(tx: int, ty: int, s: int = s, x: int = x, y: int = y) -> bool:
@@ -731,6 +771,14 @@ def reproject(motion: np.ndarray, geom: Geometry, mesh_id: np.ndarray,
                     illumination[s, :, y, x] += w * prev.illumination[s, :, ty, tx]
                     moments[s, :, y, x] += w * prev.moments[s, :, ty, tx]
                     history_length[s, y, x] += w * prev.history_length[s, ty, tx]
+                if sharp:
+                    path[s, y, x] = CATMULL_ROM
+                    for c in range(3):
+                        illumination[s, c, y, x] = catmull_rom_fetch(
+                            prev.illumination[s, c], px, py)
+                    m1 = catmull_rom_fetch(prev.moments[s, 0], px, py)
+                    m2 = catmull_rom_fetch(prev.moments[s, 1], px, py)
+                    moments[s, :, y, x] = m1, max(m2, m1 * m1)
     whole = np.floor(history_length + 0.5)
     history_length = np.where(np.abs(history_length - whole) < WHOLE_SNAP, whole,
                               history_length)
@@ -1235,7 +1283,7 @@ class ReferenceDenoiser:
         if p.temporal and self.history is not None:
             reprojected = reproject(clean.motion, geom, clean.mesh_id, radiance_mode,
                                     self.history, p.depth_tolerance, p.depth_slack,
-                                    p.normal_tolerance)
+                                    p.normal_tolerance, p.history_catmull_rom)
             shortened = self.before_accumulation(TemporalState(
                 illumination, radiance_mode, reprojected, geom.depth, clean.weights,
                 clean.glossy))
@@ -1298,7 +1346,8 @@ class ReferenceDenoiser:
                    accumulate_albedo(clean.albedo[index], means[index], lengths[index],
                                      clean.motion, geom.depth, clean.mesh_id, prev_depth,
                                      prev_mesh_id, p.alpha, p.history_cap,
-                                     demodulation_floor(p, clean, index))
+                                     demodulation_floor(p, clean, index),
+                                     p.albedo_catmull_rom)
                    for index in range(count)]
         self.albedo_mean = np.stack([colour for colour, _ in results])
         self.albedo_length = np.stack([length for _, length in results])
@@ -1633,7 +1682,8 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
 def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: np.ndarray,
                       motion: np.ndarray, depth: np.ndarray, mesh_id: np.ndarray,
                       prev_depth: np.ndarray, prev_mesh_id: np.ndarray, alpha: float,
-                      cap: float, black: float) -> tuple[np.ndarray, np.ndarray]:
+                      cap: float, black: float,
+                      catmull_rom: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``filters.albedo_history.accumulate_albedo`` of one signal: the running mean of its
     (cleaned) demodulation colour, over colours that are reflectances only (``demodulated``:
     ``effective_albedo``; a pixel whose colour is not one keeps it, ``h = 1``). The
@@ -1645,7 +1695,9 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
     Gaussian of sigma 0.5 px, ``exp(-d^2 / (2 0.5^2))`` at distance ``d``, with ``h = 1``;
     either kept only where it is a reflectance (else the current colour with ``h = 1``).
     Returns ``(colour (3, H, W), length (H, W))``; in the background the current colour with
-    length 0."""
+    length 0. ``catmull_rom``: where the position is not a whole pixel and every tap with a
+    Catmull-Rom weight passes the taps' tests, the resampled mean is
+    :func:`catmull_rom_fetch` of each channel (the length stays bilinear)."""
     a = clean_albedo(albedo)
     hist = np.asarray(history, dtype=F64)
     h_prev = np.asarray(history_length, dtype=F64)
@@ -1665,13 +1717,15 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
             x0, y0 = math.floor(px), math.floor(py)
             fx, fy = px - x0, py - y0
             total, colour, h = 0.0, np.zeros(3), 0.0
+
+            def usable_tap(tx: int, ty: int, x: int = x, y: int = y) -> bool:
+                return (0 <= tx < width and 0 <= ty < height and prev_depth[ty, tx] > 0.0
+                        and prev_mesh_id[ty, tx] == mesh_id[y, x]
+                        and bool(hist_reflectance[ty, tx]))
+
             for ty, wy in ((y0, 1.0 - fy), (y0 + 1, fy)):
                 for tx, wx in ((x0, 1.0 - fx), (x0 + 1, fx)):
-                    if not (0 <= tx < width and 0 <= ty < height):
-                        continue
-                    if prev_depth[ty, tx] <= 0.0 or prev_mesh_id[ty, tx] != mesh_id[y, x]:
-                        continue
-                    if not hist_reflectance[ty, tx]:
+                    if not usable_tap(tx, ty):
                         continue
                     total += wx * wy
                     colour += wx * wy * hist[:, ty, tx]
@@ -1691,7 +1745,14 @@ def accumulate_albedo(albedo: np.ndarray, history: np.ndarray, history_length: n
             else:
                 usable = (z > 0.0) & reflectance
                 window = a[:, y_lo:y_hi, x_lo:x_hi][:, usable[y_lo:y_hi, x_lo:x_hi]]
-                mean = np.clip(colour / total, window.min(axis=1), window.max(axis=1))
+                resampled = colour / total
+                support = [(x0 - 1 + i, y0 - 1 + j) for j in range(4) for i in range(4)
+                           if (fx > 0 or i == 1) and (fy > 0 or j == 1)]
+                if catmull_rom and (fx > 0 or fy > 0) and all(usable_tap(tx, ty)
+                                                              for tx, ty in support):
+                    resampled = np.array([catmull_rom_fetch(hist[c], px, py)
+                                          for c in range(3)])
+                mean = np.clip(resampled, window.min(axis=1), window.max(axis=1))
                 n = min(cap, h / total + 1.0)
                 mean = mean + max(alpha, 1.0 / n) * (a[:, y, x] - mean)
             if effective_albedo(mean[:, None, None], black)[0][0, 0]:

@@ -31,15 +31,17 @@ FLOOR = F32(ref.RELATIVE_ALBEDO_FLOOR)
 
 
 def _run(albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh,
-         alpha=0.2, cap=32.0):
+         alpha=0.2, cap=32.0, catmull_rom=False):
     out = np.full_like(albedo, np.nan)
     out_length = np.full(depth.shape, np.nan, dtype=F32)
     accumulate_albedo(albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh,
-                      F32(alpha), F32(cap), BLACK, MAX_REFLECTANCE, FLOOR, out, out_length)
+                      F32(alpha), F32(cap), BLACK, MAX_REFLECTANCE, FLOOR, out, out_length,
+                      catmull_rom=catmull_rom)
     return out, out_length
 
 
-def test_kernel_matches_the_float64_reference() -> None:
+@pytest.mark.parametrize("catmull_rom", [False, True])
+def test_kernel_matches_the_float64_reference(catmull_rom: bool) -> None:
     rng = np.random.default_rng(5)
     height, width = 13, 17
     albedo = rng.uniform(0.02, 0.9, (3, height, width)).astype(F32)
@@ -60,15 +62,79 @@ def test_kernel_matches_the_float64_reference() -> None:
     prev_depth[3, :] = 0.0
     prev_mesh = mesh.copy()
     prev_mesh[8:, 10:] = 3
-    out, out_length = _run(albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh)
+    if catmull_rom:  # positions whole in one axis: one column or row of the spline
+        motion[0, ::4] = np.round(motion[0, ::4])
+        motion[1, 1::4] = np.round(motion[1, 1::4])
+    out, out_length = _run(albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh,
+                           catmull_rom=catmull_rom)
     want, want_length = ref.accumulate_albedo(albedo, history, length, motion, depth, mesh,
-                                              prev_depth, prev_mesh, 0.2, 32.0, float(BLACK))
+                                              prev_depth, prev_mesh, 0.2, 32.0, float(BLACK),
+                                              catmull_rom)
     np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(out_length, want_length, rtol=1e-6, atol=1e-6)
     # The scene exercises every branch: kept means, rejected taps, background.
     kept = (out_length > 1.0)
     assert 20 < kept.sum() < kept.size - 20
     assert not np.allclose(out[:, kept], ref.clean_albedo(albedo)[:, kept])
+    if catmull_rom:  # the spline applied at some pixels (and only changed the means there)
+        bilinear, bilinear_length = _run(albedo, history, length, motion, depth, mesh,
+                                         prev_depth, prev_mesh)
+        assert np.array_equal(out_length, bilinear_length)
+        assert np.any(out != bilinear, axis=0).sum() >= 5
+
+
+def test_catmull_rom_support_across_a_mesh_edge_keeps_the_bilinear_fetch() -> None:
+    """Two meshes side by side, last frame's means very different across the edge, half-pixel
+    motion: next to the edge the spline's outer taps lie on the other mesh, so the pixel
+    keeps the bilinear fetch of its own mesh; away from the edge the spline applies."""
+    height, width = 8, 20
+    rng = np.random.default_rng(9)
+    depth, _, _ = _flat(height, width)
+    mesh = np.where(np.arange(width)[None, :] < 10, 1, 2).astype(np.int32).repeat(height, 0)
+    albedo = rng.uniform(0.05, 0.95, (3, height, width)).astype(F32)  # a wide 3x3 range
+    x = np.arange(width)
+    history = np.broadcast_to(0.3 + 0.2 * np.sin(x / 1.3), (3, height, width)).astype(F32)
+    history = np.where(mesh[None] == 2, F32(0.9), history).astype(F32)
+    length = np.full((height, width), 4.0, F32)
+    motion = np.zeros((2, height, width), F32)
+    motion[0] = 0.5
+    sharp, _ = _run(albedo, history, length, motion, depth, mesh, depth, mesh,
+                    catmull_rom=True)
+    bilinear, _ = _run(albedo, history, length, motion, depth, mesh, depth, mesh)
+    want, _ = ref.accumulate_albedo(albedo, history, length, motion, depth, mesh, depth, mesh,
+                                    0.2, 32.0, float(BLACK), True)
+    np.testing.assert_allclose(sharp, want, rtol=1e-5, atol=1e-6)
+    rows = slice(1, height - 1)
+    assert np.array_equal(sharp[:, rows, 8], bilinear[:, rows, 8])  # tap 10 on mesh 2
+    assert np.any(sharp[:, rows, 3:7] != bilinear[:, rows, 3:7])
+
+
+def test_catmull_rom_keeps_a_sharp_texture_under_sub_pixel_motion() -> None:
+    """A noise-free stripe texture seen through half-pixel motion frame after frame: the
+    bilinear mean washes the stripes out, the spline keeps them; a constant colour stays
+    exactly constant, and nothing leaves the current 3x3 range."""
+    height, width = 8, 40
+    depth, mesh, _ = _flat(height, width)
+    x = np.arange(width)
+    texture = (0.5 + 0.3 * np.sin(2 * np.pi * x / 6.0)).astype(F32)
+    albedo = np.broadcast_to(texture, (3, height, width)).astype(F32)
+    contrast = {}
+    for catmull_rom in (False, True):
+        mean, length = albedo.copy(), np.ones((height, width), F32)
+        for frame in range(12):
+            motion = np.zeros((2, height, width), F32)
+            motion[0] = 0.5 if frame % 2 == 0 else -0.5
+            # Each frame samples the texture where the pixel is: the same texture back.
+            mean, length = _run(albedo, mean, length, motion, depth, mesh, depth, mesh,
+                                catmull_rom=catmull_rom)
+        row = mean[0, 4, 8:32]
+        contrast[catmull_rom] = float(row.max() - row.min())
+    assert contrast[True] > 1.15 * contrast[False]
+    flat = np.full((3, height, width), 0.4, F32)
+    motion = np.full((2, height, width), 0.3, F32)
+    out, _ = _run(flat, flat, np.full((height, width), 5.0, F32), motion, depth, mesh, depth,
+                  mesh, catmull_rom=True)
+    assert np.all(out == F32(0.4))
 
 
 def _flat(height: int, width: int) -> tuple[np.ndarray, ...]:

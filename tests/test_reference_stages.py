@@ -615,7 +615,8 @@ def _history_for(prev: Frame, seed: int) -> dict[str, np.ndarray]:
 
 def _run_reproject(prev: Frame, cur: Frame, history: dict[str, np.ndarray],
                    tolerances: tuple[float, float, float] = (10.0, 0.002, 16.0),
-                   mode: np.ndarray | None = None, prev_mode: np.ndarray | None = None):
+                   mode: np.ndarray | None = None, prev_mode: np.ndarray | None = None,
+                   catmull_rom: bool = False):
     """The kernel and the reference on the same float32 geometry; returns both.
 
     ``mode`` and ``prev_mode`` are the kernels' uint16 masks (default: every signal
@@ -631,7 +632,7 @@ def _run_reproject(prev: Frame, cur: Frame, history: dict[str, np.ndarray],
     reproject(cur.motion, cur.depth, g_cur["unit_normal"], cur.mesh_id, mode,
               g_cur["depth_slope"], g_cur["normal_width"], prev.depth, g_prev["unit_normal"],
               prev.mesh_id, prev_mode, history["illumination"], history["moments"],
-              history["length"], *(F32(t) for t in tolerances), *out)
+              history["length"], *(F32(t) for t in tolerances), *out, catmull_rom=catmull_rom)
     previous = ref.History(history["illumination"].astype(np.float64),
                            history["moments"].astype(np.float64),
                            history["length"].astype(np.float64),
@@ -639,7 +640,7 @@ def _run_reproject(prev: Frame, cur: Frame, history: dict[str, np.ndarray],
                            prev.depth.astype(np.float64),
                            g_prev["unit_normal"].astype(np.float64), prev.mesh_id)
     want = ref.reproject(cur.motion, as_reference(g_cur), cur.mesh_id,
-                         mode_bits(mode, num_signals), previous, *tolerances)
+                         mode_bits(mode, num_signals), previous, *tolerances, catmull_rom)
     return out, want
 
 
@@ -818,6 +819,49 @@ def test_resampled_history_length_keeps_whole_counts() -> None:
     mixed = length[2:-2, width // 2 - 1:width // 2 + 1]
     assert np.any((mixed > 2.0) & (mixed < 3.0))
 
+
+def test_catmull_rom_reprojection_matches_reference() -> None:
+    """The Catmull-Rom fetch against the float64 reference on the moving scene with a
+    perturbed previous frame (ids, depths, normals, holes), reset pixels, radiance-mode
+    pixels and sub-pixel jitter: where a tap of the 4x4 support fails (not only one of the
+    bilinear four) the pixel keeps the renormalised bilinear fetch or the 3x3 fallback;
+    positions whole in one axis use one column or row."""
+    rng = np.random.default_rng(21)
+    prev, cur = scene_frame(2), scene_frame(3)
+    shape = prev.depth.shape
+    surface = prev.depth > 0
+    prev.mesh_id[(rng.random(shape) < 0.01) & surface] += 5
+    prev.depth[(rng.random(shape) < 0.01) & surface] *= F32(0.9)
+    prev.depth[rng.random(shape) < 0.01] = 0.0
+    cur.motion += rng.uniform(-0.45, 0.45, cur.motion.shape).astype(F32)
+    cur.motion[0, ::5] = np.round(cur.motion[0, ::5])  # whole in x: one column
+    cur.motion[1, :, ::4] = np.round(cur.motion[1, :, ::4])  # whole in y: one row
+    history = _history_for(prev, seed=5)
+    # A bright spot: the spline's lobes overshoot it, the clamp must hold them.
+    history["illumination"][:, :, 8:10, 10:12] *= 40.0
+    prev_mode = np.zeros(shape, np.uint16)
+    prev_mode[(rng.random(shape) < 0.01) & surface] = NO_HISTORY
+    prev_mode[(rng.random(shape) < 0.01) & surface] = 2  # signal 1 was radiance there
+    mode = np.zeros(shape, np.uint16)
+    mode[10:12, 4:8] = 1  # signal 0 is radiance here now
+    out, want = _run_reproject(prev, cur, history, mode=mode, prev_mode=prev_mode,
+                               catmull_rom=True)
+    _assert_reprojection_matches(out, want)
+    assert np.all(out[0] >= 0.0)
+    sharp = want.path == ref.CATMULL_ROM
+    # The random moments are no pair of moments; the fetch makes them one where it applies.
+    assert np.all(out[1][:, 1][sharp] >= out[1][:, 0][sharp] ** 2)
+    assert sharp[0].sum() > 60
+    assert np.sum(want.path[0] == ref.BILINEAR) > 30  # a support tap failed
+    assert np.sum(want.path[0] == ref.FALLBACK) >= 5
+    single_axis = sharp[0] & ((cur.motion[0] == np.round(cur.motion[0]))
+                              | (cur.motion[1] == np.round(cur.motion[1])))
+    assert single_axis.sum() > 20
+    # It changed the history where it applies (bilinear blurs), and only there.
+    bilinear, _ = _run_reproject(prev, cur, history, mode=mode, prev_mode=prev_mode)
+    assert np.array_equal(out[2], bilinear[2])
+    changed = np.any(out[0] != bilinear[0], axis=1)
+    assert np.all(~changed | sharp) and changed[sharp].mean() > 0.9
 
 
 def _scene_modes(frame: Frame) -> np.ndarray:

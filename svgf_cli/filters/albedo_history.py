@@ -44,6 +44,7 @@ from svgf_cli.filters.bidirectional import effective_count_at
 from svgf_cli.filters.fastmath import FASTMATH
 from svgf_cli.filters.modulate import clean_albedo, effective_albedo
 from svgf_cli.filters.reproject import MIN_BILINEAR_WEIGHT
+from svgf_cli.filters.resample import clamped_catmull_rom
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
@@ -114,6 +115,36 @@ def _gaussian_mean(albedo: np.ndarray, usable: np.ndarray, mesh_id: np.ndarray, 
     return m_r / total, m_g / total, m_b / total
 
 
+@njit(inline="always", **_JIT)
+def _catmull_rom_usable(kept: np.ndarray, prev_mesh_id: np.ndarray, mesh: np.int32, x0: int,
+                        y0: int, fx: np.float32, fy: np.float32, passed: int) -> bool:
+    """Whether the Catmull-Rom support of ``(x0 + fx, y0 + fy)`` (``resample``: one column
+    where ``fx`` is 0, one row where ``fy`` is) is all usable history: the bilinear taps
+    with weight passed (``passed``, bit ``2 dy + dx``) and every further tap is in the
+    image, a kept mean (``kept``) and of the pixel's mesh id. A whole-pixel position is the
+    bilinear fetch already."""
+    if fx == _ZERO and fy == _ZERO:
+        return False
+    needed = 1 | (2 if fx > _ZERO else 0) | (4 if fy > _ZERO else 0)
+    if fx > _ZERO and fy > _ZERO:
+        needed |= 8
+    if passed & needed != needed:
+        return False
+    height, width = kept.shape
+    first_i, end_i = (0, 4) if fx > _ZERO else (1, 2)
+    first_j, end_j = (0, 4) if fy > _ZERO else (1, 2)
+    if (x0 - 1 + first_i < 0 or y0 - 1 + first_j < 0 or x0 - 2 + end_i >= width
+            or y0 - 2 + end_j >= height):
+        return False
+    for j in range(first_j, end_j):
+        qy = U(y0 - 1 + j)
+        for i in range(first_i, end_i):
+            qx = U(x0 - 1 + i)
+            if not kept[qy, qx] or prev_mesh_id[qy, qx] != mesh:
+                return False
+    return True
+
+
 @njit(parallel=True, **_JIT)
 def _reflectances(albedo: np.ndarray, depth: np.ndarray, black: np.float32,
                   max_reflectance: np.float32, relative_floor: np.float32,
@@ -147,6 +178,7 @@ def accumulate_albedo(
     relative_floor: np.float32,
     out: np.ndarray,
     out_length: np.ndarray,
+    catmull_rom: bool = False,
 ) -> None:
     """One colour's running mean (module docstring): ``out = lerp(clamp(a_hist, min3x3,
     max3x3), a, max(alpha, 1/h))``, ``h = min(cap, h_prev + 1)``; without history the
@@ -155,6 +187,9 @@ def accumulate_albedo(
     ``albedo``, ``history`` and ``out`` are (3, H, W); ``history_length`` and ``out_length``
     (H, W) (0 = no history); ``motion`` (2, H, W); ``prev_depth`` / ``prev_mesh_id`` last
     frame's. Background pixels (depth <= 0) keep their colour with length 0.
+    ``catmull_rom``: where every tap of the 4x4 Catmull-Rom support passes the taps' tests,
+    the history is the clamped spline fetch (``resample.clamped_catmull_rom``) instead of
+    the bilinear one; its length stays bilinear.
     """
     usable = np.empty(depth.shape, dtype=np.bool_)
     _reflectances(albedo, depth, black, max_reflectance, relative_floor, usable)
@@ -164,7 +199,7 @@ def accumulate_albedo(
     _reflectances(history, prev_depth, black, max_reflectance, relative_floor, kept)
     _accumulate_rows(albedo, usable, history, kept, history_length, motion, depth, mesh_id,
                      prev_mesh_id, alpha, cap, black, max_reflectance, relative_floor, out,
-                     out_length, np.int64(get_num_threads()))
+                     out_length, bool(catmull_rom), np.int64(get_num_threads()))
 
 
 @njit(parallel=True, **_JIT)
@@ -185,6 +220,7 @@ def _accumulate_rows(
     relative_floor: np.float32,
     out: np.ndarray,
     out_length: np.ndarray,
+    catmull_rom: bool,
     threads: int,
 ) -> None:
     """All rows of :func:`accumulate_albedo` (``usable``: :func:`_reflectances` of the
@@ -230,6 +266,7 @@ def _accumulate_rows(
             h_g = _ZERO
             h_b = _ZERO
             h_len = _ZERO
+            passed = 0  # bit 2 dy + dx: the tap passed
             for dy in range(2):
                 ty = y0 + dy
                 wy = fy if dy == 1 else _ONE - fy
@@ -244,6 +281,7 @@ def _accumulate_rows(
                     if not kept[qy, qx] or prev_mesh_id[qy, qx] != mesh:
                         continue
                     w = wx * wy
+                    passed |= 1 << (2 * dy + dx)
                     total += w
                     h_r += w * history[0, qy, qx]
                     h_g += w * history[1, qy, qx]
@@ -253,9 +291,15 @@ def _accumulate_rows(
                 inv = _ONE / total
                 length = min(cap, h_len * inv + _ONE)
                 blend = max(alpha, _ONE / length)
-                m_r = min(max(h_r * inv, lo[0, x]), hi[0, x])
-                m_g = min(max(h_g * inv, lo[1, x]), hi[1, x])
-                m_b = min(max(h_b * inv, lo[2, x]), hi[2, x])
+                h_r *= inv
+                h_g *= inv
+                h_b *= inv
+                if catmull_rom and _catmull_rom_usable(kept, prev_mesh_id, mesh, x0, y0, fx,
+                                                       fy, passed):
+                    h_r, h_g, h_b = clamped_catmull_rom(history, x0, y0, fx, fy)
+                m_r = min(max(h_r, lo[0, x]), hi[0, x])
+                m_g = min(max(h_g, lo[1, x]), hi[1, x])
+                m_b = min(max(h_b, lo[2, x]), hi[2, x])
                 m_r += blend * (a_r - m_r)
                 m_g += blend * (a_g - m_g)
                 m_b += blend * (a_b - m_b)

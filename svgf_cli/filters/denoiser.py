@@ -432,7 +432,7 @@ class Denoiser:
                 history["history_mode"], history["history_illumination"],
                 history["history_moments"], history["history_length"], F32(p.depth_tolerance),
                 F32(p.depth_slack), F32(p.normal_tolerance), accumulated, moments,
-                history_length,
+                history_length, catmull_rom=p.history_catmull_rom,
             )
             self._lend_stale_history(run)
             temporal = TemporalState(
@@ -950,6 +950,7 @@ class Denoiser:
                 signal.albedo, history[0][slot], history[1][slot], run.motion, run.depth,
                 frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
                 *self._rules[signal.guide_albedo], colour[slot], length[slot],
+                catmull_rom=p.albedo_catmull_rom,
             )
         self._albedo, self._albedo_slots = (colour, length), slots
         signals = [signal if slot < 0 else dataclasses.replace(signal, albedo=colour[slot])

@@ -43,6 +43,13 @@ class SVGFParams:
     normal_tolerance: float = _p(
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01)."
     )
+    history_catmull_rom: bool = _p(
+        False,
+        "Resample the reprojected colour history and moments with a Catmull-Rom spline over"
+        " the 4x4 taps (clamped to the bilinear taps' range) where all 16 pass the"
+        " reprojection tests, bilinear elsewhere: bilinear resampling blurs the history a"
+        " little more every frame.",
+    )
     bidirectional: bool = _p(
         False,
         "Offline: also run the filter backwards in time and combine both passes' histories"
@@ -155,6 +162,13 @@ class SVGFParams:
         " reference the pixel-filtered mean (off for a renderer whose references are point"
         " samples, as svgf trace's are by default: the mean only blurs them).",
     )
+    albedo_catmull_rom: bool = _p(
+        False,
+        "Resample the temporal albedo's colour means with a Catmull-Rom spline over the 4x4"
+        " taps (clamped to the bilinear taps' range) where all 16 pass its tests, bilinear"
+        " elsewhere: bilinear resampling blurs the texture the means converge to a little"
+        " more every frame.",
+    )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
         0.0,
@@ -199,13 +213,15 @@ PRESETS: dict[str, SVGFParams] = {
     # stop for the short-history spatial variance (0.5: fireflies and lit/shadowed
     # neighbours no longer inflate it into an over-blur), firefly spreading (k = 10),
     # despike (ratio 2),
-    # demodulation by the G-buffer albedo only where it is at least 0.1, and an a-trous
+    # demodulation by the G-buffer albedo only where it is at least 0.1, the temporal
+    # albedo with its means resampled by Catmull-Rom (docs/algorithm.md), and an a-trous
     # reach that grows with the image (atrous_iterations_for).
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
                           glossy_sigma_luminance=1.0, glossy_emitter_radiance=True,
                           mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
-                          temporal_albedo=True, atrous_iterations=AUTO_ITERATIONS),
+                          temporal_albedo=True, albedo_catmull_rom=True,
+                          atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

@@ -33,6 +33,7 @@ from numba import get_num_threads, njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
 from svgf_cli.filters.modulate import NO_HISTORY
+from svgf_cli.filters.resample import catmull_rom_history, catmull_rom_weights
 from svgf_cli.filters.rows import balanced_row, balanced_row_count
 
 F32 = np.float32
@@ -115,6 +116,7 @@ def reproject(
     out_illumination: np.ndarray,
     out_moments: np.ndarray,
     out_history_length: np.ndarray,
+    catmull_rom: bool = False,
 ) -> None:
     """Resample the history of every signal at the backprojected position.
 
@@ -127,12 +129,18 @@ def reproject(
     (one set of weights for all where every usable tap agrees, the common case). Writes
     the resampled history into the ``out_*`` arrays; ``out_history_length`` (S, H, W) is the
     resampled previous history length, 0 where the signal's history is rejected.
+
+    ``catmull_rom``: where all four bilinear taps (the ones with weight) pass and every
+    further tap of the 4x4 support passes the same tests with the pixel's modes, the colour
+    and moments are the clamped Catmull-Rom fetch (``resample``) instead; the history length
+    stays bilinear.
     """
     _reproject_rows(
         motion, depth, normal, mesh_id, mode, depth_slope, normal_width, prev_depth,
         prev_normal, prev_mesh_id, prev_mode, prev_illumination, prev_moments,
         prev_history_length, F32(depth_tolerance), F32(depth_slack), F32(normal_tolerance),
-        out_illumination, out_moments, out_history_length, np.int64(get_num_threads()),
+        out_illumination, out_moments, out_history_length, bool(catmull_rom),
+        np.int64(get_num_threads()),
     )
 
 
@@ -176,6 +184,7 @@ def _reproject_rows(
     out_illumination: np.ndarray,
     out_moments: np.ndarray,
     out_history_length: np.ndarray,
+    catmull_rom: bool,
     threads: int,
 ) -> None:
     """All rows of :func:`reproject`, balanced over the threads (see ``rows``)."""
@@ -191,10 +200,14 @@ def _reproject_rows(
         # Pixels whose usable taps all agree with their modes (the common case) only record
         # their taps and weights here; their signals are resampled after the row's pass,
         # one signal at a time (fewer memory streams at once than all signals per pixel).
+        # 1: bilinear taps recorded; 2: and the Catmull-Rom support (``catmull_rom``).
         agreed = np.zeros(width, dtype=np.uint8)
         tap_rows = np.empty((2, width), dtype=np.uint64)
         tap_columns = np.empty((2, width), dtype=np.uint64)
         tap_weights = np.empty((4, width), dtype=np.float32)
+        support_rows = np.empty((4, width), dtype=np.uint64)
+        support_columns = np.empty((4, width), dtype=np.uint64)
+        support_weights = np.empty((8, width), dtype=np.float32)
         for x in range(width):
             ux = U(x)
             z = depth[uy, ux]
@@ -232,17 +245,21 @@ def _reproject_rows(
             g10 = fx * (_ONE - fy)
             g01 = (_ONE - fx) * fy
             g11 = fx * fy
-            if not _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+            ok00 = _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+            ok10 = _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+            ok01 = _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+            ok11 = _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+            if not ok00:
                 g00 = _ZERO
-            if not _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+            if not ok10:
                 g10 = _ZERO
-            if not _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+            if not ok01:
                 g01 = _ZERO
-            if not _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+            if not ok11:
                 g11 = _ZERO
             # Taps with zero weight may lie outside the image: clamp their index.
             xa = U(min(max(x0, 0), width - 1))
@@ -270,6 +287,15 @@ def _reproject_rows(
                     tap_weights[1, ux] = g10 * inv
                     tap_weights[2, ux] = g01 * inv
                     tap_weights[3, ux] = g11 * inv
+                    # The taps a fraction uses (both columns only where fx > 0) must pass.
+                    inner = ok00 and (ok10 or fx == _ZERO) and (ok01 or fy == _ZERO) and (
+                        ok11 or fx == _ZERO or fy == _ZERO)
+                    if catmull_rom and inner and _catmull_rom_support(
+                        x0, y0, fx, fy, z, nx, ny, nz, mesh, m, max_depth_diff,
+                        max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id, prev_mode,
+                        ux, support_rows, support_columns, support_weights,
+                    ):
+                        agreed[ux] = 2
                     continue
             # Per signal: a tap counts only where its stored mode equals the pixel's (a
             # history pixel marked NO_HISTORY matches no signal).
@@ -323,13 +349,64 @@ def _reproject_rows(
                 out_moments[s, 1, uy, ux] *= inv
         for s in range(num_signals):
             for x in range(width):
-                if agreed[x]:
-                    ux = U(x)
+                ux = U(x)
+                if agreed[ux] == 1:
                     _bilinear(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux], tap_columns[0, ux],
                               tap_columns[1, ux], tap_weights[0, ux], tap_weights[1, ux],
                               tap_weights[2, ux], tap_weights[3, ux], prev_illumination,
                               prev_moments, prev_history_length, out_illumination,
                               out_moments, out_history_length)
+                elif agreed[ux] == 2:
+                    _bilinear_length(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux],
+                                     tap_columns[0, ux], tap_columns[1, ux], tap_weights[0, ux],
+                                     tap_weights[1, ux], tap_weights[2, ux], tap_weights[3, ux],
+                                     prev_history_length, out_history_length)
+                    catmull_rom_history(s, uy, ux, support_rows, support_columns,
+                                        support_weights, prev_illumination, prev_moments,
+                                        out_illumination, out_moments)
+
+
+@njit(
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
+)
+def _catmull_rom_support(
+    x0: int, y0: int, fx: np.float32, fy: np.float32, z: np.float32, nx: np.float32,
+    ny: np.float32, nz: np.float32, mesh: np.int32, m: np.uint16, max_depth_diff: np.float32,
+    max_normal_diff_sq: np.float32, prev_depth: np.ndarray, prev_normal: np.ndarray,
+    prev_mesh_id: np.ndarray, prev_mode: np.ndarray, ux: np.uint64, rows: np.ndarray,
+    columns: np.ndarray, weights: np.ndarray,
+) -> bool:
+    """Whether the Catmull-Rom support of ``(x0 + fx, y0 + fy)`` is all usable: every tap
+    outside the bilinear 2x2 (whose taps the caller tested) passes the consistency tests
+    and has the pixel's modes ``m`` in every signal. An axis without a fraction has one
+    column (row): the spline's weights there are 0, 1, 0, 0. A whole-pixel position is
+    left to the bilinear fetch (the same value). On success writes the support's indices
+    and weights into column ``ux`` of ``rows``, ``columns`` (4, W) and ``weights`` (8, W:
+    the column weights, then the row weights)."""
+    if fx == _ZERO and fy == _ZERO:
+        return False
+    first_i, end_i = (0, 4) if fx > _ZERO else (1, 2)
+    first_j, end_j = (0, 4) if fy > _ZERO else (1, 2)
+    for j in range(first_j, end_j):
+        for i in range(first_i, end_i):
+            if 1 <= i <= 2 and 1 <= j <= 2:
+                continue  # the bilinear taps
+            tx = x0 - 1 + i
+            ty = y0 - 1 + j
+            if not _tap_consistent(tx, ty, z, nx, ny, nz, mesh, max_depth_diff,
+                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id):
+                return False
+            if prev_mode[U(ty), U(tx)] != m:
+                return False
+    wx0, wx1, wx2, wx3 = catmull_rom_weights(fx)
+    wy0, wy1, wy2, wy3 = catmull_rom_weights(fy)
+    weights[0, ux], weights[1, ux], weights[2, ux], weights[3, ux] = wx0, wx1, wx2, wx3
+    weights[4, ux], weights[5, ux], weights[6, ux], weights[7, ux] = wy0, wy1, wy2, wy3
+    for k in range(4):
+        columns[k, ux] = U(x0 - 1 + k) if fx > _ZERO else U(x0)
+        rows[k, ux] = U(y0 - 1 + k) if fy > _ZERO else U(y0)
+    return True
 
 
 @njit(
@@ -346,10 +423,8 @@ def _bilinear(
 
     Indexes the 4-D arrays directly: a per-pixel sub-array view would cost an atomic
     reference-count update, contended between threads."""
-    out_history_length[s, uy, ux] = _whole_if_close(
-        w00 * prev_history_length[s, ya, xa] + w10 * prev_history_length[s, ya, xb]
-        + w01 * prev_history_length[s, yb, xa] + w11 * prev_history_length[s, yb, xb]
-    )
+    _bilinear_length(s, uy, ux, ya, yb, xa, xb, w00, w10, w01, w11, prev_history_length,
+                     out_history_length)
     for c in range(3):
         out_illumination[s, c, uy, ux] = (
             w00 * prev_illumination[s, c, ya, xa] + w10 * prev_illumination[s, c, ya, xb]
@@ -360,6 +435,23 @@ def _bilinear(
             w00 * prev_moments[s, c, ya, xa] + w10 * prev_moments[s, c, ya, xb]
             + w01 * prev_moments[s, c, yb, xa] + w11 * prev_moments[s, c, yb, xb]
         )
+
+
+@njit(
+    inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+    error_model="numpy",
+)
+def _bilinear_length(
+    s: int, uy: np.uint64, ux: np.uint64, ya: np.uint64, yb: np.uint64, xa: np.uint64,
+    xb: np.uint64, w00: np.float32, w10: np.float32, w01: np.float32, w11: np.float32,
+    prev_history_length: np.ndarray, out_history_length: np.ndarray,
+) -> None:
+    """Signal ``s``'s history length at the pixel: the taps with the given weights, a whole
+    number where it is within 1e-3 of one."""
+    out_history_length[s, uy, ux] = _whole_if_close(
+        w00 * prev_history_length[s, ya, xa] + w10 * prev_history_length[s, ya, xb]
+        + w01 * prev_history_length[s, yb, xa] + w11 * prev_history_length[s, yb, xb]
+    )
 
 
 def accumulate(

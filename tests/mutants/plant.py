@@ -545,8 +545,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-history-unclamped", "filters",
         "temporal albedo: the resampled mean is not clamped to the current 3x3 range",
         "svgf_cli/filters/albedo_history.py",
-        (("            m_r = min(max(h_r * inv, lo[0, x]), hi[0, x])\n",
-          "            m_r = h_r * inv\n"),),
+        (("            m_r = min(max(h_r, lo[0, x]), hi[0, x])\n",
+          "            m_r = h_r\n"),),
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
@@ -623,6 +623,31 @@ MUTANTS: tuple[Mutant, ...] = (
         (("stats, after=writes.in_flight) as reads,", "stats) as reads,"),),
         ("tests/test_bidir_memory.py",),
     ),
+    Mutant(
+        "catmull-rom-unclamped", "filters",
+        "Catmull-Rom history fetch: the clamp to the bilinear taps' range removed (ringing,"
+        " negative colour)",
+        "svgf_cli/filters/resample.py",
+        (("    return min(max(total, lo), hi)\n", "    return total\n"),),
+        ("tests/test_reference_stages.py", "tests/test_filters_resample.py"),
+    ),
+    Mutant(
+        "catmull-rom-outer-taps-untested", "filters",
+        "Catmull-Rom history fetch: the taps outside the bilinear 2x2 are not tested",
+        "svgf_cli/filters/reproject.py",
+        (("                return False\n            if prev_mode[U(ty), U(tx)] != m:\n",
+          "                pass\n            if prev_mode[U(ty), U(tx)] != m:\n"),),
+        ("tests/test_reference_stages.py", "tests/test_filters_resample.py"),
+    ),
+    Mutant(
+        "albedo-catmull-rom-mesh-blind", "filters",
+        "temporal albedo's Catmull-Rom fetch: support taps of another mesh id accepted",
+        "svgf_cli/filters/albedo_history.py",
+        (("            if not kept[qy, qx] or prev_mesh_id[qy, qx] != mesh:\n"
+          "                return False\n",
+          "            if not kept[qy, qx]:\n                return False\n"),),
+        ("tests/test_filters_albedo_history.py",),
+    ),
 )
 
 
@@ -687,6 +712,17 @@ def _patch(file: Path, mutant: Mutant) -> str:
     return original
 
 
+def _importer_caches(copy: Path, file: Path) -> list[Path]:
+    """The kernel caches of the modules beside ``file`` that import from it. numba keys a
+    cache on its own source file only: a kernel that inlines a function of ``file`` (e.g.
+    ``reproject`` the fetch of ``resample``) would keep running the unpatched code."""
+    dotted = ".".join(file.relative_to(copy).with_suffix("").parts)
+    importers = [other.stem for other in file.parent.glob("*.py")
+                 if other != file and f"from {dotted} import" in other.read_text()]
+    cache = file.parent / "__pycache__"
+    return [path for stem in importers for path in cache.glob(f"{stem}.*.nb[ic]")]
+
+
 def plant(copy: Path, mutant: Mutant, full: bool) -> tuple[int, str, float]:
     file = copy / mutant.path
     stat = file.stat()
@@ -694,6 +730,8 @@ def plant(copy: Path, mutant: Mutant, full: bool) -> tuple[int, str, float]:
     saved_cache = copy / ".plant-cache-backup"
     if cache.exists():
         shutil.copytree(cache, saved_cache, copy_function=shutil.copy2)
+    for stale in _importer_caches(copy, file):  # restored with the rest of the cache below
+        stale.unlink()
     original = _patch(file, mutant)
     try:
         return run_tests(copy, mutant.tests, full)
