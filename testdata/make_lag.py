@@ -25,8 +25,8 @@ Scenes: ``lag/cornell_lag.obj``/``.mtl`` (Lambertian) and ``lag/cornell_glossy.o
 Run: ``python testdata/make_lag.py`` (scene and animation files only) or ``python
 testdata/make_lag.py --render [--svgf PATH] [--only NAME ...]`` (also the EXR frames, with
 ``nice -n 10``; ``make lag-fixtures`` does this). ``--resolution WxH --out DIR`` renders the
-same sequences at another size into ``DIR`` (validation beyond the bundled 128x72 frames). The render commands are printed and listed
-in ``lag/README.md``.
+same sequences at another size into ``DIR`` (validation beyond the bundled 128x72 frames).
+The render commands are printed and listed in ``lag/README.md``.
 """
 
 from __future__ import annotations
