@@ -1370,7 +1370,7 @@ class ReferenceDenoiser:
         variance_before_atrous = variance
         iterations = iteration_count(p.atrous_iterations, *geom.depth.shape)
         feedback = min(p.feedback_iteration, iterations - 1)
-        colour_history = colour
+        colour_history = unfiltered = colour
         for iteration, step in enumerate(atrous_steps(iterations)):
             # Glossy signals stop at their own sigma_l; then those mixing direct and indirect.
             sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
@@ -1385,6 +1385,12 @@ class ReferenceDenoiser:
                                                 p.sigma_normal)
             if iteration == feedback:
                 colour_history = colour
+        if feedback >= 0 and p.moving_feedback_share < 1.0:
+            # H = w F + (1 - w) U: w = 1 where the pixel stands still, the share where it moves.
+            motion = np.asarray(clean.motion, dtype=F64)
+            still = (np.abs(motion[0]) < STATIC_MOTION) & (np.abs(motion[1]) < STATIC_MOTION)
+            share = np.where(still, 1.0, p.moving_feedback_share)
+            colour_history = unfiltered + share * (colour_history - unfiltered)
         return colour, variance_before_atrous, colour_history
 
     def compose(self, clean: CleanFrame, geom: Geometry, colour: np.ndarray,

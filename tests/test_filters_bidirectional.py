@@ -236,7 +236,7 @@ def test_blend_static_history_matches_the_reference() -> None:
     motion = rng.choice(np.array([0.0, 5e-4, -2e-3, 0.7, -3.0, NO_MOTION], F32), (2, 7, 9))
     motion[:, 0, :3] = 0.0  # certainly some still pixels
     got = filtered.copy()
-    blend_static_history(got, unfiltered, motion, F32(0.3), F32(1e-3))
+    blend_static_history(got, unfiltered, motion, F32(0.3), F32(1e-3), F32(0.0))
     still = (np.abs(motion[0].astype(np.float64)) < 1e-3) & (np.abs(motion[1]) < 1e-3)
     want = unfiltered + np.where(still, 0.3, 0.0) * (filtered.astype(np.float64) - unfiltered)
     assert still.any() and not still.all()
@@ -249,14 +249,15 @@ def test_forward_step_keeps_the_unfiltered_history_where_pixels_move(preset: str
     """Where every pixel moves the forward pass runs as a causal run that feeds back its
     unfiltered accumulation (``feedback_iteration`` -1; with falcor's colour blur, the
     colour entering the a-trous): its stored history is that run's, bit for bit, and not
-    the filtered one a causal run with the preset's own feedback iteration keeps. Where the
-    wall stands still it keeps ``STATIC_FILTERED_SHARE`` of the filtered one there."""
+    the filtered one a causal run feeding back its feedback iteration everywhere keeps.
+    Where the wall stands still it keeps ``STATIC_FILTERED_SHARE`` of the filtered one."""
     params = resolve_params(preset)
     frames = scene_sequence(4)
     assert not any(np.any(np.all(np.abs(f.motion) < STATIC_MOTION, axis=0) & (f.depth > 0))
                    for f in frames)
     causal = Denoiser(params.replace(feedback_iteration=-1))
-    forward, filtered = Denoiser(params), Denoiser(params)
+    forward = Denoiser(params)
+    filtered = Denoiser(params.replace(moving_feedback_share=1.0))
     for frame in frames:
         causal.process(frame)
         forward.forward_step(frame)

@@ -13,6 +13,7 @@ from synthetic import (
     translating_sequence,
 )
 
+from svgf_cli.filters.bidirectional import STATIC_MOTION
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, resolve_params
 
@@ -346,6 +347,45 @@ def test_feedback_iteration_output_becomes_the_history() -> None:
     np.testing.assert_array_equal(unfiltered, history(params.replace(atrous_iterations=0)))
 
 
+@pytest.mark.parametrize("share", [0.0, 0.4])
+def test_moving_pixels_keep_a_share_of_the_feedback_output(share: float) -> None:
+    """``moving_feedback_share``: where the pixel moves the history is ``w F + (1 - w) U``
+    (``F`` the feedback iteration's output, ``U`` the unfiltered accumulation, ``w`` the
+    share), where it stands still ``F`` as in the paper."""
+    from moving_scene import scene_sequence
+
+    frames = scene_sequence(3, wall_speed=0.0)
+    still = np.all(np.abs(frames[-1].motion) < STATIC_MOTION, axis=0)
+    moving = ~still & (frames[-1].depth > 0)
+    assert still.mean() > 0.3 and moving.mean() > 0.02
+    params = resolve_params("default")
+
+    def last_history(p: SVGFParams) -> tuple[np.ndarray, np.ndarray]:
+        """The history after the last frame, and the history that frame started from."""
+        denoiser = Denoiser(p.replace(moving_feedback_share=share))
+        for frame in frames[:-1]:
+            denoiser.process(frame)
+        state = denoiser.state()
+        denoiser.process(frames[-1])
+        return denoiser.state()["history_illumination"], state
+
+    got, state = last_history(params)
+
+    def from_state(p: SVGFParams) -> np.ndarray:
+        """The last frame from the same history with other parameters."""
+        denoiser = Denoiser(p)
+        denoiser.load_state({**state, "params": Denoiser(p).state()["params"]})
+        denoiser.process(frames[-1])
+        return denoiser.state()["history_illumination"]
+
+    filtered = from_state(params.replace(moving_feedback_share=1.0))
+    unfiltered = from_state(params.replace(feedback_iteration=-1))
+    np.testing.assert_array_equal(got[:, :, still], filtered[:, :, still])
+    want = unfiltered + F32(share) * (filtered - unfiltered)
+    np.testing.assert_allclose(got[:, :, moving], want[:, :, moving], rtol=1e-6, atol=1e-7)
+    assert not np.allclose(filtered[:, :, moving], unfiltered[:, :, moving])
+
+
 # Each parameter at the edge of its range (accepted) and just past it (refused with its own
 # message): a library caller gets no Denoiser that would divide by zero or never converge.
 _EDGES = {
@@ -356,6 +396,7 @@ _EDGES = {
     "spatial_variance_sigma_luminance": (1e-3, 0.0, "spatial variance"),
     "spatial_variance_radius": (0, -1, "spatial variance"),
     "albedo_epsilon": (1e-9, 0.0, "albedo_epsilon"), "taa_alpha": (1.0, 0.0, "taa_alpha"),
+    "moving_feedback_share": (1.0, 1.5, "moving_feedback_share"),
 }
 
 

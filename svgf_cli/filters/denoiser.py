@@ -506,6 +506,10 @@ class Denoiser:
         # That iteration's output is protected so later iterations cannot overwrite it.
         # The last iteration's propagated variance is never read, so it is not computed.
         feedback = min(p.feedback_iteration, run.iterations - 1) if feeds_back else -1
+        # Where pixels move the history keeps only a share of the feedback output (the rest
+        # is the colour entering the a-trous, which stays untouched for that blend).
+        keep_unfiltered = feedback >= 0 and p.moving_feedback_share < 1.0
+        unfiltered_name = filtered_name
         history_name = filtered_name
         filtered_name_now = filtered_name
         filtered = run.plane(filtered_name)
@@ -519,7 +523,8 @@ class Denoiser:
         groups = signal_groups(len(run.names))
         sigmas = [signal_sigma_luminance(p, signal) for signal in run.frame.signals]
         for iteration in range(iterations):
-            out_name = scratch(filtered_name_now, history_name if feeds_back else "")
+            out_name = scratch(filtered_name_now, history_name if feeds_back else "",
+                               unfiltered_name if keep_unfiltered else "")
             if iteration == feedback:
                 history_name = out_name
             propagate = iteration + 1 < iterations
@@ -546,6 +551,10 @@ class Denoiser:
                 )
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
+        if keep_unfiltered and history_name != unfiltered_name:
+            blend_static_history(run.plane(history_name), run.plane(unfiltered_name),
+                                 run.motion, F32(1.0), F32(STATIC_MOTION),
+                                 F32(p.moving_feedback_share))
         run.lap("atrous")
         return _Filtered(filtered, filtered_name_now, history_name, variance, history_length)
 
@@ -755,7 +764,8 @@ class Denoiser:
                                           protected, feeds_back=False)
         if filtered.name != filtered.history_name:
             blend_static_history(run.plane(filtered.name), run.plane(filtered.history_name),
-                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))
+                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION),
+                                 F32(0.0))
         return filtered.name
 
     def state(self) -> dict[str, np.ndarray]:
@@ -1280,6 +1290,8 @@ def _check_params(p: SVGFParams) -> None:
         raise ValueError("albedo_epsilon must be > 0")
     if not 0.0 <= p.guide_albedo_floor <= 1.0:
         raise ValueError("guide_albedo_floor must lie in [0, 1]")
+    if not 0.0 <= p.moving_feedback_share <= 1.0:
+        raise ValueError("moving_feedback_share must lie in [0, 1]")
     if not 0.0 < p.taa_alpha <= 1.0:
         raise ValueError("taa_alpha must lie in (0, 1]")
     if 0.0 < p.despike < 1.0:

@@ -136,6 +136,11 @@ class SVGFParams:
     feedback_iteration: int = _p(
         0, "A-trous iteration whose output becomes the colour history (-1 = unfiltered)."
     )
+    moving_feedback_share: float = _p(
+        1.0,
+        "Share of the feedback iteration's output in the colour history where the pixel"
+        " moves (the rest: the unfiltered accumulation; 1 = the paper's feedback everywhere).",
+    )
     sigma_luminance: float = _p(4.0, "sigma_l: luminance edge-stopping against sqrt(variance).")
     sigma_normal: float = _p(128.0, "sigma_n: exponent of the normal edge-stopping weight.")
     sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.")
@@ -214,14 +219,16 @@ PRESETS: dict[str, SVGFParams] = {
     # neighbours no longer inflate it into an over-blur), firefly spreading (k = 10),
     # despike (ratio 2),
     # demodulation by the G-buffer albedo only where it is at least 0.1, the temporal
-    # albedo with its means resampled by Catmull-Rom (docs/algorithm.md), and an a-trous
-    # reach that grows with the image (atrous_iterations_for).
+    # albedo with its means resampled by Catmull-Rom (docs/algorithm.md), the feedback
+    # a-trous output kept as history only where pixels stand still (where they move the
+    # blur compounds with the resampling: docs/algorithm.md), and an a-trous reach that
+    # grows with the image (atrous_iterations_for).
     "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
                           glossy_sigma_luminance=1.0, glossy_emitter_radiance=True,
                           mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
                           temporal_albedo=True, albedo_catmull_rom=True,
-                          atrous_iterations=AUTO_ITERATIONS),
+                          moving_feedback_share=0.0, atrous_iterations=AUTO_ITERATIONS),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

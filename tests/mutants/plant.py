@@ -436,8 +436,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "bidirectional-static-history-unfiltered", "filters",
         "the passes of a bidirectional run keep no filtered colour where pixels stand still",
         "svgf_cli/filters/denoiser.py",
-        (("run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))",
-          "run.motion, F32(0.0), F32(STATIC_MOTION))"),),
+        (("run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION),",
+          "run.motion, F32(0.0), F32(STATIC_MOTION),"),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -622,6 +622,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "svgf_cli/bidir.py",
         (("stats, after=writes.in_flight) as reads,", "stats) as reads,"),),
         ("tests/test_bidir_memory.py",),
+    ),
+    Mutant(
+        "moving-feedback-ignored", "filters",
+        "causal feedback: the filtered output kept as history where pixels move too",
+        "svgf_cli/filters/denoiser.py",
+        (("        keep_unfiltered = feedback >= 0 and p.moving_feedback_share < 1.0\n",
+          "        keep_unfiltered = False\n"),),
+        ("tests/test_filters_denoiser.py", "tests/test_reference_denoiser.py"),
     ),
     Mutant(
         "catmull-rom-unclamped", "filters",
