@@ -236,7 +236,7 @@ def test_blend_static_history_matches_the_reference() -> None:
     motion = rng.choice(np.array([0.0, 5e-4, -2e-3, 0.7, -3.0, NO_MOTION], F32), (2, 7, 9))
     motion[:, 0, :3] = 0.0  # certainly some still pixels
     got = filtered.copy()
-    blend_static_history(got, unfiltered, motion, F32(0.3), F32(1e-3), F32(0.0))
+    blend_static_history(got, unfiltered, motion, F32(0.3), F32(1e-3))
     still = (np.abs(motion[0].astype(np.float64)) < 1e-3) & (np.abs(motion[1]) < 1e-3)
     want = unfiltered + np.where(still, 0.3, 0.0) * (filtered.astype(np.float64) - unfiltered)
     assert still.any() and not still.all()

@@ -240,32 +240,27 @@ def blend_static_history(
     motion: np.ndarray,
     share: np.float32,
     limit: np.float32,
-    moving_share: np.float32,
 ) -> None:
-    """A colour history, in place in ``filtered`` (S, 3, H, W): ``H = w F + (1 - w) U`` per
-    signal, channel and pixel, with ``F`` an a-trous iteration's output (a pass of a
-    bidirectional run: the first; a causal run: the feedback iteration's), ``U`` the colour
-    entering the a-trous, ``w = share`` where the pixel's motion (2, H, W) is below
-    ``limit`` on both axes (it does not move) and ``moving_share`` elsewhere (module
-    docstring; ``Denoiser._filter_spatially``). A weight of 1 or 0 gives ``F`` or ``U``
-    exactly."""
+    """A pass's colour history, in place in ``filtered`` (S, 3, H, W):
+    ``H = w F + (1 - w) U`` per signal, channel and pixel, with ``F`` the first a-trous
+    iteration's output, ``U`` the colour entering the a-trous, ``w = share`` where the
+    pixel's motion (2, H, W) is below ``limit`` on both axes (it does not move) and 0
+    elsewhere (module docstring)."""
     num_signals = filtered.shape[0]
     height, width = motion.shape[1], motion.shape[2]
     for y in prange(height):
         mx = motion[0, y]
         my = motion[1, y]
         w = np.empty(width, dtype=np.float32)
-        rest = np.empty(width, dtype=np.float32)
         for x in range(width):
             still = (abs(mx[x]) < limit) & (abs(my[x]) < limit)
-            w[x] = share if still else moving_share
-            rest[x] = _ONE - w[x]
+            w[x] = share if still else _ZERO
         for s in range(num_signals):
             for c in range(3):
                 f = filtered[s, c, y]
                 u = unfiltered[s, c, y]
                 for x in range(width):
-                    f[x] = w[x] * f[x] + rest[x] * u[x]
+                    f[x] = u[x] + w[x] * (f[x] - u[x])
 
 
 @njit(inline="always", **_JIT)

@@ -59,6 +59,7 @@ from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
+from svgf_cli.filters.feedback import keep_feedback_where_still
 from svgf_cli.filters.fireflies import spread_fireflies
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
 from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, atrous_iterations_for
@@ -506,8 +507,8 @@ class Denoiser:
         # That iteration's output is protected so later iterations cannot overwrite it.
         # The last iteration's propagated variance is never read, so it is not computed.
         feedback = min(p.feedback_iteration, run.iterations - 1) if feeds_back else -1
-        # Where pixels move the history keeps only a share of the feedback output (the rest
-        # is the colour entering the a-trous, which stays untouched for that blend).
+        # Where pixels move the history keeps only a share of the feedback output: the blend
+        # goes into the colour entering the a-trous, kept until that iteration has run.
         keep_unfiltered = feedback >= 0 and p.moving_feedback_share < 1.0
         unfiltered_name = filtered_name
         history_name = filtered_name
@@ -525,7 +526,7 @@ class Denoiser:
         for iteration in range(iterations):
             out_name = scratch(filtered_name_now, history_name if feeds_back else "",
                                unfiltered_name if keep_unfiltered else "")
-            if iteration == feedback:
+            if iteration == feedback and not keep_unfiltered:
                 history_name = out_name
             propagate = iteration + 1 < iterations
             out_variance = filtered_variance  # not written when not propagated
@@ -549,12 +550,13 @@ class Denoiser:
                     1 << iteration, p.sigma_depth, p.sigma_normal, propagate,
                     out_illumination[group], out_variance[group],
                 )
+            if iteration == feedback and keep_unfiltered:
+                keep_feedback_where_still(run.plane(unfiltered_name), out_illumination,
+                                          run.motion, F32(STATIC_MOTION),
+                                          F32(p.moving_feedback_share))
+                history_name, keep_unfiltered = unfiltered_name, False
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
-        if keep_unfiltered and history_name != unfiltered_name:
-            blend_static_history(run.plane(history_name), run.plane(unfiltered_name),
-                                 run.motion, F32(1.0), F32(STATIC_MOTION),
-                                 F32(p.moving_feedback_share))
         run.lap("atrous")
         return _Filtered(filtered, filtered_name_now, history_name, variance, history_length)
 
@@ -764,8 +766,7 @@ class Denoiser:
                                           protected, feeds_back=False)
         if filtered.name != filtered.history_name:
             blend_static_history(run.plane(filtered.name), run.plane(filtered.history_name),
-                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION),
-                                 F32(0.0))
+                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))
         return filtered.name
 
     def state(self) -> dict[str, np.ndarray]:

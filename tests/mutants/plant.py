@@ -436,8 +436,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "bidirectional-static-history-unfiltered", "filters",
         "the passes of a bidirectional run keep no filtered colour where pixels stand still",
         "svgf_cli/filters/denoiser.py",
-        (("run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION),",
-          "run.motion, F32(0.0), F32(STATIC_MOTION),"),),
+        (("run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))",
+          "run.motion, F32(0.0), F32(STATIC_MOTION))"),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -630,6 +630,14 @@ MUTANTS: tuple[Mutant, ...] = (
         (("        keep_unfiltered = feedback >= 0 and p.moving_feedback_share < 1.0\n",
           "        keep_unfiltered = False\n"),),
         ("tests/test_filters_denoiser.py", "tests/test_reference_denoiser.py"),
+    ),
+    Mutant(
+        "moving-feedback-still-blended", "filters",
+        "causal feedback: still pixels keep the moving share too (the blend ignores motion)",
+        "svgf_cli/filters/feedback.py",
+        (("            w[x] = _ONE if still else moving_share\n",
+          "            w[x] = moving_share\n"),),
+        ("tests/test_filters_feedback.py", "tests/test_filters_denoiser.py"),
     ),
     Mutant(
         "catmull-rom-unclamped", "filters",
