@@ -44,6 +44,18 @@ class _Alive:
             self._refs.append(weakref.ref(thing))
 
 
+
+def _run_bidirectional(tmp_path: Path, read: Any) -> None:
+    """A bidirectional run of the default preset over FRAMES of ``tmp_path / "seq"``, frames
+    read with ``read``; every frame written."""
+    config = RunConfig(params=resolve_params("default", bidirectional=True), preset="default",
+                       mapping=build_mapping("svgf"), scratch_dir=tmp_path / "scratch")
+    tasks = [FrameTask(f, tmp_path / "seq" / f"in.{f:04d}.exr", tmp_path / f"o.{f:04d}.exr")
+             for f in FRAMES]
+    quiet = Progress("lines", len(FRAMES), quiet=True, out=io.StringIO(), err=io.StringIO())
+    stats = run_sequence(tasks, config, quiet, read=read)
+    assert stats.frames_written == len(FRAMES)
+
 def test_a_bidirectional_run_holds_a_bounded_number_of_frames_and_states(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -62,13 +74,7 @@ def test_a_bidirectional_run_holds_a_bounded_number_of_frames_and_states(
 
     spill_read = ScratchFolder.read
     monkeypatch.setattr(ScratchFolder, "read", read_state)
-    config = RunConfig(params=resolve_params("default", bidirectional=True), preset="default",
-                       mapping=build_mapping("svgf"), scratch_dir=tmp_path / "scratch")
-    tasks = [FrameTask(f, tmp_path / "seq" / f"in.{f:04d}.exr", tmp_path / f"o.{f:04d}.exr")
-             for f in FRAMES]
-    quiet = Progress("lines", len(FRAMES), quiet=True, out=io.StringIO(), err=io.StringIO())
-    stats = run_sequence(tasks, config, quiet, read=read)
-    assert stats.frames_written == len(FRAMES)
+    _run_bidirectional(tmp_path, read)
     # Per pass: the frame filtered, the one written (reverse pass) and the one being read.
     assert 1 <= frames.most <= 2
     # A packed state is let go once unpacked, before the next one is read.
@@ -107,13 +113,7 @@ def test_the_reverse_pass_never_reads_a_frame_beside_two_others(
         return _default_reader(path, mapping, **kwargs)
 
     monkeypatch.setattr(bidir, "frame_writer", writer)
-    config = RunConfig(params=resolve_params("default", bidirectional=True), preset="default",
-                       mapping=build_mapping("svgf"), scratch_dir=tmp_path / "scratch")
-    tasks = [FrameTask(f, tmp_path / "seq" / f"in.{f:04d}.exr", tmp_path / f"o.{f:04d}.exr")
-             for f in FRAMES]
-    quiet = Progress("lines", len(FRAMES), quiet=True, out=io.StringIO(), err=io.StringIO())
-    stats = run_sequence(tasks, config, quiet, read=read)
-    assert stats.frames_written == len(FRAMES)
+    _run_bidirectional(tmp_path, read)
     assert len(reads) == 2 * len(FRAMES)  # both passes read every frame
     assert all(written <= {frame + 1} for frame, written in reads), reads
 

@@ -16,7 +16,6 @@ from svgf_cli.filters.bidirectional import (
     STATIC_FILTERED_SHARE,
     STATIC_MOTION,
     SideHistory,
-    blend_static_history,
     combine_histories,
     consistent_lengths,
     effective_counts,
@@ -224,24 +223,6 @@ def test_pack_history_error_is_half_rounding_at_any_exposure() -> None:
     np.testing.assert_array_equal(back.colour, side.colour)
     np.testing.assert_array_equal(back.moments[:, 0], side.moments[:, 0])
     np.testing.assert_allclose(back.moments[:, 1], side.moments[:, 1], rtol=1e-5)
-
-
-def test_blend_static_history_matches_the_reference() -> None:
-    """``H = U + w (F - U)`` with ``w = share`` where both motion components are below the
-    limit, in float64, on pixels still, barely moving, moving and in a hole."""
-    rng = np.random.default_rng(5)
-    shape = (2, 3, 7, 9)
-    filtered = rng.exponential(1.0, shape).astype(F32)
-    unfiltered = rng.exponential(1.0, shape).astype(F32)
-    motion = rng.choice(np.array([0.0, 5e-4, -2e-3, 0.7, -3.0, NO_MOTION], F32), (2, 7, 9))
-    motion[:, 0, :3] = 0.0  # certainly some still pixels
-    got = filtered.copy()
-    blend_static_history(got, unfiltered, motion, F32(0.3), F32(1e-3))
-    still = (np.abs(motion[0].astype(np.float64)) < 1e-3) & (np.abs(motion[1]) < 1e-3)
-    want = unfiltered + np.where(still, 0.3, 0.0) * (filtered.astype(np.float64) - unfiltered)
-    assert still.any() and not still.all()
-    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
-    np.testing.assert_array_equal(got[:, :, ~still], unfiltered[:, :, ~still])
 
 
 @pytest.mark.parametrize("preset", ["default", "falcor"])

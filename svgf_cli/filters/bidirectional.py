@@ -11,7 +11,7 @@ and the feedback blur would compound with the resampling in both passes (measure
 bundled sequences: relMSE 0.70-1.01x of forward-only with unfiltered histories against
 0.79-1.16x with filtered ones). Where a pixel stands still (motion below ``STATIC_MOTION``)
 the history keeps a share ``STATIC_FILTERED_SHARE`` (0.3) of the first a-trous iteration's
-output (:func:`blend_static_history`): without resampling, a little recursive spatial
+output (``filters.feedback.blend_history``): without resampling, a little recursive spatial
 filtering pays, and more so as the image grows (unfiltered, ``lag/shadow`` at 256x144 was
 worse than forward-only on FLIP, 1.06x; with the share 0.95x, relMSE 0.77x instead of
 0.95x; at 128x72 ``lag/light_step`` 0.66x instead of 0.74x, ``lag/shadow`` 0.68x instead
@@ -231,36 +231,6 @@ def combine_histories(
                 shrink = min(_ONE, reference_counts[s] * mx[x])
                 m1[x] = mean
                 m2[x] = mean * mean + shrink * max(second - mean * mean, _ZERO)
-
-
-@njit(parallel=True, **_JIT)
-def blend_static_history(
-    filtered: np.ndarray,
-    unfiltered: np.ndarray,
-    motion: np.ndarray,
-    share: np.float32,
-    limit: np.float32,
-) -> None:
-    """A pass's colour history, in place in ``filtered`` (S, 3, H, W):
-    ``H = w F + (1 - w) U`` per signal, channel and pixel, with ``F`` the first a-trous
-    iteration's output, ``U`` the colour entering the a-trous, ``w = share`` where the
-    pixel's motion (2, H, W) is below ``limit`` on both axes (it does not move) and 0
-    elsewhere (module docstring)."""
-    num_signals = filtered.shape[0]
-    height, width = motion.shape[1], motion.shape[2]
-    for y in prange(height):
-        mx = motion[0, y]
-        my = motion[1, y]
-        w = np.empty(width, dtype=np.float32)
-        for x in range(width):
-            still = (abs(mx[x]) < limit) & (abs(my[x]) < limit)
-            w[x] = share if still else _ZERO
-        for s in range(num_signals):
-            for c in range(3):
-                f = filtered[s, c, y]
-                u = unfiltered[s, c, y]
-                for x in range(width):
-                    f[x] = u[x] + w[x] * (f[x] - u[x])
 
 
 @njit(inline="always", **_JIT)

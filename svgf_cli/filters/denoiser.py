@@ -50,7 +50,6 @@ from svgf_cli.filters.bidirectional import (
     STATIC_FILTERED_SHARE,
     STATIC_MOTION,
     SideHistory,
-    blend_static_history,
     combine_histories,
     consistent_lengths,
     effective_counts,
@@ -59,7 +58,7 @@ from svgf_cli.filters.clamp import firefly_clamp, history_clamp
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import float32_weights
-from svgf_cli.filters.feedback import keep_feedback_where_still
+from svgf_cli.filters.feedback import blend_history
 from svgf_cli.filters.fireflies import spread_fireflies
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
 from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, atrous_iterations_for
@@ -551,9 +550,8 @@ class Denoiser:
                     out_illumination[group], out_variance[group],
                 )
             if iteration == feedback and keep_unfiltered:
-                keep_feedback_where_still(run.plane(unfiltered_name), out_illumination,
-                                          run.motion, F32(STATIC_MOTION),
-                                          F32(p.moving_feedback_share))
+                blend_history(run.plane(unfiltered_name), out_illumination, run.motion,
+                              F32(STATIC_MOTION), F32(1.0), F32(p.moving_feedback_share))
                 history_name, keep_unfiltered = unfiltered_name, False
             filtered, filtered_variance = out_illumination, out_variance
             filtered_name_now = out_name
@@ -755,8 +753,9 @@ class Denoiser:
         name): its accumulation as blended (with the variance stage's colour blur,
         ``spatial_variance_blur_color``, the colour entering the a-trous), and where the
         pixel does not move a share ``STATIC_FILTERED_SHARE`` of the first a-trous
-        iteration's output (:func:`blend_static_history`), where a causal run keeps the
-        output of its feedback iteration everywhere. The combination weighs each side as
+        iteration's output (``filters.feedback.blend_history``; a causal run keeps all of its
+        feedback iteration's output there, and ``moving_feedback_share`` of it where the
+        pixel moves). The combination weighs each side as
         an average of its effective samples; a spatially filtered history is a blurred one,
         and where the pixels move the blur compounds with the resampling in both passes;
         where they do not, some of it pays (``docs/bidirectional.md``)."""
@@ -764,10 +763,11 @@ class Denoiser:
         filtered = self._filter_spatially(run, "accumulated", work["moments"],
                                           work["history_length"], min(1, run.iterations),
                                           protected, feeds_back=False)
-        if filtered.name != filtered.history_name:
-            blend_static_history(run.plane(filtered.name), run.plane(filtered.history_name),
-                                 run.motion, F32(STATIC_FILTERED_SHARE), F32(STATIC_MOTION))
-        return filtered.name
+        if filtered.name == filtered.history_name:
+            return filtered.name  # no a-trous iteration: the accumulation itself
+        blend_history(run.plane(filtered.history_name), run.plane(filtered.name), run.motion,
+                      F32(STATIC_MOTION), F32(STATIC_FILTERED_SHARE), F32(0.0))
+        return filtered.history_name
 
     def state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue the sequence bit-identically (copies)."""

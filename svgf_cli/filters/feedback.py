@@ -1,12 +1,15 @@
-"""The colour history a causal run keeps: the feedback iteration's output where pixels stand
-still, the unfiltered accumulation where they move (``moving_feedback_share``).
+"""The colour history kept for the next frame: a blend of an a-trous iteration's output and
+the unfiltered accumulation, by whether the pixel moves.
 
 The paper keeps the output of an a-trous iteration as next frame's colour history. Where a
 pixel moves, that history is resampled at a sub-pixel position next frame and the a-trous
 blur compounds with the resampling's, frame after frame; where it stands still, nothing is
 resampled and the recursive filtering pays (docs/algorithm.md, "Feedback where pixels
-move"). The blend is written into the unfiltered buffer, which is dead once the iteration
-that feeds back has read it, so it costs no buffer of its own.
+move"). A causal run keeps the feedback iteration's output where pixels stand still and
+``moving_feedback_share`` of it where they move; a pass of a bidirectional run
+``STATIC_FILTERED_SHARE`` of the first iteration's where they stand still and none where
+they move (``filters.bidirectional``). The blend is written into the unfiltered buffer,
+which is dead once the iteration has read it, so it costs no buffer of its own.
 """
 
 from __future__ import annotations
@@ -24,17 +27,18 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_
 
 
 @njit(parallel=True, **_JIT)
-def keep_feedback_where_still(
+def blend_history(
     unfiltered: np.ndarray,
     filtered: np.ndarray,
     motion: np.ndarray,
     limit: np.float32,
+    still_share: np.float32,
     moving_share: np.float32,
 ) -> None:
     """The colour history, in place in ``unfiltered`` (S, 3, H, W):
-    ``H = w F + (1 - w) U`` per signal, channel and pixel, with ``F`` the feedback
-    iteration's output (``filtered``), ``U`` the colour entering the a-trous, ``w = 1``
-    where the pixel's motion (2, H, W) is below ``limit`` on both axes and
+    ``H = w F + (1 - w) U`` per signal, channel and pixel, with ``F`` an a-trous
+    iteration's output (``filtered``), ``U`` the colour entering the a-trous, ``w =
+    still_share`` where the pixel's motion (2, H, W) is below ``limit`` on both axes and
     ``moving_share`` where it is not. A weight of 1 or 0 gives ``F`` or ``U`` exactly; a
     row whose weights are all 0 is not touched."""
     num_signals = unfiltered.shape[0]
@@ -47,7 +51,7 @@ def keep_feedback_where_still(
         any_weight = False
         for x in range(width):
             still = (abs(mx[x]) < limit) & (abs(my[x]) < limit)
-            w[x] = _ONE if still else moving_share
+            w[x] = still_share if still else moving_share
             rest[x] = _ONE - w[x]
             any_weight |= w[x] != _ZERO
         if not any_weight:
