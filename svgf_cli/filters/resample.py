@@ -48,8 +48,9 @@ U = np.uint64
 _ZERO = F32(0.0)
 _HALF = F32(0.5)
 _ONE = F32(1.0)
-_JIT = dict(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
-            error_model="numpy")
+# Not inlined at numba's level: LLVM still inlines where it pays, and the kernels that call
+# these compile much faster from a cold cache (measured: the same 1080p speed, 15 s less).
+_JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
 
 @njit(**_JIT)
