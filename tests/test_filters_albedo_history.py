@@ -32,7 +32,12 @@ FLOOR = F32(ref.RELATIVE_ALBEDO_FLOOR)
 
 def _run(albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh,
          alpha=0.2, cap=32.0, catmull_rom=False):
-    out = np.full_like(albedo, np.nan)
+    # Contiguous arrays, as the Denoiser passes: a view would compile the kernel once more
+    # for its layout (seconds of a cold test run each).
+    albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh = (
+        np.ascontiguousarray(a) for a in (albedo, history, length, motion, depth, mesh,
+                                          prev_depth, prev_mesh))
+    out = np.full(albedo.shape, np.nan, dtype=F32)
     out_length = np.full(depth.shape, np.nan, dtype=F32)
     accumulate_albedo(albedo, history, length, motion, depth, mesh, prev_depth, prev_mesh,
                       F32(alpha), F32(cap), BLACK, MAX_REFLECTANCE, FLOOR, out, out_length,

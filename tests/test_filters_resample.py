@@ -21,6 +21,9 @@ F32 = np.float32
 def _flat_reproject(motion: np.ndarray, illumination: np.ndarray, moments: np.ndarray,
                     catmull_rom: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Reproject a history over a flat plane (every tap consistent) with ``motion``."""
+    # Contiguous, as the Denoiser passes them: a view compiles the kernel again.
+    motion, illumination, moments = (np.ascontiguousarray(a)
+                                     for a in (motion, illumination, moments))
     num_signals, _, height, width = illumination.shape
     depth = np.full((height, width), 4.0, F32)
     normal = np.zeros((3, height, width), F32)
