@@ -65,6 +65,10 @@ CASES: dict[str, tuple[SVGFParams, dict[str, Any], int | None]] = {
                                     {"moving_edge": True}, None),
     # one combined colour: a mixed signal, at mixed_sigma_luminance
     "default, combined": (resolve_params("default"), {"layout": "combined"}, None),
+    # feedback from the second iteration (with the colour blur), half of it where pixels
+    # move; the wall stands still, the objects move
+    "falcor, moving feedback share": (resolve_params("falcor", moving_feedback_share=0.5),
+                                      {"layout": "combined", "wall_speed": 0.0}, None),
 }
 WORST: dict[str, float] = {}
 
