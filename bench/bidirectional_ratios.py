@@ -7,7 +7,12 @@ frames read as ``svgf denoise`` reads them; references ``ref.####.exr`` next to 
 Prints per sequence the mean over frames of trimmed relMSE, FLIP and temporal error for
 both and their ratio (bidirectional / forward), the ratios of RMSE and untrimmed relMSE,
 the PSNR and SSIM differences, which metrics are worse than forward-only, and the worst of
-the first four frames' trimmed relMSE over the sequence mean (forward / bidirectional).
+the first four frames' trimmed relMSE over the sequence mean (forward / bidirectional), and
+the cold start with the content held fixed: runs started at every frame from the third to
+the fourth-last (no warm-up), their first four frames' mean trimmed relMSE over the same
+frames' in the run over the whole sequence, averaged over the starts (forward /
+bidirectional; 1.00: no cold start). The "first 4" column mixes the cold start with how
+hard the first frames are; this one does not.
 ``bench/bidirectional_eval.py`` measures the same through the CLI (slower).
 
 Run: ``.venv/bin/python bench/bidirectional_ratios.py [--consistency-sigma K] [SEQUENCE ...]``
@@ -21,7 +26,9 @@ from __future__ import annotations
 import argparse
 import ast
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
@@ -72,7 +79,7 @@ def read_sequence(name: str, aovs: str) -> tuple[list, list[np.ndarray]]:
     return frames, references
 
 
-def metrics(outputs: list[np.ndarray], references: list[np.ndarray]) -> dict[str, float]:
+def metrics(outputs: list[np.ndarray], references: list[np.ndarray]) -> dict[str, Any]:
     per: dict[str, list[float]] = {k: [] for k in (*LOWER_IS_BETTER, "psnr", "ssim")}
     previous = None
     for x, r in zip(outputs, references, strict=True):
@@ -86,9 +93,24 @@ def metrics(outputs: list[np.ndarray], references: list[np.ndarray]) -> dict[str
         if previous is not None:
             per["temporal"].append(temporal_error(xd, previous[0], rd, previous[1]))
         previous = (xd, rd)
-    means = {k: float(np.mean(v)) for k, v in per.items()}
+    means: dict[str, Any] = {k: float(np.mean(v)) for k, v in per.items()}
     means["first4"] = max(per["relmse_trimmed"][:4]) / means["relmse_trimmed"]
+    means["per_frame"] = per["relmse_trimmed"]
     return means
+
+
+def cold_start(frames: list, references: list[np.ndarray], whole: list[float],
+               denoise: Callable[[list], list[np.ndarray]]) -> float:
+    """Mean trimmed relMSE of the first four frames of a run started at frame ``a`` (no
+    warm-up) over the same frames' in the run over the whole sequence (``whole``: its
+    per-frame trimmed relMSE), averaged over ``a`` = 2 .. n - 4 (0-based)."""
+    ratios = []
+    for start in range(2, len(frames) - 3):
+        outputs = denoise(frames[start:])[:4]
+        chunk = [relmse_trimmed(x, r)
+                 for x, r in zip(outputs, references[start:start + 4], strict=True)]
+        ratios.append(np.mean(chunk) / np.mean(whole[start:start + 4]))
+    return float(np.mean(ratios))
 
 
 def main() -> None:
@@ -107,15 +129,23 @@ def main() -> None:
         overrides[name] = ast.literal_eval(value)
     params = resolve_params("default", **overrides)
     print("| sequence | relMSE (trimmed) fwd / bidir (ratio) | FLIP | temporal | RMSE ratio "
-          "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean "
+          "| cold start |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+
+    def causal_run(chunk: list) -> list[np.ndarray]:
+        causal = Denoiser(params)
+        return [np.ascontiguousarray(causal.process(f).color[:3]) for f in chunk]
+
+    def bidirectional_run(chunk: list) -> list[np.ndarray]:
+        return [np.ascontiguousarray(o.color[:3]) for o in denoise_bidirectional(chunk, params)]
+
     for name in args.sequences:
         frames, references = read_sequence(name, SEQUENCES[name])
-        causal = Denoiser(params)
-        forward = metrics([np.ascontiguousarray(causal.process(f).color[:3]) for f in frames],
-                          references)
-        both = metrics([np.ascontiguousarray(o.color[:3])
-                        for o in denoise_bidirectional(frames, params)], references)
+        forward = metrics(causal_run(frames), references)
+        both = metrics(bidirectional_run(frames), references)
+        cold = [cold_start(frames, references, run_metrics["per_frame"], run)
+                for run_metrics, run in ((forward, causal_run), (both, bidirectional_run))]
         ratio = {k: both[k] / forward[k] for k in LOWER_IS_BETTER}
         worse = [k for k in LOWER_IS_BETTER if both[k] > forward[k]]
         worse += [k for k in ("psnr", "ssim") if both[k] < forward[k]]
@@ -125,7 +155,8 @@ def main() -> None:
               + f" | {ratio['rmse']:.2f} | {ratio['relmse']:.2f}"
               + f" | {both['psnr'] - forward['psnr']:+.2f} | {both['ssim'] - forward['ssim']:+.4f}"
               + f" | {', '.join(worse) or '-'}"
-              + f" | {forward['first4']:.2f} / {both['first4']:.2f} |", flush=True)
+              + f" | {forward['first4']:.2f} / {both['first4']:.2f}"
+              + f" | {cold[0]:.2f} / {cold[1]:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -220,20 +220,24 @@ def write_inputs() -> None:
 
 
 def trace_command(name: str, svgf: str, resolution: str = RESOLUTION,
-                  out: Path | None = None) -> list[str]:
+                  out: Path | None = None, seed: int = 0, reference: bool = True) -> list[str]:
     """The `svgf trace` command of one sequence; ``out`` (default: ``testdata/lag``) holds its
-    folder, so larger renders for validation stay out of the fixtures."""
+    folder, so larger renders for validation stay out of the fixtures. Another ``seed`` is
+    another noise realisation of the same frames (``bench/bias_variance.py``), which needs no
+    ``reference`` of its own."""
     spec = SEQUENCES[name]
     rel = Path("testdata") / "lag"
     frames = (out if out is not None else rel) / name
     command = [
         svgf, "trace", str(rel / spec["scene"]), "-o", str(frames / "in.####.exr"),
         "--frames", FRAMES, "--resolution", resolution, "--spp", "1",
-        "--max-depth", str(MAX_DEPTH), "--seed", "0", "--animation", str(rel / name / "anim.json"),
-        "--motion-next", "--gradient-samples", "--compression", "zip",
-        "--reference", str(frames / "ref.####.exr"), "--reference-spp", str(REFERENCE_SPP),
-        "--reference-channels", "rgb", "--reference-half", "--overwrite", "-q",
+        "--max-depth", str(MAX_DEPTH), "--seed", str(seed),
+        "--animation", str(rel / name / "anim.json"),
+        "--motion-next", "--gradient-samples", "--compression", "zip", "--overwrite", "-q",
     ]  # fmt: skip
+    if reference:
+        command += ["--reference", str(frames / "ref.####.exr"), "--reference-spp",
+                    str(REFERENCE_SPP), "--reference-channels", "rgb", "--reference-half"]
     for layer in SKIP_LAYERS:
         command += ["--skip-layer", layer]
     if spec.get("lobes"):
