@@ -21,7 +21,10 @@ Run (renders the lag sequence ``camera`` at 256x144 with five seeds first, refer
 ``.venv/bin/python bench/bias_variance.py --render camera --resolution 256x144 --seeds 5
 --out /tmp/bv``; on renders you made: ``.venv/bin/python bench/bias_variance.py --reference
 DIR --inputs DIR DIR ... [--aovs svgf] [--frames 5-12] [--set NAME=VALUE]`` (each input
-folder holds ``in.####.exr``, the reference folder ``ref.####.exr``, numbered alike).
+folder holds ``in.####.exr``, the reference folder ``ref.####.exr``, numbered alike). For
+the Blender renders: ``testdata/cycles/render.py --what inputs --input-seed N --out DIR`` for
+a few N, then ``--aovs cycles --reference testdata/cycles/roll --inputs testdata/cycles/roll
+DIR1/roll ...``.
 """
 
 from __future__ import annotations

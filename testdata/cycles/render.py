@@ -378,9 +378,9 @@ def common_settings(scene, resolution: tuple[int, int]) -> None:
     render.use_stamp_hostname = False
 
 
-def input_settings(scene, codec: str, depth: str) -> None:
+def input_settings(scene, codec: str, depth: str, seed: int = INPUT_SEED) -> None:
     scene.cycles.samples = 1
-    scene.cycles.seed = INPUT_SEED
+    scene.cycles.seed = seed
     layer = scene.view_layers[0]
     for name in (
         "combined", "z", "normal", "vector", "object_index", "emit", "environment",
@@ -461,7 +461,7 @@ def run(args) -> None:
             "blender": bpy.app.version_string,
             "resolution": list(args.resolution),
             "frames": [FRAMES[0], FRAMES[1]],
-            "input_seed": INPUT_SEED,
+            "input_seed": args.input_seed,
             "reference_seed": REF_SEED,
             "reference_spp": args.ref_spp,
             "pass_index": PASS_INDEX[name],
@@ -474,7 +474,7 @@ def run(args) -> None:
         if args.what in ("scene", "inputs", "all"):
             (out / "scene.json").write_text(json.dumps(info, indent=1) + "\n")
         if args.what in ("inputs", "all"):
-            input_settings(scene, args.codec, args.depth)
+            input_settings(scene, args.codec, args.depth, args.input_seed)
             for frame in frames:
                 scene.frame_set(frame)
                 render_frame(scene, out / f"{args.prefix}in.{frame:04d}.exr")
@@ -508,6 +508,9 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--depth", default="16", choices=["16", "32"], help="inputs' half/float")
     parser.add_argument("--out", type=Path, default=HERE)
     parser.add_argument("--prefix", default="", help="file name prefix (for experiments)")
+    parser.add_argument("--input-seed", type=int, default=INPUT_SEED,
+                        help="Cycles seed of the inputs: another noise realisation of the same "
+                        "frames (bench/bias_variance.py)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     run(args)
