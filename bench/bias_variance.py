@@ -164,7 +164,9 @@ def main() -> None:
     else:
         parser.error("give --render NAME, or --reference DIR and two or more --inputs DIR")
     references = numbered(reference, "ref")
-    numbers = sorted(set(references).intersection(*(numbered(f, "in") for f in inputs)))
+    # Every run covers all common frames (history before the measured ones), then is cut.
+    everything = sorted(set(references).intersection(*(numbered(f, "in") for f in inputs)))
+    numbers = everything
     if args.frames:
         first, _, last = args.frames.partition("-")
         numbers = [n for n in numbers if int(first) <= n <= int(last or first)]
@@ -182,8 +184,6 @@ def main() -> None:
     print("| run | all: bias^2 + variance | edges: bias^2 + variance | rest: bias^2 + variance |")
     print("|---|---|---|---|")
     for label, make in (("forward-only", forward), ("bidirectional", bidirectional)):
-        # The sequence runs whole (history before the measured frames), then is cut.
-        everything = sorted(set(references).intersection(*(numbered(f, "in") for f in inputs)))
         outputs = run_all(inputs, everything, args.aovs, make(params))
         keep = [everything.index(n) for n in numbers]
         parts = split(outputs[:, keep], truth, masks)
