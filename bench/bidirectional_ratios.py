@@ -17,8 +17,10 @@ hard the first frames are; this one does not.
 
 Run: ``.venv/bin/python bench/bidirectional_ratios.py [--consistency-sigma K] [SEQUENCE ...]``
 (``--consistency-sigma`` overrides the consistency test's threshold, e.g. 1e9 to measure the
-run without it; ``--set NAME=VALUE`` overrides a parameter of the default preset, e.g.
-``--set temporal_albedo=True``).
+run without it; ``--set NAME=VALUE`` overrides a parameter of the default preset for both
+runs, e.g. ``--set temporal_albedo=True``, ``--set-bidirectional NAME=VALUE`` for the
+bidirectional run only). A SEQUENCE is a bundled name or a folder of ``in.####.exr`` and
+``ref.####.exr`` (renders not committed), ``FOLDER:cycles`` for Blender's passes.
 """
 
 from __future__ import annotations
@@ -65,8 +67,11 @@ LOWER_IS_BETTER = ("relmse_trimmed", "flip", "temporal", "rmse", "relmse")
 
 
 def read_sequence(name: str, aovs: str) -> tuple[list, list[np.ndarray]]:
-    folder = REPO / "testdata" / INPUTS_OF.get(name, name)
-    reference_folder = REPO / "testdata" / name
+    if name in SEQUENCES:
+        folder = REPO / "testdata" / INPUTS_OF.get(name, name)
+        reference_folder = REPO / "testdata" / name
+    else:
+        folder = reference_folder = Path(name)
     mapping = build_mapping(aovs, None, None, "auto")
     frames, references = [], []
     index = 1
@@ -113,6 +118,12 @@ def cold_start(frames: list, references: list[np.ndarray], whole: list[float],
     return float(np.mean(ratios))
 
 
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` strings as parameter overrides (values are Python literals)."""
+    return {name: ast.literal_eval(value)
+            for name, _, value in (item.partition("=") for item in items)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sequences", nargs="*", default=list(SEQUENCES))
@@ -120,14 +131,15 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a default-preset parameter (Python literal), e.g."
                         " temporal_albedo=True; repeatable")
+    parser.add_argument("--set-bidirectional", action="append", default=[],
+                        metavar="NAME=VALUE", help="as --set, for the bidirectional run only")
     args = parser.parse_args()
     if args.consistency_sigma is not None:
         denoiser_module.CONSISTENCY_SIGMA = args.consistency_sigma
-    overrides = {}
-    for item in args.set:
-        name, _, value = item.partition("=")
-        overrides[name] = ast.literal_eval(value)
+    overrides = parse_overrides(args.set)
     params = resolve_params("default", **overrides)
+    bidirectional_params = resolve_params(
+        "default", **overrides, **parse_overrides(args.set_bidirectional))
     print("| sequence | relMSE (trimmed) fwd / bidir (ratio) | FLIP | temporal | RMSE ratio "
           "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean "
           "| cold start |")
@@ -138,10 +150,12 @@ def main() -> None:
         return [np.ascontiguousarray(causal.process(f).color[:3]) for f in chunk]
 
     def bidirectional_run(chunk: list) -> list[np.ndarray]:
-        return [np.ascontiguousarray(o.color[:3]) for o in denoise_bidirectional(chunk, params)]
+        outputs = denoise_bidirectional(chunk, bidirectional_params)
+        return [np.ascontiguousarray(o.color[:3]) for o in outputs]
 
     for name in args.sequences:
-        frames, references = read_sequence(name, SEQUENCES[name])
+        path, _, aovs = name.partition(":")
+        frames, references = read_sequence(path, SEQUENCES.get(path, aovs or "svgf"))
         forward = metrics(causal_run(frames), references)
         both = metrics(bidirectional_run(frames), references)
         cold = [cold_start(frames, references, run_metrics["per_frame"], run)
