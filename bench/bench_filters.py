@@ -19,13 +19,13 @@ Run: ``.venv/bin/python bench/bench_filters.py [--frames N] [--sizes 1280x720,19
 from __future__ import annotations
 
 import argparse
-import ast
 import resource
 import sys
 import time
 from typing import Any
 
 import numpy as np
+from overrides import parse_overrides  # bench/, the script's folder
 
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
@@ -205,10 +205,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a parameter of the preset (Python literal); repeatable")
     args = parser.parse_args(argv)
-    overrides = {}
-    for item in args.set:
-        name, _, value = item.partition("=")
-        overrides[name] = ast.literal_eval(value)
+    overrides = parse_overrides(args.set)
     kind = ("direct + indirect" if args.signals == 2
             else "diffuse_direct + diffuse_indirect + specular (lobes-split)")
     print(f"SVGF filter core, preset {args.preset}, {kind}, "

@@ -30,7 +30,6 @@ DIR1/roll ...``.
 from __future__ import annotations
 
 import argparse
-import ast
 import subprocess
 import sys
 from collections.abc import Callable
@@ -42,6 +41,8 @@ import OpenImageIO as oiio
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "testdata"))
+
+from overrides import parse_overrides  # noqa: E402  (bench/, the script's folder)
 
 from svgf_cli.evaluate.metrics import RELMSE_EPSILON  # noqa: E402
 from svgf_cli.filters.denoiser import Denoiser  # noqa: E402
@@ -172,8 +173,7 @@ def main() -> None:
         numbers = [n for n in numbers if int(first) <= n <= int(last or first)]
     elif len(numbers) > 12:
         numbers = numbers[4:-4]
-    overrides = {k: ast.literal_eval(v) for k, v in (s.split("=", 1) for s in args.set)}
-    params = resolve_params("default", **overrides)
+    params = resolve_params("default", **parse_overrides(args.set))
     mapping = build_mapping(args.aovs, None, None, "auto")
     masks = np.stack([edge_mask(read_frame(numbered(inputs[0], "in")[n], mapping).frame)
                       for n in numbers])

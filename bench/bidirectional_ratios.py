@@ -26,7 +26,6 @@ bidirectional run only). A SEQUENCE is a bundled name or a folder of ``in.####.e
 from __future__ import annotations
 
 import argparse
-import ast
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -37,6 +36,8 @@ import OpenImageIO as oiio
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from overrides import parse_overrides  # noqa: E402  (bench/, the script's folder)
 
 from svgf_cli.evaluate.metrics import (  # noqa: E402
     flip,
@@ -118,12 +119,6 @@ def cold_start(frames: list, references: list[np.ndarray], whole: list[float],
     return float(np.mean(ratios))
 
 
-def parse_overrides(items: list[str]) -> dict[str, Any]:
-    """``NAME=VALUE`` strings as parameter overrides (values are Python literals)."""
-    return {name: ast.literal_eval(value)
-            for name, _, value in (item.partition("=") for item in items)}
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sequences", nargs="*", default=list(SEQUENCES))
@@ -139,7 +134,7 @@ def main() -> None:
     overrides = parse_overrides(args.set)
     params = resolve_params("default", **overrides)
     bidirectional_params = resolve_params(
-        "default", **overrides, **parse_overrides(args.set_bidirectional))
+        "default", **{**overrides, **parse_overrides(args.set_bidirectional)})
     print("| sequence | relMSE (trimmed) fwd / bidir (ratio) | FLIP | temporal | RMSE ratio "
           "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean "
           "| cold start |")
