@@ -455,3 +455,60 @@ def test_mesh_ids_match_a_float64_rounding(scale: float, broken: float | None) -
     ids = exr.mesh_ids(raw)
     assert ids.dtype == np.int32
     assert np.array_equal(ids, expected.astype(np.int32))
+
+
+def _cycles_channels(
+    depth: np.ndarray | None, denoising_depth: np.ndarray
+) -> dict[str, np.ndarray]:
+    """A Cycles-named frame: Combined, Denoising Albedo, Normal, Vector and the depths."""
+    svgf = gbuffer()
+    channels = {}
+    for c in "RGB":
+        channels[f"ViewLayer.Combined.{c}"] = svgf[c]
+        channels[f"ViewLayer.Denoising Albedo.{c}"] = svgf[f"albedo.{c}"]
+    for c in "XYZ":
+        channels[f"ViewLayer.Normal.{c}"] = svgf[f"N.{c}"]
+    channels["ViewLayer.Vector.X"] = svgf["motion.X"]
+    channels["ViewLayer.Vector.Y"] = svgf["motion.Y"]
+    if depth is not None:
+        channels["ViewLayer.Depth.Z"] = depth.astype(np.float32)
+    channels["ViewLayer.Denoising Depth.Z"] = denoising_depth.astype(np.float32)
+    return channels
+
+
+def test_a_depth_with_no_surface_falls_back_to_the_next_candidate(tmp_path: Path) -> None:
+    # Cycles writes Depth from sample 0 only: rendered with a sample offset, every pixel
+    # holds its background value 1e10, while Denoising Depth averages the samples.
+    surface = np.random.default_rng(3).uniform(1.0, 10.0, (H, W))
+    path = tmp_path / "offset.exr"
+    write_exr(path, _cycles_channels(np.full((H, W), 1e10), surface))
+    result = read_frame(path, build_mapping("cycles"))
+    assert np.array_equal(result.frame.depth, surface.astype(np.float32))
+    assert result.resolved["depth"] == ("ViewLayer.Denoising Depth.Z",)
+    assert [w for w in result.warnings if "background on every pixel" in w] == [
+        f"{path}: depth ViewLayer.Depth.Z is background on every pixel (Cycles writes Depth "
+        "from sample 0 only); using ViewLayer.Denoising Depth.Z"
+    ]
+    # The file's own channels pass through untouched.
+    assert np.all(result.source.parts[0].channels["ViewLayer.Depth.Z"].pixels == 1e10)
+
+
+def test_a_depth_with_a_surface_is_kept_and_an_empty_one_is_announced(tmp_path: Path) -> None:
+    surface = np.random.default_rng(4).uniform(1.0, 10.0, (H, W))
+    one_pixel = np.full((H, W), 1e10)
+    one_pixel[2, 3] = 4.0
+    path = tmp_path / "sample0.exr"
+    write_exr(path, _cycles_channels(one_pixel, surface))
+    result = read_frame(path, build_mapping("cycles"))
+    assert result.resolved["depth"] == ("ViewLayer.Depth.Z",)
+    assert result.frame.depth[2, 3] == 4.0 and np.count_nonzero(result.frame.depth) == 1
+    assert not any("every pixel" in w for w in result.warnings)
+    # Nothing to fall back to: said once, and the frame keeps its (all background) depth.
+    empty = tmp_path / "empty.exr"
+    write_exr(empty, _cycles_channels(None, np.zeros((H, W))))
+    result = read_frame(empty, build_mapping("cycles"))
+    assert not np.any(result.frame.depth)
+    assert [w for w in result.warnings if "every pixel" in w] == [
+        f"{empty}: depth ViewLayer.Denoising Depth.Z is background on every pixel: "
+        "nothing is filtered"
+    ]

@@ -641,6 +641,38 @@ def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> int:
     return changed
 
 
+def _depth_with_surfaces(
+    depth: np.ndarray,
+    resolved: ResolvedLayers,
+    planes: _Planes,
+    path: Path,
+    warnings: list[str],
+) -> np.ndarray:
+    """The cleaned (1, H, W) depth, or the first alternative depth with a surface in it.
+
+    Cycles writes its Depth pass (and IndexOB) from sample 0 only, so a frame rendered
+    with a sample offset holds background there on every pixel, while Denoising Depth
+    averages every sample; filtering such a frame would pass it through untouched. A
+    depth with no surface on any pixel where an alternative has some is replaced, with a
+    warning; with none to fall back to, the warning says the frame is left unfiltered.
+    """
+    if np.any(depth[0] > 0):
+        return depth
+    chosen = ",".join(resolved["depth"] or ())
+    for alternative in resolved.alternatives.get("depth", []):
+        candidate = planes.gather(alternative)
+        _clean_depth(candidate[0], path, [])
+        if np.any(candidate[0] > 0):
+            warnings.append(
+                f"{path}: depth {chosen} is background on every pixel (Cycles writes Depth "
+                f"from sample 0 only); using {','.join(alternative)}"
+            )
+            resolved.channels["depth"] = alternative
+            return candidate
+    warnings.append(f"{path}: depth {chosen} is background on every pixel: nothing is filtered")
+    return depth
+
+
 def _keep_colour_part_only(
     source: SourceFile, colour: tuple[str, str, str] | None, resolved: ResolvedLayers
 ) -> None:
@@ -734,6 +766,8 @@ def read_frame(
     if fallback is not None:
         roles = list(dict.fromkeys([*roles, *fallback.roles()]))
     names = [name for role in roles for name in (resolved[role] or ())]
+    # Located too (the whole file is decoded anyway) in case the chosen depth is empty.
+    names += [name for alt in resolved.alternatives.get("depth", []) for name in alt]
     gradient = [p.gradient_mask for p in (plan, fallback) if p and p.gradient_mask]
     gradient += [name for p in (plan, fallback) if p
                  for _, pair in p.gradient_channels for name in pair]
@@ -776,6 +810,7 @@ def read_frame(
                if resolved[r] is not None]
     for role in gbuffer:
         fetch(role)
+    values["depth"] = _depth_with_surfaces(values["depth"], resolved, planes, path, warnings)
 
     def release(role: str) -> None:
         if role not in gbuffer:

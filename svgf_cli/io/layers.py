@@ -346,6 +346,9 @@ class ResolvedLayers:
     channels: dict[str, tuple[str, ...] | None]
     missing: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    # The role's other candidates present in the file, in the mapping's order after the
+    # chosen one: a reader may fall back to them when the chosen channels hold nothing.
+    alternatives: dict[str, list[tuple[str, ...]]] = field(default_factory=dict)
     plan: Any = None
     requested_signals: str = "auto"
 
@@ -458,6 +461,7 @@ def resolve_layers(
     present = set(channel_names)
     by_suffix = _suffix_index(channel_names)
     channels: dict[str, tuple[str, ...] | None] = {}
+    alternatives: dict[str, list[tuple[str, ...]]] = {}
     looked_for: dict[str, str] = {}
     notes: list[str] = []
     for role in ROLES:
@@ -466,11 +470,12 @@ def resolve_layers(
         channels[role] = None
         for wanted in options:
             found, ambiguity = _match_tuple(wanted, present, by_suffix)
-            if ambiguity:
-                notes.append(f"{role}: {ambiguity}")
-            if found is not None:
+            if channels[role] is None:
+                if ambiguity:
+                    notes.append(f"{role}: {ambiguity}")
                 channels[role] = found
-                break
+            elif found is not None and found != channels[role]:
+                alternatives.setdefault(role, []).append(found)
 
     missing: dict[str, str] = {}
     for role in REQUIRED_ROLES:
@@ -486,7 +491,8 @@ def resolve_layers(
         lone = "direct" if channels["direct"] is not None else "indirect"
         notes.append(f"{lone} found without its partner: filtering color as one signal")
 
-    resolved = ResolvedLayers(channels=channels, missing=missing, notes=notes)
+    resolved = ResolvedLayers(channels=channels, missing=missing, notes=notes,
+                              alternatives=alternatives)
     if strict and missing:
         parts = [f"{role} (looked for {where})" for role, where in missing.items()]
         extra = f" [{'; '.join(notes)}]" if notes else ""

@@ -171,6 +171,14 @@ MUTANTS: tuple[Mutant, ...] = (
         IO_TESTS,
     ),
     Mutant(
+        "empty-depth-kept", "io", "a depth with no surface kept (Cycles' Depth with a sample "
+        "offset: every frame written unfiltered)",
+        "svgf_cli/io/exr.py",
+        (("    if np.any(depth[0] > 0):\n        return depth\n",
+          "    if True:\n        return depth\n"),),
+        IO_TESTS,
+    ),
+    Mutant(
         "skip-existing-no-replay", "farm", "--skip-existing (and chunks) not replaying history",
         "svgf_cli/farm/job.py",
         (("frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]",
