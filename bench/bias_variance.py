@@ -157,6 +157,8 @@ def main() -> None:
                              "4, where the sequence's ends dominate)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a default-preset parameter (Python literal); repeatable")
+    parser.add_argument("--runs", default="forward,bidirectional",
+                        help="comma-separated runs to split: forward, bidirectional")
     args = parser.parse_args()
     if args.render:
         reference, inputs = render(args.render, args.resolution, args.seeds, args.out)
@@ -183,7 +185,11 @@ def main() -> None:
           f"edge pixels {masks.mean():.1%}; relMSE = bias^2 + variance")
     print("| run | all: bias^2 + variance | edges: bias^2 + variance | rest: bias^2 + variance |")
     print("|---|---|---|---|")
-    for label, make in (("forward-only", forward), ("bidirectional", bidirectional)):
+    runs = {"forward": ("forward-only", forward), "bidirectional": ("bidirectional", bidirectional)}
+    chosen = [name.strip() for name in args.runs.split(",") if name.strip()]
+    if not chosen or any(name not in runs for name in chosen):
+        parser.error(f"--runs takes a comma-separated list of {', '.join(runs)}")
+    for label, make in (runs[name] for name in chosen):
         outputs = run_all(inputs, everything, args.aovs, make(params))
         keep = [everything.index(n) for n in numbers]
         parts = split(outputs[:, keep], truth, masks)

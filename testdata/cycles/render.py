@@ -378,9 +378,17 @@ def common_settings(scene, resolution: tuple[int, int]) -> None:
     render.use_stamp_hostname = False
 
 
-def input_settings(scene, codec: str, depth: str, seed: int = INPUT_SEED) -> None:
-    scene.cycles.samples = 1
+def input_settings(
+    scene, codec: str, depth: str, seed: int = INPUT_SEED, sample_offset: int = 0
+) -> None:
     scene.cycles.seed = seed
+    # Cycles traces sample 0 through the pixel centre (the filter is only sampled from sample
+    # 1 on), so default 1-spp frames are point samples that no history anti-aliases; a
+    # subset of one sample starting at 1 or later is one jittered sample of the pixel filter.
+    scene.cycles.samples = 1 + sample_offset
+    scene.cycles.use_sample_subset = sample_offset > 0
+    scene.cycles.sample_offset = sample_offset
+    scene.cycles.sample_subset_length = 1
     layer = scene.view_layers[0]
     for name in (
         "combined", "z", "normal", "vector", "object_index", "emit", "environment",
@@ -462,6 +470,7 @@ def run(args) -> None:
             "resolution": list(args.resolution),
             "frames": [FRAMES[0], FRAMES[1]],
             "input_seed": args.input_seed,
+            "input_sample_offset": args.sample_offset,
             "reference_seed": REF_SEED,
             "reference_spp": args.ref_spp,
             "pass_index": PASS_INDEX[name],
@@ -474,7 +483,7 @@ def run(args) -> None:
         if args.what in ("scene", "inputs", "all"):
             (out / "scene.json").write_text(json.dumps(info, indent=1) + "\n")
         if args.what in ("inputs", "all"):
-            input_settings(scene, args.codec, args.depth, args.input_seed)
+            input_settings(scene, args.codec, args.depth, args.input_seed, args.sample_offset)
             for frame in frames:
                 scene.frame_set(frame)
                 render_frame(scene, out / f"{args.prefix}in.{frame:04d}.exr")
@@ -511,6 +520,10 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--input-seed", type=int, default=INPUT_SEED,
                         help="Cycles seed of the inputs: another noise realisation of the same "
                         "frames (bench/bias_variance.py)")
+    parser.add_argument("--sample-offset", type=int, default=0,
+                        help="Cycles sample offset of the inputs: 0 (Blender's default) traces "
+                        "the one sample through the pixel centre, 1 or more jitters it over the "
+                        "pixel filter")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     run(args)
