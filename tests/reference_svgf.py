@@ -1025,34 +1025,84 @@ def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
 
 
 # --------------------------------------------------------------------------- TAA
-def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
-                alpha: float) -> np.ndarray:
-    """Temporal anti-aliasing of the output: ``lerp(clamp(prev(P)), current, alpha)``.
+TAA_DEPTH_JUMP = 1.05
+TAA_CLIP_SIGMA = 0.75
 
-    ``P = (x + motion.x, y + motion.y)`` (the same backward motion as the reprojection); the
-    previous output is sampled bilinearly there (indices clamped to the image) and clamped
-    per channel to the min/max of the current 3x3 neighbourhood (in-image pixels). A
-    position outside ``[-0.5, size - 0.5]`` takes the current value.
+
+def taa_outline(depth: np.ndarray) -> np.ndarray:
+    """(H, W) bool: surface pixels whose 3x3 holds a surface pixel with a background
+    neighbour or a neighbour more than 5 % nearer or farther (8 neighbours, in the image)."""
+    z = np.asarray(depth, dtype=F64)
+    height, width = z.shape
+    jump = np.zeros((height, width), dtype=bool)
+    for y in range(height):
+        for x in range(width):
+            if z[y, x] <= 0:
+                continue
+            window = z[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2]
+            jump[y, x] = bool(np.any((window <= 0) | (window > TAA_DEPTH_JUMP * z[y, x])
+                                     | (z[y, x] > TAA_DEPTH_JUMP * window)))
+    outline = np.zeros_like(jump)
+    for y in range(height):
+        for x in range(width):
+            outline[y, x] = z[y, x] > 0 and bool(jump[max(y - 1, 0):y + 2,
+                                                      max(x - 1, 0):x + 2].any())
+    return outline
+
+
+def _catmull_rom(t: float) -> np.ndarray:
+    return np.array([t * (-0.5 + t * (1 - t / 2)), 1 + t * t * (-2.5 + 1.5 * t),
+                     t * (0.5 + t * (2 - 1.5 * t)), t * t * (-0.5 + t / 2)])
+
+
+def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
+                depth: np.ndarray, weights: tuple[float, float, float],
+                alpha: float) -> np.ndarray:
+    """Temporal anti-aliasing at outlines (``svgf_cli.filters.taa``).
+
+    On :func:`taa_outline` pixels whose backprojected position ``P = (x + motion.x,
+    y + motion.y)`` lies in ``[-0.5, size - 0.5]``: ``h`` = the Catmull-Rom fetch of the
+    previous output at ``P`` (4x4 taps, indices clamped, negatives to 0); in the tonemapped
+    space ``T(c) = c / (1 + l(c))`` it is clipped per channel to ``mu +- 0.75 sigma`` of the
+    current 3x3 (population sigma, in-image pixels), widened to hold the pixel's own
+    ``T(c)``, and taken back by ``c = T / (1 - l(T))``
+    (``l(T)`` at most 0.999); then ``out = (a c + b h) / (a + b)``, ``a = alpha / (1 + l(c))``,
+    ``b = (1 - alpha) / (1 + l(h))``. Everywhere else the current value.
     """
     cur = np.asarray(current, dtype=F64)
     prev = np.asarray(previous, dtype=F64)
     mv = np.asarray(motion, dtype=F64)
+    w = np.asarray(weights, dtype=F64)
     _, height, width = cur.shape
+    outline = taa_outline(depth)
     out = cur.copy()
+
+    def luma(c: np.ndarray) -> float:
+        return max(float(w @ c), 0.0)
+
     for y in range(height):
         for x in range(width):
             px, py = x + mv[0, y, x], y + mv[1, y, x]
-            if not (-0.5 <= px <= width - 0.5 and -0.5 <= py <= height - 0.5):
+            if not outline[y, x] or not (-0.5 <= px <= width - 0.5
+                                         and -0.5 <= py <= height - 0.5):
                 continue
             x0, y0 = math.floor(px), math.floor(py)
-            fx, fy = px - x0, py - y0
-            xa, xb = min(max(x0, 0), width - 1), min(max(x0 + 1, 0), width - 1)
-            ya, yb = min(max(y0, 0), height - 1), min(max(y0 + 1, 0), height - 1)
-            sampled = ((1 - fy) * ((1 - fx) * prev[:, ya, xa] + fx * prev[:, ya, xb])
-                       + fy * ((1 - fx) * prev[:, yb, xa] + fx * prev[:, yb, xb]))
+            wx, wy = _catmull_rom(px - x0), _catmull_rom(py - y0)
+            rows = np.clip(np.arange(y0 - 1, y0 + 3), 0, height - 1)
+            cols = np.clip(np.arange(x0 - 1, x0 + 3), 0, width - 1)
+            taps = prev[:, rows][:, :, cols]  # (3, 4, 4)
+            history = np.maximum(np.einsum("j,i,cji->c", wy, wx, taps), 0.0)
             window = cur[:, max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].reshape(3, -1)
-            sampled = np.clip(sampled, window.min(axis=1), window.max(axis=1))
-            out[:, y, x] = sampled + alpha * (cur[:, y, x] - sampled)
+            mapped = window / (1.0 + np.maximum(w @ window, 0.0))
+            mean, sigma = mapped.mean(axis=1), mapped.std(axis=1)
+            centre = cur[:, y, x] / (1.0 + luma(cur[:, y, x]))
+            clipped = np.clip(history / (1.0 + luma(history)),
+                              np.minimum(mean - TAA_CLIP_SIGMA * sigma, centre),
+                              np.maximum(mean + TAA_CLIP_SIGMA * sigma, centre))
+            history = np.maximum(clipped, 0.0) / (1.0 - min(luma(clipped), 0.999))
+            a = alpha / (1.0 + luma(cur[:, y, x]))
+            b = (1.0 - alpha) / (1.0 + luma(history))
+            out[:, y, x] = (a * cur[:, y, x] + b * history) / (a + b)
     return out
 
 
@@ -1418,7 +1468,8 @@ class ReferenceDenoiser:
                 output, clean.emission, radiance_mode, geom.depth, p.despike, clean.weights)
         if p.taa:
             if self.taa_previous is not None:
-                output = taa_resolve(output, self.taa_previous, clean.motion, p.taa_alpha)
+                output = taa_resolve(output, self.taa_previous, clean.motion, geom.depth,
+                                     clean.weights, p.taa_alpha)
             self.taa_previous = output
         return ReferenceOutput(output, variance_before_atrous, length, radiance_mode,
                                per_signal, counts)

@@ -16,6 +16,7 @@ from synthetic import (
 from svgf_cli.filters.bidirectional import STATIC_MOTION
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, resolve_params
+from svgf_cli.frame import Frame
 
 F32 = np.float32
 
@@ -311,21 +312,68 @@ def test_history_clamp_removes_lag_after_a_lighting_change() -> None:
     assert clamped > 0.5 * 3.0 * 0.9
 
 
-def test_taa_blends_with_clamped_reprojected_previous_output() -> None:
-    frames = static_sequence(6, 16, 16, split=False, noise=0.3)
+def _outline_frame(block: slice, flip: bool, *, emission: float = 0.0,
+                   block_motion: float = 0.0) -> Frame:
+    """A dark wall (depth 8, illumination 0.2) behind a block (depth 2) over ``block``'s
+    columns: lit (illumination 2) or, with ``emission``, a light; ``flip`` moves the
+    block's left column onto the wall, as a jittered sample of that pixel would."""
+    h, w = 12, 24
+    depth = np.full((h, w), 8.0, dtype=F32)
+    illumination = np.full((h, w), 0.2, dtype=F32)
+    glow = np.zeros((3, h, w), dtype=F32)
+    depth[:, block] = 2.0
+    illumination[:, block] = 0.0 if emission else 2.0
+    glow[:, :, block] = emission
+    if flip:
+        depth[:, block.start] = 8.0
+        illumination[:, block.start] = 0.2
+        glow[:, :, block.start] = 0.0
+    motion = np.zeros((2, h, w), dtype=F32)
+    motion[0][depth == 2.0] = block_motion
+    return make_frame(w, h, split=False, illumination=illumination, depth=depth,
+                      mesh_id=np.where(depth == 2.0, 2, 1), motion=motion,
+                      emission=glow if emission else None)
+
+
+def test_taa_averages_a_jittered_outline_toward_its_coverage() -> None:
+    """An outline pixel whose sample lands on the block or on the wall at random (a
+    jittered renderer, coverage 1/2): SVGF keeps the two surfaces apart and its output
+    flips; TAA's output there moves far less, near the two surfaces' mean."""
+    rng = np.random.default_rng(3)
+    frames = [_outline_frame(slice(12, 18), bool(flip)) for flip in rng.integers(0, 2, 30)]
     params = resolve_params("paper", atrous_iterations=0, temporal=False)
     plain, _ = _run(params, frames)
-    taa, _ = _run(params.replace(taa=True, taa_alpha=0.2), frames)
+    taa, _ = _run(params.replace(taa=True, taa_alpha=0.5), frames)
     np.testing.assert_array_equal(taa[0].color, plain[0].color)  # nothing to blend yet
 
-    def flicker(outs) -> float:
-        return float(np.mean([np.abs(b.color - a.color).mean()
-                              for a, b in zip(outs[2:], outs[3:], strict=False)]))
+    def outline(outs) -> np.ndarray:
+        return np.array([o.color[1, 6, 12] for o in outs[5:]])
 
-    assert flicker(taa) < 0.5 * flicker(plain)
-    # The neighbourhood clamp: a sudden change is never hidden behind old output.
-    bright = make_frame(16, 16, split=False, illumination=5.0)
-    denoiser = Denoiser(params.replace(taa=True, taa_alpha=0.2))
+    mix = 0.5 * (0.2 + 2.0) * 0.5  # the mean of the two surfaces (albedo 0.5)
+    assert outline(taa).std() < 0.7 * outline(plain).std()  # alpha 0.5: sqrt(1/3) ideally
+    assert abs(outline(taa).mean() - mix) < 0.25 * mix
+    # Away from the outline nothing changes.
+    for a, b in zip(plain, taa, strict=True):
+        np.testing.assert_array_equal(a.color[:, :, :9], b.color[:, :, :9])
+        np.testing.assert_array_equal(a.color[:, :, 21:], b.color[:, :, 21:])
+
+
+def test_taa_leaves_no_trail_behind_a_moving_light() -> None:
+    """A light (radiance 50) crossing a dark wall one pixel a frame: the wall it uncovers
+    is back to the wall's value two pixels behind it (the clip against the current 3x3),
+    and never holds more than a fifth of the light right behind it."""
+    frames = [_outline_frame(slice(4 + t, 8 + t), False, emission=50.0, block_motion=-1.0)
+              for t in range(12)]
+    params = resolve_params("paper", atrous_iterations=0, temporal=False)
+    taa, _ = _run(params.replace(taa=True, taa_alpha=0.5), frames)
+    wall = 0.2 * 0.5
+    for t, out in enumerate(taa[1:], start=1):
+        behind = out.color[:, 6, :4 + t]  # the wall left of the light
+        assert behind[:, -1].max() < 0.2 * 50.0
+        np.testing.assert_allclose(behind[:, :-1], wall, rtol=1e-5)
+    # Nothing blends where the outline does not reach: a sudden change shows at once.
+    bright = make_frame(24, 12, split=False, illumination=5.0, depth=8.0)
+    denoiser = Denoiser(params.replace(taa=True, taa_alpha=0.5))
     for f in frames:
         denoiser.process(f)
     np.testing.assert_allclose(denoiser.process(bright).color, _radiance(bright), rtol=1e-6)

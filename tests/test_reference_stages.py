@@ -39,7 +39,7 @@ from svgf_cli.filters.modulate import (
     remodulate_add,
 )
 from svgf_cli.filters.reproject import accumulate, reproject
-from svgf_cli.filters.taa import taa_resolve
+from svgf_cli.filters.taa import on_outline, taa_resolve
 from svgf_cli.filters.variance import (
     boost_short_history,
     estimate_variance,
@@ -1037,25 +1037,58 @@ def test_variance_estimate_with_boost_matches_reference(blur: bool) -> None:
 
 
 # --------------------------------------------------------------------------- TAA
+def _two_surfaces(height: int, width: int) -> np.ndarray:
+    """Depth: a far wall (8) with a near block (2) and a background corner (0)."""
+    depth = np.full((height, width), 8.0, dtype=F32)
+    depth[2:7, 2:9] = 2.0
+    depth[:2, -3:] = 0.0
+    return depth
+
+
+def test_taa_outline_matches_reference_and_ignores_slopes() -> None:
+    depth = _two_surfaces(9, 12)
+    got = np.array([[on_outline(depth, y, x) and depth[y, x] > 0 for x in range(12)]
+                    for y in range(9)])
+    want = ref.taa_outline(depth)
+    np.testing.assert_array_equal(got, want)
+    # Both sides of the block's edge, two pixels wide, and the wall around the background.
+    ring = want[1:8, 1:9].copy()
+    ring[3, 3:6] = True
+    assert ring.all() and not want[4, 4:7].any() and want[:3, -4].all()
+    assert not want[8, 11] and not want[:2, -3:].any()  # far from any outline; background
+    # A floor at a grazing angle: depth grows 4 % a row, 40 % over the image: no outline.
+    slope = (2.0 * 1.04 ** np.arange(9, dtype=np.float64))[:, None] * np.ones((1, 12))
+    assert not ref.taa_outline(slope).any()
+    assert not any(on_outline(slope.astype(F32), y, x) for y in range(9) for x in range(12))
+
+
 def test_taa_matches_reference() -> None:
     rng = np.random.default_rng(6)
     height, width = 9, 12
     current = rng.gamma(2.0, 0.5, (3, height, width)).astype(F32)
+    current[:, 3, 4] = 40.0  # a light in the neighbourhood of outline pixels
     previous = rng.gamma(2.0, 0.5, (3, height, width)).astype(F32)
     motion = rng.uniform(-2.5, 2.5, (2, height, width)).astype(F32)
     motion[0, :, 0] = -0.75  # outside on the left (x - 0.75 < -0.5): current value
     motion[0, :, 1] = -1.25  # just inside the image: clamped taps
     motion[1, 0, :] = -0.25
+    depth = _two_surfaces(height, width)
+    weights = np.array(ACESCG, dtype=F32)
     out = np.empty_like(current)
-    taa_resolve(current, previous, motion, F32(0.1), out)
-    want = ref.taa_resolve(current, previous, motion, 0.1)
-    _close(out, want, 1e-6, "taa")
+    taa_resolve(current, previous, motion, depth, weights, F32(0.5), out)
+    want = ref.taa_resolve(current, previous, motion, depth, ACESCG, 0.5)
+    _close(out, want, 1e-5, "taa")
+    outline = ref.taa_outline(depth)
+    np.testing.assert_array_equal(out[:, ~outline], current[:, ~outline])
     np.testing.assert_array_equal(out[:, :, 0], current[:, :, 0])
+    changed = np.any(out != current, axis=0)
+    assert changed[outline].mean() > 0.5  # the blend did run where it may
 
 
 def test_taa_follows_the_motion_of_a_translating_image() -> None:
-    """An image that moved by exactly (+2, +1) px: with its history reprojected through the
-    backward motion, a slow blend (alpha 0.1) returns the current image unchanged."""
+    """An image that moved by exactly (+2, +1) px, outlines everywhere (depth alternating
+    between columns): with its history reprojected through the backward motion, the blend
+    returns the current image unchanged."""
     y, x = np.mgrid[0:12, 0:14].astype(np.float64)
 
     def image(shift_x: float, shift_y: float) -> np.ndarray:
@@ -1065,8 +1098,10 @@ def test_taa_follows_the_motion_of_a_translating_image() -> None:
 
     previous, current = image(0, 0), image(2, 1)
     motion = np.stack([np.full(x.shape, -2.0), np.full(x.shape, -1.0)]).astype(F32)
+    depth = np.where(x % 2 == 0, 1.0, 2.0).astype(F32)
+    weights = np.array(REC709, dtype=F32)
     out = np.empty_like(current)
-    taa_resolve(current, previous, motion, F32(0.1), out)
+    taa_resolve(current, previous, motion, depth, weights, F32(0.1), out)
     inside = (slice(None), slice(1, None), slice(2, None))
     np.testing.assert_allclose(out[inside], current[inside], rtol=1e-6, atol=1e-6)
-    _close(out, ref.taa_resolve(current, previous, motion, 0.1), 1e-6)
+    _close(out, ref.taa_resolve(current, previous, motion, depth, REC709, 0.1), 1e-6)

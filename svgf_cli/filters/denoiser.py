@@ -578,7 +578,8 @@ class Denoiser:
             if self._taa_previous is None:
                 self._taa_previous = output.copy()
             else:
-                taa_resolve(output, self._taa_previous, run.motion, F32(p.taa_alpha),
+                taa_resolve(output, self._taa_previous, run.motion, run.depth,
+                            np.array(run.weights, dtype=F32), F32(p.taa_alpha),
                             run.work["taa"])
                 np.copyto(self._taa_previous, run.work["taa"])
             output = self._taa_previous.copy()

@@ -197,8 +197,14 @@ class SVGFParams:
         " same-mode neighbour (any neighbour, in the output, for a pixel whose mode none"
         " shares) is brought down to that bound (fireflies the a-trous kept; 0 = off).",
     )
-    taa: bool = _p(False, "Temporal anti-aliasing of the final output (the paper's last step).")
-    taa_alpha: float = _p(0.1, "Blend factor of the TAA pass.")
+    taa: bool = _p(
+        False,
+        "Temporal anti-aliasing of the output at object outlines (the paper's last step):"
+        " the previous output, Catmull-Rom resampled and clipped to the current 3x3, blended"
+        " in where a jittered sample flips between two surfaces.",
+    )
+    taa_alpha: float = _p(0.5, "The current output's share in the TAA blend (before the"
+                               " luminance weighting).")
 
     def to_json(self) -> str:
         """Stable JSON of every field (sorted keys), stored in output metadata."""

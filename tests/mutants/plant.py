@@ -118,6 +118,19 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "taa-everywhere", "filters", "TAA blends inside surfaces too (no outline test)",
+        "svgf_cli/filters/taa.py",
+        (("            if depth[y, x] <= _ZERO or not on_outline(depth, y, x):",
+          "            if depth[y, x] <= _ZERO:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "taa-unclipped", "filters", "TAA history not clipped to the current 3x3",
+        "svgf_cli/filters/taa.py",
+        (("    return min(max(t, low), high)\n", "    return t\n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "arnold-backward", "io", "Arnold preset treated as backward motion",
         "svgf_cli/io/layers.py",
         (('    "arnold": "forward-pixels",', '    "arnold": "backward-pixels",'),),
