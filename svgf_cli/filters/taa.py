@@ -80,11 +80,22 @@ def on_outline(depth: np.ndarray, y: int, x: int) -> bool:
     """Whether a surface pixel of the 3x3 around ``(y, x)`` borders another surface or the
     background (:func:`_jump`): the pixels a jittered sample can carry across an outline,
     on both sides of it. A depth that only slopes (a floor seen at a grazing angle) is no
-    outline."""
+    outline. (:func:`taa_resolve` computes the same from a plane of :func:`_jump`.)"""
     height, width = depth.shape
     for yy in range(max(y - 1, 0), min(y + 2, height)):
         for xx in range(max(x - 1, 0), min(x + 2, width)):
             if depth[yy, xx] > _ZERO and _jump(depth, yy, xx):
+                return True
+    return False
+
+
+@njit(**_JIT)
+def _near_jump(jumps: np.ndarray, y: int, x: int) -> bool:
+    """Whether ``jumps`` (H, W) is set anywhere in the 3x3 around ``(y, x)``."""
+    height, width = jumps.shape
+    for yy in range(max(y - 1, 0), min(y + 2, height)):
+        for xx in range(max(x - 1, 0), min(x + 2, width)):
+            if jumps[yy, xx]:
                 return True
     return False
 
@@ -185,6 +196,12 @@ def taa_resolve(
     frame's luminance.
     """
     height, width = current.shape[1], current.shape[2]
+    # Which surface pixels border another surface or the background, once per pixel (the
+    # outline test of a pixel reads its 3x3 of these).
+    jumps = np.empty((height, width), dtype=np.bool_)
+    for y in prange(height):
+        for x in range(width):
+            jumps[y, x] = depth[y, x] > _ZERO and _jump(depth, y, x)
     low_x, low_y = F32(-0.5), F32(-0.5)
     high_x, high_y = F32(width) - _HALF, F32(height) - _HALF
     for y in prange(height):
@@ -192,7 +209,7 @@ def taa_resolve(
         for x in range(width):
             for c in range(3):
                 out[c, y, x] = current[c, y, x]
-            if depth[y, x] <= _ZERO or not on_outline(depth, y, x):
+            if depth[y, x] <= _ZERO or not _near_jump(jumps, y, x):
                 continue
             px = F32(x) + motion[0, y, x]
             py = F32(y) + motion[1, y, x]

@@ -120,7 +120,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "taa-everywhere", "filters", "TAA blends inside surfaces too (no outline test)",
         "svgf_cli/filters/taa.py",
-        (("            if depth[y, x] <= _ZERO or not on_outline(depth, y, x):",
+        (("            if depth[y, x] <= _ZERO or not _near_jump(jumps, y, x):",
           "            if depth[y, x] <= _ZERO:"),),
         FILTER_TESTS,
     ),
