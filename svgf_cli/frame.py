@@ -109,6 +109,9 @@ class Frame:
     emission: np.ndarray | None = None
     luminance_weights: tuple[float, float, float] = field(default=REC709_LUMINANCE)
     motion_next: np.ndarray | None = None
+    # The file says its one sample per pixel went through the pixel centre (Cycles at 1 spp),
+    # while a converged frame of its renderer averages the pixel filter's footprint.
+    centre_sampled: bool = False
 
     # ----------------------------------------------------------------- constructors
     @classmethod

@@ -1106,6 +1106,21 @@ def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
     return out
 
 
+# --------------------------------------------------------------------------- pixel filter
+def pixel_filter(colour: np.ndarray, emission: np.ndarray, weight: float) -> np.ndarray:
+    """``K (colour - emission) + emission`` with ``K`` the separable ``[w, 1 - 2w, w]``,
+    edges replicated (``svgf_cli.filters.pixel_filter``)."""
+    light = np.asarray(emission, dtype=F64)
+    rest = np.asarray(colour, dtype=F64) - light
+    kernel = np.array([weight, 1.0 - 2.0 * weight, weight])
+    for axis in (2, 1):
+        padded = np.pad(rest, [(1, 1) if a == axis else (0, 0) for a in range(3)], mode="edge")
+        size = rest.shape[axis]
+        rest = sum(k * np.take(padded, np.arange(i, i + size), axis=axis)
+                   for i, k in enumerate(kernel))
+    return rest + light
+
+
 # --------------------------------------------------------------------------- history guard
 def reset_nonfinite_history(history: History) -> int:
     """In place: where any signal's history (colour, moments, history length) holds a

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numba
 import numpy as np
 import pytest
@@ -15,7 +17,12 @@ from synthetic import (
 
 from svgf_cli.filters.bidirectional import STATIC_MOTION
 from svgf_cli.filters.denoiser import Denoiser
-from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, resolve_params
+from svgf_cli.filters.params import (
+    AUTO_ITERATIONS,
+    AUTO_PIXEL_FILTER,
+    SVGFParams,
+    resolve_params,
+)
 from svgf_cli.frame import Frame
 
 F32 = np.float32
@@ -377,6 +384,37 @@ def test_taa_leaves_no_trail_behind_a_moving_light() -> None:
     for f in frames:
         denoiser.process(f)
     np.testing.assert_allclose(denoiser.process(bright).color, _radiance(bright), rtol=1e-6)
+
+
+def test_pixel_filter_auto_blurs_only_centre_sampled_frames() -> None:
+    """``auto`` (the default preset) applies the 3-tap pixel filter to frames whose header
+    says they are pixel-centre samples and to no other; an explicit weight applies to all.
+    The emission is added back unfiltered."""
+    h, w = 12, 16
+    illumination = np.full((h, w), 0.2, dtype=F32)
+    illumination[:, 8:] = 2.0  # a sharp shading edge
+    glow = np.zeros((3, h, w), dtype=F32)
+    glow[:, 2:4, 2:4] = 40.0
+
+    def frames(centre: bool) -> list[Frame]:
+        sequence = static_sequence(3, w, h, split=False, illumination=illumination,
+                                   emission=glow)
+        return [dataclasses.replace(f, centre_sampled=centre) for f in sequence]
+
+    params = resolve_params("paper", atrous_iterations=0, temporal=False)
+    sharp, _ = _run(params, frames(True))
+    auto, _ = _run(params.replace(pixel_filter=AUTO_PIXEL_FILTER), frames(True))
+    jittered, _ = _run(params.replace(pixel_filter=AUTO_PIXEL_FILTER), frames(False))
+    forced, _ = _run(params.replace(pixel_filter=0.05), frames(False))
+    np.testing.assert_array_equal(jittered[-1].color, sharp[-1].color)
+    np.testing.assert_array_equal(forced[-1].color, auto[-1].color)
+    edge = auto[-1].color[1, 6]
+    left, right = sharp[-1].color[1, 6, 7], sharp[-1].color[1, 6, 8]
+    assert edge[7] == pytest.approx(0.95 * left + 0.05 * right, rel=1e-5)
+    assert edge[8] == pytest.approx(0.95 * right + 0.05 * left, rel=1e-5)
+    # The light keeps its own value (its neighbours' rest is blurred into it, not it out).
+    assert np.all(auto[-1].color[:, 2:4, 2:4] >= glow[:, 2:4, 2:4])
+    assert auto[-1].color[1, 2, 1] < 1.0
 
 
 def test_feedback_iteration_output_becomes_the_history() -> None:

@@ -512,3 +512,21 @@ def test_a_depth_with_a_surface_is_kept_and_an_empty_one_is_announced(tmp_path: 
         f"{empty}: depth ViewLayer.Denoising Depth.Z is background on every pixel: "
         "nothing is filtered"
     ]
+
+
+@pytest.mark.parametrize(
+    ("attributes", "expected"),
+    [
+        ({"cycles.ViewLayer.samples": "1"}, True),  # Cycles' sample 0: the pixel centre
+        ({"cycles.ViewLayer.samples": "2"}, False),  # a sample offset: jittered
+        ({"cycles.ViewLayer.samples": "128"}, False),
+        ({"Software": "Arnold"}, False),
+        ({}, False),
+    ],
+)
+def test_centre_sampled_frames_are_told_by_their_header(
+    tmp_path: Path, attributes: dict[str, str], expected: bool
+) -> None:
+    path = tmp_path / "frame.exr"
+    write_exr(path, gbuffer(), attributes=attributes)
+    assert read_frame(path, build_mapping()).frame.centre_sampled is expected

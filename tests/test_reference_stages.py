@@ -38,6 +38,7 @@ from svgf_cli.filters.modulate import (
     remodulate,
     remodulate_add,
 )
+from svgf_cli.filters.pixel_filter import pixel_filter
 from svgf_cli.filters.reproject import accumulate, reproject
 from svgf_cli.filters.taa import on_outline, taa_resolve
 from svgf_cli.filters.variance import (
@@ -1105,3 +1106,28 @@ def test_taa_follows_the_motion_of_a_translating_image() -> None:
     inside = (slice(None), slice(1, None), slice(2, None))
     np.testing.assert_allclose(out[inside], current[inside], rtol=1e-6, atol=1e-6)
     _close(out, ref.taa_resolve(current, previous, motion, depth, REC709, 0.1), 1e-6)
+
+
+# --------------------------------------------------------------------------- pixel filter
+@pytest.mark.parametrize("weight", [0.05, 1.0 / 3.0])
+def test_pixel_filter_matches_reference(weight: float) -> None:
+    rng = np.random.default_rng(8)
+    colour = rng.gamma(2.0, 0.5, (3, 7, 11)).astype(F32)
+    emission = np.zeros_like(colour)
+    emission[:, 2, 3:6] = 30.0  # a light: added back as it is
+    colour += emission
+    out = np.empty_like(colour)
+    pixel_filter(colour, emission, F32(weight), out)
+    _close(out, ref.pixel_filter(colour, emission, weight), 1e-6, "pixel filter")
+    # Light does not leak: the pixels beside the light see only the rest's blur.
+    assert np.all(out[:, 2, 2] < colour[:, 2, 2] + 1.0)
+
+
+def test_pixel_filter_keeps_constants_and_ramps() -> None:
+    y, x = np.mgrid[0:6, 0:9].astype(np.float64)
+    ramp = np.stack([1.0 + 0.1 * x, 2.0 + 0.05 * y, np.full_like(x, 3.0)]).astype(F32)
+    out = np.empty_like(ramp)
+    pixel_filter(ramp, np.zeros_like(ramp), F32(0.05), out)
+    # Linear ramps and constants stay; at the replicated edges a ramp bends by w * slope.
+    np.testing.assert_allclose(out[:, 1:-1, 1:-1], ramp[:, 1:-1, 1:-1], rtol=1e-6)
+    np.testing.assert_allclose(out[2], ramp[2], rtol=1e-6)

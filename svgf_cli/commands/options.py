@@ -17,6 +17,7 @@ import click
 from svgf_cli.errors import UsageError
 from svgf_cli.filters.params import (
     AUTO_ITERATIONS,
+    AUTO_PIXEL_FILTER,
     DEFAULT_PRESET,
     PRESETS,
     SVGFParams,
@@ -48,9 +49,33 @@ class IterationsType(click.ParamType):
         return count
 
 
+class PixelFilterType(click.ParamType):
+    """``W`` (a neighbour weight in 0..1/3; 0 = off) or ``auto`` (AUTO_PIXEL_FILTER: from
+    the frame's header)."""
+
+    name = "W|auto"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if value is None or isinstance(value, float):
+            return value
+        text = str(value).strip().lower()
+        if text == "auto":
+            return AUTO_PIXEL_FILTER
+        try:
+            weight = float(text)
+        except ValueError:
+            self.fail(f"{value!r}: expected a weight or 'auto'", param, ctx)
+        if not 0.0 <= weight <= 1.0 / 3.0:
+            self.fail(f"{weight}: must lie in 0..1/3 or be 'auto'", param, ctx)
+        return weight
+
+
 def param_label(name: str, value: Any) -> str:
-    """A parameter value as the user writes it (``auto`` for the automatic a-trous count)."""
+    """A parameter value as the user writes it (``auto`` for the automatic a-trous count
+    and pixel filter)."""
     if name == "atrous_iterations" and value == AUTO_ITERATIONS:
+        return "auto"
+    if name == "pixel_filter" and value == AUTO_PIXEL_FILTER:
         return "auto"
     return str(value)
 
@@ -81,6 +106,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "spread_fireflies": click.FloatRange(min=0.0),
     "despike": click.FloatRange(min=0.0),
     "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
+    "pixel_filter": PixelFilterType(),
     "antilag_radius": click.IntRange(1, 16),
     "antilag_sigma": click.FloatRange(min=0.0),
     "antilag_spatial_samples": click.FloatRange(min=1.0),
@@ -198,7 +224,8 @@ def _param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
     click_type = PARAM_RANGES.get(f.name, _CLICK_TYPES.get(type_name))
     if click_type is None:
         raise TypeError(f"SVGFParams.{f.name}: unsupported type {type_name}")
-    metavar = click_type.name.upper() if isinstance(click_type, IterationsType) else None
+    metavar = (click_type.name.upper()
+               if isinstance(click_type, IterationsType | PixelFilterType) else None)
     return click.option(flag, f.name, type=click_type, default=None,
                         metavar=metavar or type_name.upper(), help=help_text)
 

@@ -61,7 +61,13 @@ from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.feedback import blend_history
 from svgf_cli.filters.fireflies import spread_fireflies
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
-from svgf_cli.filters.params import AUTO_ITERATIONS, SVGFParams, atrous_iterations_for
+from svgf_cli.filters.params import (
+    AUTO_ITERATIONS,
+    AUTO_PIXEL_FILTER,
+    SVGFParams,
+    atrous_iterations_for,
+)
+from svgf_cli.filters.pixel_filter import pixel_filter, pixel_filter_weight
 from svgf_cli.filters.reproject import accumulate_in_place, reproject
 from svgf_cli.filters.taa import taa_resolve
 from svgf_cli.filters.variance import estimate_variance
@@ -584,6 +590,17 @@ class Denoiser:
                 np.copyto(self._taa_previous, run.work["taa"])
             output = self._taa_previous.copy()
             run.lap("taa")
+        weight = pixel_filter_weight(p.pixel_filter, run.frame.centre_sampled)
+        if weight > 0.0:
+            # After TAA, whose history must stay the unfiltered output (the kernel would
+            # compound over the frames).
+            emission = run.frame.emission
+            if emission is None:
+                emission = np.zeros_like(output)
+            filtered_output = np.empty_like(output)
+            pixel_filter(output, emission, F32(weight), filtered_output)
+            output = filtered_output
+            run.lap("pixel_filter")
 
         self._frames_processed += 1
         self.stage_seconds = run.timings
@@ -1296,6 +1313,8 @@ def _check_params(p: SVGFParams) -> None:
         raise ValueError("moving_feedback_share must lie in [0, 1]")
     if not 0.0 < p.taa_alpha <= 1.0:
         raise ValueError("taa_alpha must lie in (0, 1]")
+    if p.pixel_filter != AUTO_PIXEL_FILTER and not 0.0 <= p.pixel_filter <= 1.0 / 3.0:
+        raise ValueError(f"pixel_filter must lie in [0, 1/3] or be {AUTO_PIXEL_FILTER} (auto)")
     if 0.0 < p.despike < 1.0:
         raise ValueError("despike must be 0 (off) or >= 1 (a ratio to the neighbours)")
 

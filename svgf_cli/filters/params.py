@@ -15,6 +15,8 @@ from typing import Any
 
 # ``atrous_iterations`` value that picks the count from the image size.
 AUTO_ITERATIONS = -1
+# ``pixel_filter`` from the frame's header (svgf_cli.filters.pixel_filter).
+AUTO_PIXEL_FILTER = -1.0
 
 
 def _p(default: Any, help: str, **extra: Any) -> Any:
@@ -197,6 +199,13 @@ class SVGFParams:
         " same-mode neighbour (any neighbour, in the output, for a pixel whose mode none"
         " shares) is brought down to that bound (fireflies the a-trous kept; 0 = off).",
     )
+    pixel_filter: float = _p(
+        0.0,
+        "Neighbour weight w of a [w, 1-2w, w] kernel per axis applied to the output without"
+        " its emission: the renderer's pixel filter, which frames sampled at pixel centres"
+        " lack (0 = off; auto (-1 in svgf/params) = 0.05 where the header says the frame is"
+        " one sample through the pixel centre, Cycles at 1 spp, else off).",
+    )
     taa: bool = _p(
         False,
         "Temporal anti-aliasing of the output at object outlines (the paper's last step):"
@@ -234,7 +243,8 @@ PRESETS: dict[str, SVGFParams] = {
                           mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
                           despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
                           temporal_albedo=True, albedo_catmull_rom=True,
-                          moving_feedback_share=0.0, atrous_iterations=AUTO_ITERATIONS),
+                          moving_feedback_share=0.0, atrous_iterations=AUTO_ITERATIONS,
+                          pixel_filter=AUTO_PIXEL_FILTER),
     # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
     "falcor": SVGFParams(
         alpha=0.05,

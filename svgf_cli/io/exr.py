@@ -641,6 +641,24 @@ def _clean_depth(depth: np.ndarray, path: Path, warnings: list[str]) -> int:
     return changed
 
 
+def centre_sampled(attributes: Mapping[str, Any]) -> bool:
+    """Whether the header says the frame is one sample per pixel through the pixel centre.
+
+    Cycles writes ``cycles.<view layer>.samples`` and traces its sample 0 through the pixel
+    centre (docs/cycles.md): a value of 1 is such a frame. With a sample offset it writes
+    the subset's end (2 or more) and the one sample is jittered. Other renderers' headers
+    say nothing of it: False.
+    """
+    for key, value in attributes.items():
+        if key.startswith("cycles.") and key.endswith(".samples"):
+            try:
+                if int(str(value).strip()) == 1:
+                    return True
+            except ValueError:
+                continue
+    return False
+
+
 def _depth_with_surfaces(
     depth: np.ndarray,
     resolved: ResolvedLayers,
@@ -862,6 +880,7 @@ def read_frame(
         emission=emission,
         # The filter's luminance is the file's own (its chromaticities), never negative.
         luminance_weights=info.luminance_weights.for_filter(),
+        centre_sampled=centre_sampled(info.attributes),
     )
     if "motion_next" in values:
         frame.motion_next = to_next_pixels(values["motion_next"], convention)
