@@ -165,6 +165,7 @@ class CleanFrame:
     glossy: list[bool] = field(default_factory=list)  # per signal: Signal.glossy
     guide: list[bool] = field(default_factory=list)  # per signal: Signal.guide_albedo
     mixed: list[bool] = field(default_factory=list)  # per signal: Signal.mixed
+    centre_sampled: bool = False  # Frame.centre_sampled
 
 
 def _count(counts: dict[str, int], kind: str, plane: str, value: int) -> None:
@@ -210,6 +211,7 @@ def apply_value_policy(frame: Frame) -> CleanFrame:
         glossy=[s.glossy for s in frame.signals],
         guide=[s.guide_albedo for s in frame.signals],
         mixed=[s.mixed for s in frame.signals],
+        centre_sampled=frame.centre_sampled,
     )
 
 
@@ -1486,6 +1488,12 @@ class ReferenceDenoiser:
                 output = taa_resolve(output, self.taa_previous, clean.motion, geom.depth,
                                      clean.weights, p.taa_alpha)
             self.taa_previous = output
+        weight = p.pixel_filter
+        if weight == -1.0:  # auto: the header says the frame is centre-sampled
+            weight = 0.05 if clean.centre_sampled else 0.0
+        if weight > 0.0:
+            emission = clean.emission if clean.emission is not None else np.zeros_like(output)
+            output = pixel_filter(output, emission, weight)
         return ReferenceOutput(output, variance_before_atrous, length, radiance_mode,
                                per_signal, counts)
 

@@ -25,6 +25,7 @@ on that, and every filter bug planted by ``tests/mutants/plant.py`` still exceed
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from typing import Any
 
@@ -63,6 +64,9 @@ CASES: dict[str, tuple[SVGFParams, dict[str, Any], int | None]] = {
                                            {**THREE, "light_step": (4, 0.4)}, None),
     "default+extras, moving edge": (resolve_params("default", **EXTRAS),
                                     {"moving_edge": True}, None),
+    # Cycles at 1 spp (the header says pixel centres): the pixel filter, with every extra
+    "default+extras, centre-sampled": (resolve_params("default", **EXTRAS),
+                                       {"centre_sampled": True}, None),
     # one combined colour: a mixed signal, at mixed_sigma_luminance
     "default, combined": (resolve_params("default"), {"layout": "combined"}, None),
     # feedback from the second iteration (with the colour blur), half of it where pixels
@@ -129,7 +133,10 @@ def compare_frame(got: Any, want: ref.ReferenceOutput, denoiser: Denoiser,
 
 
 def _frames(scene: dict[str, Any], extreme_frame: int | None) -> list[Frame]:
-    frames = scene_sequence(6, **scene)
+    options = dict(scene)
+    centre_sampled = bool(options.pop("centre_sampled", False))
+    frames = [dataclasses.replace(f, centre_sampled=centre_sampled)
+              for f in scene_sequence(6, **options)]
     if extreme_frame is not None:
         plant_extremes(frames[extreme_frame])
     return frames

@@ -131,6 +131,30 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "pixel-filter-everywhere", "filters",
+        "pixel filter auto applied to frames that are not centre-sampled",
+        "svgf_cli/filters/pixel_filter.py",
+        (("    return CENTRE_SAMPLE_WEIGHT if centre_sampled else 0.0\n",
+          "    return CENTRE_SAMPLE_WEIGHT\n"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "pixel-filter-blurs-lights", "filters", "pixel filter blurs the emission too",
+        "svgf_cli/filters/pixel_filter.py",
+        (("                target[x] = centre * here[c, x] + weight * (up[c, x] + down[c, x]) "
+          "+ light[x]",
+          "                target[x] = centre * here[c, x] + weight * (up[c, x] + down[c, x]) "
+          "+ light[x] * centre"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "centre-sampled-any-count", "io", "any Cycles sample count read as centre-sampled",
+        "svgf_cli/io/exr.py",
+        (("                if int(str(value).strip()) == 1:",
+          "                if int(str(value).strip()) >= 1:"),),
+        IO_TESTS,
+    ),
+    Mutant(
         "arnold-backward", "io", "Arnold preset treated as backward motion",
         "svgf_cli/io/layers.py",
         (('    "arnold": "forward-pixels",', '    "arnold": "backward-pixels",'),),
