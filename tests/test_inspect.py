@@ -117,3 +117,16 @@ def test_luminance_weights_windows_and_views_are_reported(
     )
     code, out, _ = run_cli(["inspect", str(stereo)], capsys)
     assert code == 0 and "views: left, right (multi-view: svgf denoise refuses it)" in out
+
+
+def test_a_centre_sampled_frame_is_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Cycles' header at 1 spp: the report says the default preset's pixel filter applies."""
+    centre = tmp_path / "c.0001.exr"
+    write_exr(centre, {name: np.full((H, W), 0.5, np.float32) for name in SVGF},
+              attributes={"cycles.ViewLayer.samples": "1"})
+    code, out, _ = run_cli(["inspect", str(centre)], capsys)
+    assert code == 0 and "samples: one through the pixel centre" in out
+    code, out, _ = run_cli(["inspect", str(_write(tmp_path / "j.0001.exr", SVGF))], capsys)
+    assert code == 0 and "samples:" not in out

@@ -23,7 +23,7 @@ from svgf_cli.commands.options import (
 )
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
-from svgf_cli.filters.params import AUTO_ITERATIONS, atrous_iterations_for
+from svgf_cli.filters.params import AUTO_ITERATIONS, AUTO_PIXEL_FILTER, atrous_iterations_for
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS, SIGNAL_CHOICES
 from svgf_cli.progress import PROGRESS_MODES, Progress
 
@@ -225,8 +225,10 @@ def command(**options: Any) -> None:
     frame such as in.1001.exr) or a list of files.
     """
     from svgf_cli.farm.job import build_job
+    from svgf_cli.filters.pixel_filter import pixel_filter_weight
     from svgf_cli.io.atomic import remove_stale_temporaries
     from svgf_cli.io.exr import (
+        centre_sampled,
         check_compression,
         compression_name,
         fix_signal_set,
@@ -291,6 +293,12 @@ def command(**options: Any) -> None:
     if params.atrous_iterations == AUTO_ITERATIONS:
         count = atrous_iterations_for(params, info.height, info.width)
         progress.info(f"A-trous: {count} iterations (auto, for {info.width}x{info.height})")
+    if params.pixel_filter == AUTO_PIXEL_FILTER:
+        centre = centre_sampled(info.attributes)
+        weight = pixel_filter_weight(params.pixel_filter, centre)
+        progress.info(f"Pixel filter: {weight:g} (auto: "
+                      + ("the header says one sample through the pixel centre)" if centre
+                         else "the header does not say the samples are pixel centres)"))
     progress.info(
         f"Layers ({options['preset_aovs']} AOVs, motion {mapping.motion_convention}, "
         f"from {first_input}):\n{resolved.describe()}\n  {info.luminance_weights.describe()}"

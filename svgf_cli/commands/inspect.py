@@ -12,6 +12,7 @@ from svgf_cli.errors import InputError
 from svgf_cli.io.exr import (
     ExrInfo,
     TypedAttribute,
+    centre_sampled,
     io_threads,
     read_frame,
     read_info,
@@ -142,6 +143,9 @@ def _text(
         verdict = "passed" if check.passed else "FAILED: svgf denoise filters the combined colour"
         lines.append(f"  light-pass check ({verdict}): {check.describe()}")
     lines.append(f"  {info.luminance_weights.describe()}")
+    if centre_sampled(info.attributes):
+        lines.append("  samples: one through the pixel centre (header): the default preset "
+                     "applies the renderer's pixel filter (--pixel-filter auto)")
     colour = resolve_output_colour(mapping, info.channels)
     lines.append(
         f"  denoised colour written as: {', '.join(colour or ('R', 'G', 'B'))}"
