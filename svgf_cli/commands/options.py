@@ -28,46 +28,40 @@ from svgf_cli.filters.params import (
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-class IterationsType(click.ParamType):
-    """``N`` (0 to 12 a-trous iterations; step 4096 at most) or ``auto`` (AUTO_ITERATIONS:
-    from the image size)."""
+class AutoOrNumber(click.ParamType):
+    """A number in ``[low, high]`` or ``auto`` (``sentinel``, resolved later: the a-trous
+    count from the image size, the pixel filter from the frame's header)."""
 
-    name = "N|auto"
+    def __init__(self, name: str, kind: type, low: float, high: float, shown_range: str,
+                 noun: str, sentinel: float) -> None:
+        self.name = name
+        self.kind = kind
+        self.low, self.high = low, high
+        self.shown_range = shown_range
+        self.noun = noun
+        self.sentinel = sentinel
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
-        if value is None or isinstance(value, int):
+        if value is None or isinstance(value, self.kind):
             return value
         text = str(value).strip().lower()
         if text == "auto":
-            return AUTO_ITERATIONS
+            return self.kind(self.sentinel)
         try:
-            count = int(text)
+            number = self.kind(text)
         except ValueError:
-            self.fail(f"{value!r}: expected a number of iterations or 'auto'", param, ctx)
-        if not 0 <= count <= 12:
-            self.fail(f"{count}: must lie in 0..12 or be 'auto'", param, ctx)
-        return count
+            self.fail(f"{value!r}: expected {self.noun} or 'auto'", param, ctx)
+        if not self.low <= number <= self.high:
+            self.fail(f"{number}: must lie in {self.shown_range} or be 'auto'", param, ctx)
+        return number
 
 
-class PixelFilterType(click.ParamType):
-    """``W`` (a neighbour weight in 0..1/3; 0 = off) or ``auto`` (AUTO_PIXEL_FILTER: from
-    the frame's header)."""
-
-    name = "W|auto"
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
-        if value is None or isinstance(value, float):
-            return value
-        text = str(value).strip().lower()
-        if text == "auto":
-            return AUTO_PIXEL_FILTER
-        try:
-            weight = float(text)
-        except ValueError:
-            self.fail(f"{value!r}: expected a weight or 'auto'", param, ctx)
-        if not 0.0 <= weight <= 1.0 / 3.0:
-            self.fail(f"{weight}: must lie in 0..1/3 or be 'auto'", param, ctx)
-        return weight
+# ``N`` (0 to 12 a-trous iterations; step 4096 at most) or ``auto``.
+ITERATIONS_TYPE = AutoOrNumber("N|auto", int, 0, 12, "0..12", "a number of iterations",
+                               AUTO_ITERATIONS)
+# ``W`` (a neighbour weight in 0..1/3; 0 = off) or ``auto``.
+PIXEL_FILTER_TYPE = AutoOrNumber("W|auto", float, 0.0, 1.0 / 3.0, "0..1/3", "a weight",
+                                 AUTO_PIXEL_FILTER)
 
 
 def param_label(name: str, value: Any) -> str:
@@ -94,7 +88,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "variance_history_threshold": click.IntRange(min=0),
     "spatial_variance_radius": click.IntRange(min=0),
     "spatial_variance_sigma_luminance": click.FloatRange(min=0.0, min_open=True),
-    "atrous_iterations": IterationsType(),
+    "atrous_iterations": ITERATIONS_TYPE,
     "feedback_iteration": click.IntRange(min=-1),
     "sigma_luminance": click.FloatRange(min=0.0, min_open=True),
     "sigma_normal": click.FloatRange(min=0.0, min_open=True),
@@ -106,7 +100,7 @@ PARAM_RANGES: dict[str, click.ParamType] = {
     "spread_fireflies": click.FloatRange(min=0.0),
     "despike": click.FloatRange(min=0.0),
     "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
-    "pixel_filter": PixelFilterType(),
+    "pixel_filter": PIXEL_FILTER_TYPE,
     "antilag_radius": click.IntRange(1, 16),
     "antilag_sigma": click.FloatRange(min=0.0),
     "antilag_spatial_samples": click.FloatRange(min=1.0),
@@ -224,8 +218,7 @@ def _param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
     click_type = PARAM_RANGES.get(f.name, _CLICK_TYPES.get(type_name))
     if click_type is None:
         raise TypeError(f"SVGFParams.{f.name}: unsupported type {type_name}")
-    metavar = (click_type.name.upper()
-               if isinstance(click_type, IterationsType | PixelFilterType) else None)
+    metavar = click_type.name.upper() if isinstance(click_type, AutoOrNumber) else None
     return click.option(flag, f.name, type=click_type, default=None,
                         metavar=metavar or type_name.upper(), help=help_text)
 
