@@ -1,8 +1,8 @@
 """Temporal demodulation colour: remodulate with the colour's running mean over frames.
 
-A renderer that jitters its camera samples over the pixel filter (Arnold, Karma; Cycles only
-from its second sample on: its first goes through the pixel centre, docs/cycles.md) writes,
-per pixel, the colour of one sample of the filter footprint. Where the
+A renderer that jitters its camera samples over the pixel filter (Cycles only from its
+second sample on, with a sample offset: its first goes through the pixel centre,
+docs/cycles.md) writes, per pixel, the colour of one sample of the filter footprint. Where the
 footprint straddles a texture edge, that colour is one texture or the other from frame to
 frame, while the reference (many samples) is their filtered mean. Demodulation by the
 sample's own colour is exact (the illumination of that sample), and temporal accumulation
