@@ -535,6 +535,21 @@ class _Planes:
             stacked[index] = self.located[name].channels[name].pixels
         return stacked
 
+    def locate_like(self, names: tuple[str, ...], like: str) -> bool:
+        """Locate ``names`` (not asked for when the file was read) in a part with the same
+        data window as the part holding ``like``, full-resolution; False where one is not."""
+        window = self.located[like].data_window
+        for name in names:
+            for part in self.source.parts:
+                channel = part.channels.get(name)
+                if (channel is not None and part.data_window == window
+                        and channel.x_sampling == 1 and channel.y_sampling == 1):
+                    self.located[name] = part
+                    break
+            else:
+                return False
+        return True
+
     def share(self, names: tuple[str, ...], stacked: np.ndarray) -> None:
         """The source's float32 channels ``names`` become views of ``stacked`` (which holds
         the same values), so a frame's planes are not held twice while it is written.
@@ -676,8 +691,11 @@ def _depth_with_surfaces(
     """
     if np.any(depth[0] > 0):
         return depth
-    chosen = ",".join(resolved["depth"] or ())
+    chosen_names = resolved["depth"] or ()
+    chosen = ",".join(chosen_names)
     for alternative in resolved.alternatives.get("depth", []):
+        if not planes.locate_like(alternative, chosen_names[0]):
+            continue
         candidate = planes.gather(alternative)
         _clean_depth(candidate[0], path, [])
         if np.any(candidate[0] > 0):
@@ -784,8 +802,6 @@ def read_frame(
     if fallback is not None:
         roles = list(dict.fromkeys([*roles, *fallback.roles()]))
     names = [name for role in roles for name in (resolved[role] or ())]
-    # Located too (the whole file is decoded anyway) in case the chosen depth is empty.
-    names += [name for alt in resolved.alternatives.get("depth", []) for name in alt]
     gradient = [p.gradient_mask for p in (plan, fallback) if p and p.gradient_mask]
     gradient += [name for p in (plan, fallback) if p
                  for _, pair in p.gradient_channels for name in pair]
