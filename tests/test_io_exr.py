@@ -530,3 +530,25 @@ def test_centre_sampled_frames_are_told_by_their_header(
     path = tmp_path / "frame.exr"
     write_exr(path, gbuffer(), attributes=attributes)
     assert read_frame(path, build_mapping()).frame.centre_sampled is expected
+
+
+def test_an_alternative_depth_in_a_part_of_another_window_is_not_needed(tmp_path: Path) -> None:
+    # Cycles-named frame in one part; a second, smaller part holds another Denoising Depth
+    # candidate's channel. The chosen Depth has surfaces: the file reads, the other part is
+    # never asked for. Were the chosen Depth empty, the alternative could not serve either.
+    surface = np.random.default_rng(5).uniform(1.0, 10.0, (H, W))
+    channels = _cycles_channels(surface, surface)
+    alternative = {"ViewLayer.Denoising Depth.Z": channels.pop("ViewLayer.Denoising Depth.Z")}
+    path = tmp_path / "parts.exr"
+    small = {n: v[: H - 2, : W - 2].copy() for n, v in alternative.items()}
+    _write_multipart(path, [("main", list(channels), (W, H))], channels,
+                     extra=("more", list(small), small))
+    result = read_frame(path, build_mapping("cycles"))
+    assert np.array_equal(result.frame.depth, surface.astype(np.float32))
+    empty = tmp_path / "empty.exr"
+    channels["ViewLayer.Depth.Z"] = np.full((H, W), 1e10, np.float32)
+    _write_multipart(empty, [("main", list(channels), (W, H))], channels,
+                     extra=("more", list(small), small))
+    result = read_frame(empty, build_mapping("cycles"))
+    assert not np.any(result.frame.depth)
+    assert any("nothing is filtered" in w for w in result.warnings)
