@@ -12,7 +12,10 @@ the cold start with the content held fixed: runs started at every frame from the
 the fourth-last (no warm-up), their first four frames' mean trimmed relMSE over the same
 frames' in the run over the whole sequence, averaged over the starts (forward /
 bidirectional; 1.00: no cold start). The "first 4" column mixes the cold start with how
-hard the first frames are; this one does not.
+hard the first frames are; this one does not. "steady" is the relMSE ratio over the frames
+where both passes are warm (at least ``warm_frames`` from either end: a long causal history's
+effective sample count within 10 %); a sequence of 16 frames or fewer has none, and its mean
+ratio is mostly the gain of the first frames (a long shot's mean tends to this column).
 ``bench/bidirectional_eval.py`` measures the same through the CLI (slower).
 
 Run: ``.venv/bin/python bench/bidirectional_ratios.py [--consistency-sigma K] [SEQUENCE ...]``
@@ -50,6 +53,7 @@ from svgf_cli.evaluate.metrics import (  # noqa: E402
     tone_map,
 )
 from svgf_cli.filters import denoiser as denoiser_module  # noqa: E402
+from svgf_cli.filters.bidirectional import effective_counts  # noqa: E402
 from svgf_cli.filters.denoiser import Denoiser  # noqa: E402
 from svgf_cli.filters.params import resolve_params  # noqa: E402
 from svgf_cli.filters.two_pass import denoise_bidirectional  # noqa: E402
@@ -105,6 +109,22 @@ def metrics(outputs: list[np.ndarray], references: list[np.ndarray]) -> dict[str
     return means
 
 
+def warm_frames(alpha: float, cap: int) -> int:
+    """Frames a history needs before its effective sample count is within 10 % of a long
+    history's (10 at alpha 0.2)."""
+    counts = effective_counts(alpha, cap)
+    return int(np.argmax(counts >= 0.9 * counts[-1]))
+
+
+def steady_ratio(forward: list[float], both: list[float], warm: int) -> float | None:
+    """Mean per-frame relMSE ratio bidirectional / forward over the frames at least ``warm``
+    from either end (None: the sequence has no such frame)."""
+    frames = slice(warm, len(forward) - warm)
+    if frames.start >= frames.stop:
+        return None
+    return float(np.mean(both[frames]) / np.mean(forward[frames]))
+
+
 def cold_start(frames: list, references: list[np.ndarray], whole: list[float],
                denoise: Callable[[list], list[np.ndarray]]) -> float:
     """Mean trimmed relMSE of the first four frames of a run started at frame ``a`` (no
@@ -137,8 +157,9 @@ def main() -> None:
         "default", **{**overrides, **parse_overrides(args.set_bidirectional)})
     print("| sequence | relMSE (trimmed) fwd / bidir (ratio) | FLIP | temporal | RMSE ratio "
           "| relMSE ratio | PSNR diff | SSIM diff | worse than forward | first 4 / mean "
-          "| cold start |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| cold start | steady |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    warm = warm_frames(params.alpha, params.history_cap)
 
     def causal_run(chunk: list) -> list[np.ndarray]:
         causal = Denoiser(params)
@@ -165,7 +186,13 @@ def main() -> None:
               + f" | {both['psnr'] - forward['psnr']:+.2f} | {both['ssim'] - forward['ssim']:+.4f}"
               + f" | {', '.join(worse) or '-'}"
               + f" | {forward['first4']:.2f} / {both['first4']:.2f}"
-              + f" | {cold[0]:.2f} / {cold[1]:.2f} |", flush=True)
+              + f" | {cold[0]:.2f} / {cold[1]:.2f}"
+              + f" | {_ratio(steady_ratio(forward['per_frame'], both['per_frame'], warm))} |",
+              flush=True)
+
+
+def _ratio(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
 
 
 if __name__ == "__main__":
