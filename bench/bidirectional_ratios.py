@@ -117,8 +117,8 @@ def warm_frames(alpha: float, cap: int) -> int:
 
 
 def steady_ratio(forward: list[float], both: list[float], warm: int) -> float | None:
-    """Mean per-frame relMSE ratio bidirectional / forward over the frames at least ``warm``
-    from either end (None: the sequence has no such frame)."""
+    """Bidirectional's mean per-frame relMSE over forward-only's, both over the frames at
+    least ``warm`` from either end (None: the sequence has no such frame)."""
     frames = slice(warm, len(forward) - warm)
     if frames.start >= frames.stop:
         return None
