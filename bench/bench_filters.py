@@ -178,16 +178,9 @@ def steal_percent(before: tuple[int, int] | None, after: tuple[int, int] | None)
 
 
 def denoiser_buffer_bytes(denoiser: Denoiser) -> int:
-    """Bytes of the full-frame arrays a Denoiser keeps between frames (workspace + history)."""
-    arrays: list[np.ndarray] = []
-    work = denoiser._work
-    if work is not None:
-        arrays += list(work.planes.values())
-    if denoiser._history is not None:
-        arrays += list(denoiser._history.values())
-    if denoiser._taa_previous is not None:
-        arrays.append(denoiser._taa_previous)
-    return sum(a.nbytes for a in arrays)
+    """Bytes of the full-frame arrays a Denoiser keeps between frames (workspace, history,
+    colour means, TAA), each counted once: ``PipelineFilter.held_bytes``."""
+    return denoiser.held_bytes()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -51,7 +51,7 @@ def writer(result, out: Path, colour_only: bool):
     from types import SimpleNamespace
 
     from svgf_cli.io.output import write_output
-    from svgf_cli.runner import build_output
+    from svgf_cli.run.output import build_output
 
     colour = result.frame.total_radiance()
 
@@ -79,12 +79,10 @@ class _Config:
         self.colour_only = colour_only
         self.preset = "paper"
         self.warmup_label = "all"
-        self.params = SimpleParams()
+        # Real parameters: output_attributes names the stages their pipeline runs.
+        from svgf_cli.filters.params import SVGFParams
 
-
-class SimpleParams:
-    def to_json(self) -> str:
-        return "{}"
+        self.params = SVGFParams()
 
 
 _threads = [0]

@@ -21,17 +21,18 @@ against their noise-free reference:
 Columns: relMSE of the last 4 frames; the largest output pixel over the reference's local
 (5x5) maximum, and the share of pixels above 3x it (issue 14's target: none).
 
-Run: ``.venv/bin/python bench/demodulation_floor.py`` (sets the Denoiser's private demodulation
-rule; a measurement, not an API).
+Run: ``.venv/bin/python bench/demodulation_floor.py`` (replaces the relative floor in the
+demodulation rules of the Denoiser's ``setup``; a measurement, not an API).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 
 import numpy as np
 
-from svgf_cli.filters.denoiser import MAX_REFLECTANCE, Denoiser
+from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
 from svgf_cli.frame import Frame, Signal
 
@@ -84,7 +85,11 @@ def frames(kind: str, palette: str) -> tuple[list[Frame], np.ndarray]:
 def score(kind: str, palette: str, black: float, relative: float) -> tuple[float, float, float]:
     sequence, reference = frames(kind, palette)
     denoiser = Denoiser(resolve_params("paper", albedo_epsilon=black))
-    denoiser._rule = (F32(black), F32(MAX_REFLECTANCE), F32(relative))
+    # The rules (floor, MAX_REFLECTANCE, relative floor) per guide_albedo are derived from
+    # the settings once (filters.context.Setup); the floor is albedo_epsilon = black.
+    rules = {guide: (floor, ceiling, F32(relative))
+             for guide, (floor, ceiling, _) in denoiser.setup.rules.items()}
+    denoiser.setup = dataclasses.replace(denoiser.setup, rules=rules)
     bound = local_max(reference.max(axis=0))
     errors, worst, hot = [], 0.0, 0.0
     for index, frame in enumerate(sequence):

@@ -18,25 +18,43 @@ from typing import Any
 
 from bench_filters import SceneCanvas, denoiser_buffer_bytes
 
-from svgf_cli.filters import denoiser as denoiser_module
 from svgf_cli.filters import modulate
+from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
+from svgf_cli.filters.stages import (
+    accumulate,
+    antilag,
+    atrous,
+    firefly_clamp,
+    gradients,
+    history_clamp,
+    reproject,
+    variance,
+)
+from svgf_cli.filters.stages.store_history import StoreHistory
+from svgf_cli.filters.stages.values import CleanGeometry
 
-KERNELS = (
-    "unit_normals", "depth_gradients", "normal_gradient", "reproject", "history_clamp",
-    "antilag", "accumulate_in_place", "estimate_variance", "luminance_stop_guides",
-    "atrous_iteration", "firefly_clamp",
+# Each kernel is patched in the stage module that imports and calls it.
+KERNELS: tuple[tuple[Any, str], ...] = (
+    (gradients, "unit_normals"), (gradients, "depth_gradients"),
+    (gradients, "normal_gradient"), (reproject, "reproject"),
+    (history_clamp, "history_clamp"), (antilag, "antilag"),
+    (accumulate, "accumulate_in_place"), (variance, "estimate_variance"),
+    (atrous, "luminance_stop_guides"), (atrous, "atrous_iteration"),
+    (firefly_clamp, "firefly_clamp"),
 )
 
 
-def timed(owner: Any, name: str, totals: dict[str, float]) -> None:
-    """Replace ``owner.name`` by a wrapper adding its CPU seconds to ``totals[name]``."""
+def timed(owner: Any, name: str, totals: dict[str, float], label: str | None = None) -> None:
+    """Replace ``owner.name`` by a wrapper adding its CPU seconds to ``totals[label]``
+    (``label`` defaults to ``name``)."""
     function: Callable[..., Any] = getattr(owner, name)
+    key = label or name
 
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         start = time.process_time()
         result = function(*args, **kwargs)
-        totals[name] = totals.get(name, 0.0) + time.process_time() - start
+        totals[key] = totals.get(key, 0.0) + time.process_time() - start
         return result
 
     setattr(owner, name, wrapper)
@@ -51,15 +69,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--preset", default="default")
     args = parser.parse_args(argv)
     totals: dict[str, float] = {}
-    for name in KERNELS:
-        timed(denoiser_module, name, totals)
+    for module, name in KERNELS:
+        timed(module, name, totals)
     for name in ("demodulate", "remodulate_add"):
-        timed(modulate, name, totals)
-    for name in ("_clean_geometry", "_store_history"):
-        timed(denoiser_module.Denoiser, name, totals)
+        timed(modulate, name, totals)  # called as modulate.<name> by the stages
+    # the host side of two stages (the geometry value policy; the history swap + guard)
+    timed(CleanGeometry, "run", totals, "clean_geometry")
+    timed(StoreHistory, "run", totals, "store_history")
     width, height = (int(v) for v in args.size.lower().split("x"))
     canvas = SceneCanvas(width, height, pan=args.warmup + args.frames + 1, signals=args.signals)
-    denoiser = denoiser_module.Denoiser(resolve_params(args.preset))
+    denoiser = Denoiser(resolve_params(args.preset))
     for index in range(args.warmup):
         denoiser.process(canvas.frame(index))
     totals.clear()

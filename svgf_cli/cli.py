@@ -19,6 +19,7 @@ COMMANDS = {
     "trace": "svgf_cli.commands.trace",
     "evaluate": "svgf_cli.commands.evaluate",
     "plan": "svgf_cli.commands.plan",
+    "params": "svgf_cli.commands.params",
     "inspect": "svgf_cli.commands.inspect",
 }
 

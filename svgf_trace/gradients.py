@@ -34,7 +34,8 @@ import numpy as np
 
 from svgf_trace import kernels
 from svgf_trace.animation import Animation
-from svgf_trace.render import (
+from svgf_trace.scene import Scene
+from svgf_trace.tracing import (
     STREAM_GRADIENT,
     STREAM_INPUT,
     FrameGeometry,
@@ -45,7 +46,6 @@ from svgf_trace.render import (
     prepare_frame,
     trace_samples,
 )
-from svgf_trace.scene import Scene
 
 STRATUM = 3
 # Relative distance within which a hit on another triangle of the same object counts as

@@ -281,27 +281,34 @@ def _corner(token: str, counts: tuple[int, int, int], path: Path, line_no: int) 
     return tuple(out)
 
 
-def load_obj(path: str | Path) -> Scene:
-    """Load an OBJ (and the MTL files it names) into a :class:`Scene`.
+# Triangles grouped by object name in first-appearance order: name -> list of
+# (corner indices (3 x (v, vt, vn)), material name).
+_Groups = dict[str, list[tuple[tuple[tuple[int, ...], ...], str | None]]]
 
-    Raises InputError for a missing or unreadable file, a malformed line, a missing material
-    library or texture (named), an undefined material, or a file without triangles.
-    """
-    path = Path(path)
+
+@dataclass
+class _ObjRecords:
+    """What an OBJ file lists, as parsed: vertex data, materials and grouped triangles."""
+
+    verts: list[list[float]] = field(default_factory=list)
+    texcoords: list[list[float]] = field(default_factory=list)
+    normals: list[list[float]] = field(default_factory=list)
+    materials: dict[str, Material] = field(default_factory=dict)
+    groups: _Groups = field(default_factory=dict)
+
+
+def _read_scene_text(path: Path) -> str:
     if not path.is_file():
         raise InputError("scene file not found", str(path))
     try:
-        text = path.read_text(errors="replace")
+        return path.read_text(errors="replace")
     except OSError as exc:
         raise InputError(f"cannot read scene: {exc.strerror}", str(path)) from exc
 
-    verts: list[list[float]] = []
-    texcoords: list[list[float]] = []
-    normals: list[list[float]] = []
-    materials: dict[str, Material] = {}
-    # Triangles grouped by object name in first-appearance order: name -> list of
-    # (corner indices (3 x (v, vt, vn)), material name).
-    groups: dict[str, list[tuple[tuple[tuple[int, ...], ...], str | None]]] = {}
+
+def _parse_obj(text: str, path: Path) -> _ObjRecords:
+    """Parse the OBJ lines (and the MTL files they name); faces fan-triangulated."""
+    obj = _ObjRecords()
     current_object = path.stem
     current_material: str | None = None
 
@@ -311,19 +318,19 @@ def load_obj(path: str | Path) -> Scene:
             continue
         key, args = tokens[0], tokens[1:]
         if key == "v":
-            verts.append(_floats(args, 3, path, line_no, "v"))
+            obj.verts.append(_floats(args, 3, path, line_no, "v"))
         elif key == "vt":
             uv = _floats(args, 1, path, line_no, "vt")
             v_coord = float(args[1]) if len(args) > 1 else 0.0
-            texcoords.append([uv[0], v_coord])
+            obj.texcoords.append([uv[0], v_coord])
         elif key == "vn":
-            normals.append(_floats(args, 3, path, line_no, "vn"))
+            obj.normals.append(_floats(args, 3, path, line_no, "vn"))
         elif key == "f":
             if len(args) < 3:
                 raise InputError(f"line {line_no}: face with fewer than 3 corners", str(path))
-            counts = (len(verts), len(texcoords), len(normals))
+            counts = (len(obj.verts), len(obj.texcoords), len(obj.normals))
             corners = [_corner(t, counts, path, line_no) for t in args]
-            tris = groups.setdefault(current_object, [])
+            tris = obj.groups.setdefault(current_object, [])
             for i in range(1, len(corners) - 1):
                 tris.append(((corners[0], corners[i], corners[i + 1]), current_material))
         elif key in ("o", "g"):
@@ -332,12 +339,23 @@ def load_obj(path: str | Path) -> Scene:
             current_material = " ".join(args)
         elif key == "mtllib":
             for name in args:
-                parse_mtl(path.parent / name, materials)
+                parse_mtl(path.parent / name, obj.materials)
+    return obj
 
-    triangle_total = sum(len(t) for t in groups.values())
-    if triangle_total == 0:
-        raise InputError("scene has no faces (empty mesh)", str(path))
 
+@dataclass
+class _Triangles:
+    """The triangles numbered object by object: corner indices, material and object."""
+
+    corner_idx: np.ndarray  # (T, 3, 3) int64 (v, vt, vn) per corner, -1 absent
+    material: np.ndarray  # (T,) int32 index into ``materials``
+    object_index: np.ndarray  # (T,) int32
+    objects: list[SceneObject]
+    materials: list[Material]  # in first-use order; "(default)" for faces without usemtl
+
+
+def _number_triangles(obj: _ObjRecords, triangle_total: int, path: Path) -> _Triangles:
+    """Lay the grouped triangles out in arrays; InputError for an undefined material."""
     material_index: dict[str | None, int] = {}
     material_list: list[Material] = []
 
@@ -345,24 +363,20 @@ def load_obj(path: str | Path) -> Scene:
         if name not in material_index:
             if name is None:
                 material = Material(name="(default)")
-            elif name in materials:
-                material = materials[name]
+            elif name in obj.materials:
+                material = obj.materials[name]
             else:
                 raise InputError(f"material {name!r} is used but not defined", str(path))
             material_index[name] = len(material_list)
             material_list.append(material)
         return material_index[name]
 
-    v_arr = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
-    vt_arr = np.asarray(texcoords, dtype=np.float64).reshape(-1, 2)
-    vn_arr = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-
     corner_idx = np.empty((triangle_total, 3, 3), dtype=np.int64)
     mat = np.empty(triangle_total, dtype=np.int32)
     obj_idx = np.empty(triangle_total, dtype=np.int32)
     objects: list[SceneObject] = []
     cursor = 0
-    for obj_number, (name, tris) in enumerate((n, t) for n, t in groups.items() if t):
+    for obj_number, (name, tris) in enumerate((n, t) for n, t in obj.groups.items() if t):
         start = cursor
         for corners, material_name in tris:
             corner_idx[cursor] = corners
@@ -370,6 +384,27 @@ def load_obj(path: str | Path) -> Scene:
             obj_idx[cursor] = obj_number
             cursor += 1
         objects.append(SceneObject(name=name, index=obj_number, start=start, stop=cursor))
+    return _Triangles(corner_idx, mat, obj_idx, objects, material_list)
+
+
+def load_obj(path: str | Path) -> Scene:
+    """Load an OBJ (and the MTL files it names) into a :class:`Scene`.
+
+    Raises InputError for a missing or unreadable file, a malformed line, a missing material
+    library or texture (named), an undefined material, or a file without triangles.
+    """
+    path = Path(path)
+    obj = _parse_obj(_read_scene_text(path), path)
+
+    triangle_total = sum(len(t) for t in obj.groups.values())
+    if triangle_total == 0:
+        raise InputError("scene has no faces (empty mesh)", str(path))
+
+    v_arr = np.asarray(obj.verts, dtype=np.float64).reshape(-1, 3)
+    vt_arr = np.asarray(obj.texcoords, dtype=np.float64).reshape(-1, 2)
+    vn_arr = np.asarray(obj.normals, dtype=np.float64).reshape(-1, 3)
+    triangles = _number_triangles(obj, triangle_total, path)
+    corner_idx = triangles.corner_idx
 
     positions = v_arr[corner_idx[:, :, 0]]
     has_uvs = np.all(corner_idx[:, :, 1] >= 0, axis=1)
@@ -393,8 +428,8 @@ def load_obj(path: str | Path) -> Scene:
         has_normals=has_normals,
         uvs=uvs,
         has_uvs=has_uvs,
-        material=mat,
-        object_index=obj_idx,
-        materials=material_list,
-        objects=objects,
+        material=triangles.material,
+        object_index=triangles.object_index,
+        materials=triangles.materials,
+        objects=triangles.objects,
     )

@@ -19,12 +19,15 @@ import numpy as np
 import pytest
 from test_cli_support import exit_code, write_sequence
 
-from svgf_cli import bidir, heap
+from svgf_cli import heap
 from svgf_cli.filters.params import resolve_params
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.spill import ScratchFolder
 from svgf_cli.progress import Progress
-from svgf_cli.runner import FrameTask, RunConfig, _default_reader, frame_writer, run_sequence
+from svgf_cli.run import bidirectional
+from svgf_cli.run.chunk import run_sequence
+from svgf_cli.run.tasks import FrameTask, RunConfig
+from svgf_cli.run.workers import default_reader, frame_writer
 
 FRAMES = range(1, 9)
 
@@ -63,7 +66,7 @@ def test_a_bidirectional_run_holds_a_bounded_number_of_frames_and_states(
     frames, states = _Alive(), _Alive()
 
     def read(path: Path, mapping: Any, **kwargs: Any) -> Any:
-        result = _default_reader(path, mapping, **kwargs)
+        result = default_reader(path, mapping, **kwargs)
         frames.add(result)
         return result
 
@@ -110,9 +113,9 @@ def test_the_reverse_pass_never_reads_a_frame_beside_two_others(
     def read(path: Path, mapping: Any, **kwargs: Any) -> Any:
         with lock:
             reads.append((int(Path(path).name.split(".")[1]), set(writing)))
-        return _default_reader(path, mapping, **kwargs)
+        return default_reader(path, mapping, **kwargs)
 
-    monkeypatch.setattr(bidir, "frame_writer", writer)
+    monkeypatch.setattr(bidirectional, "frame_writer", writer)
     _run_bidirectional(tmp_path, read)
     assert len(reads) == 2 * len(FRAMES)  # both passes read every frame
     assert all(written <= {frame + 1} for frame, written in reads), reads

@@ -19,7 +19,9 @@ from svgf_cli.filters.params import resolve_params
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.spill import ScratchFolder
 from svgf_cli.progress import Progress
-from svgf_cli.runner import FrameTask, Interrupted, RunConfig, StopFlag, run_sequence
+from svgf_cli.run.chunk import run_sequence
+from svgf_cli.run.stop import Interrupted, StopFlag
+from svgf_cli.run.tasks import FrameTask, RunConfig
 
 FRAMES = range(1, 11)
 

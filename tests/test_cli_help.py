@@ -1,4 +1,4 @@
-"""`--help` in sections: everyday options first, filter parameters last, ranges shown."""
+"""`--help` in sections: everyday options first, the filter parameters as --set; short."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from test_cli_support import run_cli, write_sequence
 from svgf_cli.commands.denoise import command as denoise
 from svgf_cli.commands.evaluate import command as evaluate
 from svgf_cli.commands.options import FILTER_SECTION
+from svgf_cli.commands.plan import command as plan
 from svgf_cli.farm.plan import DEFAULT_WARMUP
 
 
@@ -32,12 +33,17 @@ def test_denoise_help_sections_in_order_and_fits_100_columns() -> None:
     ]
     positions = [text.index(t) for t in titles]
     assert positions == sorted(positions)
-    # everyday options before the first filter parameter; ranges from click's range types
-    assert text.index("--frames") < text.index("--warmup") < text.index("--alpha")
+    # everyday options first; the filter parameters are set with --set, listed elsewhere
+    assert text.index("--frames") < text.index("--warmup") < text.index("\n  --set NAME=VALUE")
     assert text.index("--preset-aovs") < text.index(FILTER_SECTION)
-    assert "[0.0<x<=1.0]" in text and "[1<=x<=16]" in text and "[x>=1]" in text
-    assert "--atrous-iterations N|AUTO" in text and "default: auto" in text
+    assert text.index(FILTER_SECTION) < text.index("--list-params")
+    assert "--alpha" not in text and "--history-clamp" not in text  # hidden aliases
     assert max(len(line) for line in text.splitlines()) <= 100
+
+
+def test_denoise_help_is_short_at_80_columns() -> None:
+    """Issue 28: everyday options only, one screen-ish (it was 298 lines)."""
+    assert len(help_text(denoise, width=80).splitlines()) <= 120
 
 
 def test_unlisted_options_land_in_the_default_section() -> None:
@@ -52,7 +58,23 @@ def test_unlisted_options_land_in_the_default_section() -> None:
     text = help_text(evaluate)  # no section table: everything but the filter in "Options"
     options = text.index("\nOptions:")
     assert options < text.index("-r, --reference", options) < text.index(FILTER_SECTION)
-    assert text.index(FILTER_SECTION) < text.index("--preset ") < text.index("--alpha")
+    assert text.index(FILTER_SECTION) < text.index("--preset ") < text.index("\n  --set NAME=VALUE")
+    assert "--alpha" not in text
+
+
+def test_plan_and_denoise_share_the_frame_options() -> None:
+    """--frames, --warmup and --chunk-size are declared once (options.frame_options): the
+    same help and type; plan requires --frames and --chunk-size, and denoise's warm-up
+    default applies only with --frames (docs/farm.md)."""
+    def option(command: click.Command, name: str) -> click.Option:
+        return next(p for p in command.params if p.name == name)
+
+    for name in ("frames_spec", "warmup", "chunk_size"):
+        ours, theirs = option(denoise, name), option(plan, name)
+        assert ours.opts == theirs.opts and type(ours.type) is type(theirs.type)
+        assert ours.default == theirs.default
+        assert ours.required is False and theirs.required is (name != "warmup")
+    assert option(plan, "warmup").default == DEFAULT_WARMUP
 
 
 @pytest.mark.parametrize(

@@ -11,7 +11,7 @@ from svgf_cli.farm.dask_backend import run_chunk_task
 from svgf_cli.farm.job import build_job
 from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS
 from svgf_cli.io.layers import build_mapping
-from svgf_cli.runner import FrameTask, RunConfig
+from svgf_cli.run.tasks import FrameTask, RunConfig
 
 pytest.importorskip("distributed")  # the optional `farm` extra (part of `dev`)
 

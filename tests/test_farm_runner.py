@@ -22,19 +22,12 @@ from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM, InputError, UsageError
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame, Frame
 from svgf_cli.progress import Progress
-from svgf_cli.runner import (
-    FrameTask,
-    Interrupted,
-    OutputFrame,
-    ReadAhead,
-    RunConfig,
-    RunStats,
-    WriteBehind,
-    load_history,
-    pending_tasks,
-    run_sequence,
-    stop_on_signals,
-)
+from svgf_cli.run.chunk import run_sequence
+from svgf_cli.run.history import load_history
+from svgf_cli.run.output import OutputFrame
+from svgf_cli.run.stop import Interrupted, stop_on_signals
+from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats, pending_tasks
+from svgf_cli.run.workers import ReadAhead, WriteBehind
 
 W, H = 8, 6
 

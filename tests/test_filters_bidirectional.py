@@ -26,7 +26,7 @@ from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.fastmath import float32_weights
 from svgf_cli.filters.invert_motion import NO_MOTION, invert_motion
 from svgf_cli.filters.params import resolve_params
-from svgf_cli.filters.two_pass import ReversePass, denoise_bidirectional
+from svgf_cli.filters.two_pass import ForwardPass, Keep, ReversePass, denoise_bidirectional
 
 F32 = np.float32
 TOLERANCE = 2e-4
@@ -226,7 +226,7 @@ def test_pack_history_error_is_half_rounding_at_any_exposure() -> None:
 
 
 @pytest.mark.parametrize("preset", ["default", "falcor"])
-def test_forward_step_keeps_the_unfiltered_history_where_pixels_move(preset: str) -> None:
+def test_forward_pass_keeps_the_unfiltered_history_where_pixels_move(preset: str) -> None:
     """Where every pixel moves the forward pass runs as a causal run that feeds back its
     unfiltered accumulation (``feedback_iteration`` -1; with falcor's colour blur, the
     colour entering the a-trous): its stored history is that run's, bit for bit, and not
@@ -237,11 +237,11 @@ def test_forward_step_keeps_the_unfiltered_history_where_pixels_move(preset: str
     assert not any(np.any(np.all(np.abs(f.motion) < STATIC_MOTION, axis=0) & (f.depth > 0))
                    for f in frames)
     causal = Denoiser(params.replace(feedback_iteration=-1))
-    forward = Denoiser(params)
+    forward = ForwardPass(params)
     filtered = Denoiser(params.replace(moving_feedback_share=1.0))
     for frame in frames:
         causal.process(frame)
-        forward.forward_step(frame)
+        forward.process(frame, Keep.NOTHING)
         filtered.process(frame)
     a, b = causal.state(), forward.state()
     for key in ("history_illumination", "history_moments", "history_length", "history_mode"):
@@ -251,10 +251,10 @@ def test_forward_step_keeps_the_unfiltered_history_where_pixels_move(preset: str
     # the history there is not the unfiltered one, elsewhere it is
     still_frames = scene_sequence(1, wall_speed=0.0)
     causal = Denoiser(params.replace(feedback_iteration=-1))
-    forward = Denoiser(params)
+    forward = ForwardPass(params)
     for frame in still_frames:
         causal.process(frame)
-        forward.forward_step(frame)
+        forward.process(frame, Keep.NOTHING)
     still = np.all(np.abs(still_frames[-1].motion) < STATIC_MOTION, axis=0)
     a, b = causal.state(), forward.state()
     assert still.mean() > 0.3
@@ -311,21 +311,21 @@ def test_a_reverse_pass_holds_no_combination_buffers_between_frames() -> None:
     params = resolve_params("default")
     assert params.temporal_albedo
     frames = scene_sequence(5)
-    forward = Denoiser(params)
-    kept = [forward.forward_step(frame) for frame in frames]
+    forward = ForwardPass(params)
+    kept = [forward.process(frame) for frame in frames]
     reverse = ReversePass(params)
     held = []
     for t in range(len(frames) - 1, -1, -1):
         output = reverse.process(frames[t], kept[t] if t < len(frames) - 1 else None)
         assert (output is None) == (t == len(frames) - 1)
-        held.append(reverse.denoiser.held_bytes())
+        held.append(reverse.held_bytes())
     assert held[1] == held[2] == held[3] == held[4]
     frame = frames[0]
     into = reverse.forward_buffers(len(frame.names), frame.height, frame.width)
     assert into.albedo is not None and into.albedo_length is not None
     combination = sum(plane.nbytes for plane in (into.colour, into.moments, into.length,
                                                   into.albedo, into.albedo_length))
-    assert reverse.denoiser.held_bytes() - held[-1] == combination
+    assert reverse.held_bytes() - held[-1] == combination
 
 
 def test_bidirectional_refuses_taa() -> None:

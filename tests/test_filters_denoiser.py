@@ -475,14 +475,18 @@ def test_moving_pixels_keep_a_share_of_the_feedback_output(share: float) -> None
 # Each parameter at the edge of its range (accepted) and just past it (refused with its own
 # message): a library caller gets no Denoiser that would divide by zero or never converge.
 _EDGES = {
-    "atrous_iterations": (-1, -2, ">= 0"), "alpha": (1.0, 0.0, "alpha and moments_alpha"),
-    "moments_alpha": (1.0, 1.5, "alpha and moments_alpha"), "history_cap": (1, 0, "history_cap"),
-    "sigma_normal": (1e-3, 0.0, "sigma_normal"), "sigma_luminance": (1e-3, 0.0, "sigma_normal"),
-    "sigma_depth": (1e-3, 0.0, "sigma_normal"),
-    "spatial_variance_sigma_luminance": (1e-3, 0.0, "spatial variance"),
-    "spatial_variance_radius": (0, -1, "spatial variance"),
-    "albedo_epsilon": (1e-9, 0.0, "albedo_epsilon"), "taa_alpha": (1.0, 0.0, "taa_alpha"),
-    "moving_feedback_share": (1.0, 1.5, "moving_feedback_share"),
+    "atrous_iterations": (-1, -2, "atrous_iterations = -2: must be 0..12 or auto"),
+    "alpha": (1.0, 0.0, r"alpha = 0.0: must be \(0, 1\]"),
+    "moments_alpha": (1.0, 1.5, r"moments_alpha = 1.5: must be \(0, 1\]"),
+    "history_cap": (1, 0, "history_cap = 0: must be >= 1"),
+    "sigma_normal": (1e-3, 0.0, "sigma_normal = 0.0: must be > 0"),
+    "sigma_luminance": (1e-3, 0.0, "sigma_luminance = 0.0: must be > 0"),
+    "sigma_depth": (1e-3, 0.0, "sigma_depth = 0.0: must be > 0"),
+    "spatial_variance_sigma_luminance": (1e-3, 0.0, "spatial_variance_sigma_luminance = 0.0"),
+    "spatial_variance_radius": (0, -1, "spatial_variance_radius = -1: must be >= 0"),
+    "albedo_epsilon": (1e-9, 0.0, "albedo_epsilon = 0.0: must be > 0"),
+    "taa_alpha": (1.0, 0.0, r"taa_alpha = 0.0: must be \(0, 1\]"),
+    "moving_feedback_share": (1.0, 1.5, r"moving_feedback_share = 1.5: must be \[0, 1\]"),
 }
 
 
@@ -496,7 +500,7 @@ def test_parameters_outside_their_range_are_refused(name: str) -> None:
 
 def test_atrous_iterations_stop_at_twelve() -> None:
     Denoiser(resolve_params("paper", atrous_iterations=12))
-    with pytest.raises(ValueError, match="<= 12"):
+    with pytest.raises(ValueError, match=r"atrous_iterations = 13: must be 0\.\.12 or auto"):
         Denoiser(resolve_params("paper", atrous_iterations=13))
 
 

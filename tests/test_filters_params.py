@@ -1,8 +1,13 @@
-"""The presets are what the user documentation says they are: every parameter of
-``SVGFParams`` has a row in the table of docs/denoise.md with its ``paper`` and ``falcor``
-values, and ``default`` is ``paper`` except for the options that page lists. (The filter
-tests compare the kernels with the float64 reference under the same parameters, so a
-changed preset value would pass them all.)"""
+"""The presets are what the user documentation says they are, and what they always were.
+
+Every parameter of ``SVGFParams`` has a row in the table of docs/denoise.md with its group,
+valid range, ``paper`` and ``falcor`` values; ``default`` is ``paper`` except for the
+parameters that page lists, which are the preset's declared departures. Each preset's
+resolved values are pinned to the values before presets became departure lists (they are
+stored in every output's ``svgf/params``). (The filter tests compare the kernels with the
+float64 reference under the same parameters, so a changed preset value would pass them all.)
+``check_params`` refuses a value outside the declared range with a message naming the
+parameter, its value and the range."""
 
 from __future__ import annotations
 
@@ -15,12 +20,68 @@ import pytest
 from svgf_cli.filters.params import (
     AUTO_ITERATIONS,
     DEFAULT_PRESET,
+    DEPARTURES,
+    GROUPS,
     PRESETS,
     SVGFParams,
     atrous_iterations_for,
+    check_params,
+    param_fields,
 )
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "denoise.md"
+HEADER = "| parameter | group | values | paper | falcor | meaning |"
+
+# Each preset's resolved values as they were before the presets became the paper's values
+# plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
+# every output stores them in svgf/params.
+PINNED: dict[str, dict[str, object]] = {
+    "paper": {
+        "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
+        "depth_tolerance": 10.0, "depth_slack": 0.002, "normal_tolerance": 16.0,
+        "history_catmull_rom": False, "bidirectional": False, "variance_history_threshold": 4,
+        "spatial_variance_radius": 3, "spatial_variance_sigma_luminance": 10.0,
+        "spatial_variance_blur_color": False, "antilag": False, "antilag_radius": 2,
+        "antilag_sigma": 3.5, "antilag_spatial_samples": 64.0, "antilag_tolerance": 0.02,
+        "antilag_gradients": True, "glossy_history_clamp": 0.0, "glossy_sigma_luminance": 0.0,
+        "mixed_sigma_luminance": 0.0, "glossy_emitter_radiance": False, "atrous_iterations": 5,
+        "feedback_iteration": 0, "moving_feedback_share": 1.0, "sigma_luminance": 4.0,
+        "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
+        "guide_albedo_floor": 0.0, "temporal_albedo": False, "albedo_catmull_rom": False,
+        "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
+        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5,
+    },
+    "default": {
+        "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
+        "depth_tolerance": 10.0, "depth_slack": 0.002, "normal_tolerance": 16.0,
+        "history_catmull_rom": False, "bidirectional": False, "variance_history_threshold": 4,
+        "spatial_variance_radius": 3, "spatial_variance_sigma_luminance": 0.5,
+        "spatial_variance_blur_color": False, "antilag": True, "antilag_radius": 2,
+        "antilag_sigma": 3.5, "antilag_spatial_samples": 64.0, "antilag_tolerance": 0.02,
+        "antilag_gradients": True, "glossy_history_clamp": 1.0, "glossy_sigma_luminance": 1.0,
+        "mixed_sigma_luminance": 2.5, "glossy_emitter_radiance": True, "atrous_iterations": -1,
+        "feedback_iteration": 0, "moving_feedback_share": 0.0, "sigma_luminance": 4.0,
+        "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
+        "guide_albedo_floor": 0.1, "temporal_albedo": True, "albedo_catmull_rom": True,
+        "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
+        "pixel_filter": -1.0, "taa": False, "taa_alpha": 0.5,
+    },
+    "falcor": {
+        "alpha": 0.05, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
+        "depth_tolerance": 10.0, "depth_slack": 0.002, "normal_tolerance": 16.0,
+        "history_catmull_rom": False, "bidirectional": False, "variance_history_threshold": 4,
+        "spatial_variance_radius": 3, "spatial_variance_sigma_luminance": 10.0,
+        "spatial_variance_blur_color": True, "antilag": False, "antilag_radius": 2,
+        "antilag_sigma": 3.5, "antilag_spatial_samples": 64.0, "antilag_tolerance": 0.02,
+        "antilag_gradients": True, "glossy_history_clamp": 0.0, "glossy_sigma_luminance": 0.0,
+        "mixed_sigma_luminance": 0.0, "glossy_emitter_radiance": False, "atrous_iterations": 4,
+        "feedback_iteration": 1, "moving_feedback_share": 1.0, "sigma_luminance": 10.0,
+        "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
+        "guide_albedo_floor": 0.0, "temporal_albedo": False, "albedo_catmull_rom": False,
+        "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
+        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5,
+    },
+}
 
 
 def _value(text: str, field: dataclasses.Field) -> object:
@@ -31,31 +92,39 @@ def _value(text: str, field: dataclasses.Field) -> object:
     return int(text) if field.type in ("int", int) else float(text)
 
 
-def _field(option: str) -> dataclasses.Field:
-    """``--spatial-variance-radius`` or ``--temporal/--no-temporal``: the field it sets."""
-    name = option.strip("`").split("/")[0].removeprefix("--").replace("-", "_")
+def _field(name: str) -> dataclasses.Field:
+    """```spatial_variance_radius```: the field it names."""
+    name = name.strip("`")
     fields = {f.name: f for f in dataclasses.fields(SVGFParams)}
-    assert name in fields, f"docs/denoise.md documents an unknown parameter {option}"
+    assert name in fields, f"docs/denoise.md documents an unknown parameter {name}"
     return fields[name]
 
 
+def _values_text(field: dataclasses.Field) -> str:
+    valid = field.metadata["valid"]
+    return "on, off" if valid is None else valid.text()
+
+
 def _documented() -> tuple[dict[str, dict[str, object]], dict[str, object]]:
-    """The table's paper and falcor columns by field name, and the options the text says
-    ``default`` changes, with their values."""
+    """The table's paper and falcor columns by field name (checking its group and values
+    columns against the declaration), and the parameters the text says ``default`` changes,
+    with their values."""
     text = DOC.read_text()
-    table = text.split("| option | paper | falcor | meaning |", 1)[1].split("\n\n", 1)[0]
+    table = text.split(HEADER, 1)[1].split("\n\n", 1)[0]
     columns: dict[str, dict[str, object]] = {"paper": {}, "falcor": {}}
     for row in table.strip().splitlines()[1:]:
-        option, paper, falcor = (cell.strip() for cell in row.strip("|").split("|")[:3])
-        field = _field(option)
+        name, group, values, paper, falcor = (c.strip() for c in row.strip("|").split(" | ")[:5])
+        field = _field(name)
+        assert group == field.metadata["group"], name
+        assert values == _values_text(field), name
         columns["paper"][field.name] = _value(paper, field)
         columns["falcor"][field.name] = _value(falcor, field)
     sentence = re.search(r"same value in `default` as in `paper` except (.*?)\.\n\n", text,
                          re.S)
     assert sentence is not None
     changes = {}
-    for option, value in re.findall(r"`(--[a-z-]+)`\s+\(([\w.]+)\)", sentence.group(1)):
-        field = _field(option)
+    for name, value in re.findall(r"`([a-z_]+)`\s+\(([\w.]+)\)", sentence.group(1)):
+        field = _field(name)
         changes[field.name] = _value(value, field)
     return columns, changes
 
@@ -78,6 +147,52 @@ def test_default_preset_is_paper_with_the_documented_changes() -> None:
     assert DEFAULT_PRESET == "default"
     assert dataclasses.asdict(PRESETS["default"]) == {**columns["paper"], **changes}
     assert set(PRESETS) == {"default", "paper", "falcor"}
+    assert {d.name: d.value for d in DEPARTURES["default"]} == changes
+
+
+@pytest.mark.parametrize("preset", sorted(PINNED))
+def test_presets_resolve_to_their_pinned_values(preset: str) -> None:
+    assert dataclasses.asdict(PRESETS[preset]) == PINNED[preset]
+    assert set(PINNED) == set(PRESETS)
+
+
+@pytest.mark.parametrize("preset", sorted(DEPARTURES))
+def test_each_departure_changes_the_paper_and_says_why(preset: str) -> None:
+    paper = SVGFParams()
+    names = [d.name for d in DEPARTURES[preset]]
+    assert len(names) == len(set(names)), "a parameter departs twice"
+    for departure in DEPARTURES[preset]:
+        assert getattr(paper, departure.name) != departure.value, departure
+        assert len(departure.reason) > 10 and "\n" not in departure.reason
+    check_params(PRESETS[preset])
+
+
+def test_every_field_has_a_group_help_and_a_range_unless_boolean() -> None:
+    for field in param_fields():
+        assert field.metadata["group"] in GROUPS, field.name
+        assert field.metadata["help"], field.name
+        is_bool = field.type in ("bool", bool)
+        assert (field.metadata["valid"] is None) == is_bool, field.name
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "message"),
+    [
+        ("alpha", 0.0, "alpha = 0.0: must be (0, 1]"),
+        ("sigma_luminance", 0.0, "sigma_luminance = 0.0: must be > 0"),
+        ("history_cap", 0, "history_cap = 0: must be >= 1"),
+        ("antilag_radius", 17, "antilag_radius = 17: must be [1, 16]"),
+        ("despike", 0.5, "despike = 0.5: must be 0 (off) or >= 1"),
+        ("atrous_iterations", -2, "atrous_iterations = -2: must be 0..12 or auto (auto is -1)"),
+        ("pixel_filter", 0.5, "pixel_filter = 0.5: must be 0..1/3 or auto (auto is -1)"),
+    ],
+)
+def test_check_params_names_the_parameter_its_value_and_range(
+    name: str, value: object, message: str
+) -> None:
+    with pytest.raises(ValueError) as info:
+        check_params(PRESETS["paper"].replace(**{name: value}))
+    assert str(info.value) == message
 
 
 @pytest.mark.parametrize(("height", "width", "count"), [

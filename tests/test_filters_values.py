@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from synthetic import make_frame, translating_sequence
 
-import svgf_cli.filters.denoiser as denoiser_module
+import svgf_cli.filters.stages.accumulate as denoiser_module  # the accumulate stage
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
 from svgf_cli.filters.values import VALUE_LIMIT, count_geometry, reset_nonfinite_history

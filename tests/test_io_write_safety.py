@@ -34,7 +34,7 @@ from svgf_cli.io.atomic import (
 from svgf_cli.io.exr import ExrWriteError, output_error, read_frame, write_exr
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.output import write_output
-from svgf_cli.runner import load_history, save_history
+from svgf_cli.run.history import load_history, save_history
 
 
 def test_output_is_the_renamed_temporary_never_written_in_place(
@@ -202,7 +202,7 @@ def test_killed_history_write_leaves_only_a_hidden_temporary(tmp_path: Path) -> 
 import numpy as np, os, signal
 from pathlib import Path
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.runner import save_history
+from svgf_cli.run.history import save_history
 real = np.savez
 def dying(handle, **payload):
     handle.write(b"PK partial")

@@ -34,7 +34,8 @@ import pytest
 import reference_svgf as ref
 from moving_scene import ACESCG_LUMINANCE, plant_extremes, scene_frame, scene_sequence
 
-from svgf_cli.filters.denoiser import Denoiser, TemporalState
+from svgf_cli.filters.context import FrameContext, StageBase
+from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.modulate import NO_HISTORY
 from svgf_cli.filters.params import SVGFParams, resolve_params
 from svgf_cli.frame import Frame
@@ -219,10 +220,23 @@ class _Poisoned:
             moments[:, :, self.PIXEL[0], self.PIXEL[1]] = np.nan
 
 
-class PoisonedDenoiser(_Poisoned, Denoiser):
-    def _before_accumulation(self, temporal: TemporalState) -> None:
-        super()._before_accumulation(temporal)
-        self.poison(temporal.history_moments)
+class PoisonStage(_Poisoned, StageBase):
+    """A stage of one's own after the reprojection (the paper preset has no history clamp
+    nor anti-lag): poisons the reprojected moments where there is a history."""
+
+    name = "poison"
+
+    def run(self, ctx: FrameContext) -> bool:
+        if not ctx.reprojected or ctx.temporal is None:
+            return False
+        self.poison(ctx.temporal.history_moments)
+        return True
+
+
+def poisoned_denoiser(params: SVGFParams, debug_layers: bool = False) -> Denoiser:
+    denoiser = Denoiser(params, debug_layers=debug_layers)
+    denoiser.pipeline.insert_after("reproject", PoisonStage())
+    return denoiser
 
 
 class PoisonedReference(_Poisoned, ref.ReferenceDenoiser):
@@ -238,7 +252,7 @@ def test_history_guard_resets_a_poisoned_pixel_like_the_reference() -> None:
     kernels assume finite values (fast-math) and their result there is undefined."""
     params = resolve_params("paper", atrous_iterations=0, variance_history_threshold=1)
     frames = scene_sequence(5, **THREE)
-    denoiser = PoisonedDenoiser(params, debug_layers=True)
+    denoiser = poisoned_denoiser(params, debug_layers=True)
     reference = PoisonedReference(params)
     y, x = _Poisoned.PIXEL
     assert frames[2].depth[y, x] > 0

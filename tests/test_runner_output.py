@@ -17,7 +17,10 @@ from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame
 from svgf_cli.io.exr import read_frame
 from svgf_cli.io.layers import build_mapping
-from svgf_cli.runner import FrameTask, Progress, RunConfig, build_output, run_sequence
+from svgf_cli.progress import Progress
+from svgf_cli.run.chunk import run_sequence
+from svgf_cli.run.output import build_output
+from svgf_cli.run.tasks import FrameTask, RunConfig
 
 
 class CountingDenoiser:

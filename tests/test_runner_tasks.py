@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from svgf_cli.errors import EXIT_SIGINT, EXIT_SIGTERM
-from svgf_cli.runner import FrameTask, Interrupted, stop_on_signals, trim_tail
+from svgf_cli.run.stop import Interrupted, stop_on_signals
+from svgf_cli.run.tasks import FrameTask, trim_tail
 
 
 def _tasks(written: list[bool]) -> list[FrameTask]:

@@ -9,7 +9,7 @@ import pytest
 from tracescenes import read_exr
 
 from svgf_cli.cli import main
-from svgf_trace import render
+from svgf_trace import render, tracing
 from svgf_trace.animation import Animation
 from svgf_trace.scene import load_obj
 
@@ -95,7 +95,7 @@ def test_same_seed_gives_identical_files_whatever_the_range_or_threads(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # Small chunks so the two-thread run really splits every batch across threads.
-    monkeypatch.setattr(render, "MIN_RAYS_PER_THREAD", 7)
+    monkeypatch.setattr(tracing, "MIN_RAYS_PER_THREAD", 7)
     assert run(small(str(tmp_path / "a.####.exr"), "--frames", "1-3", "--threads", "2"),
                capsys)[0] == 0  # fmt: skip
     assert run(small(str(tmp_path / "b.####.exr"), "--frames", "2", "--threads", "1"),
@@ -121,7 +121,7 @@ def test_sampling_does_not_depend_on_batch_size(monkeypatch: pytest.MonkeyPatch)
     scene = load_obj(TESTDATA / "cornell.obj")
     results = []
     for batch_paths in (1 << 20, 100):
-        monkeypatch.setattr(render, "MAX_PATHS_PER_BATCH", batch_paths)
+        monkeypatch.setattr(tracing, "MAX_PATHS_PER_BATCH", batch_paths)
         geo = render.prepare_frame(scene, Animation(), 1, 12, 8)
         hits = render.trace_primary(geo)
         results.append(render.trace_samples(geo, hits, 5, 4, render.frame_key(3, 1, 1)))

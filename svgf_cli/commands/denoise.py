@@ -1,12 +1,14 @@
 """`svgf denoise INPUTS... -o OUTPUT`: SVGF over an EXR sequence (wiring only).
 
 The work lives elsewhere: `farm.job` resolves frames/outputs and checks them before anything
-is written, `runner` drives the Denoiser, `farm.dask_backend` runs chunks on Dask.
+is written, `svgf_cli.run` (the file driver) runs the filter over the frames,
+`farm.dask_backend` runs chunks on Dask.
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,16 +16,21 @@ import click
 
 from svgf_cli import __version__
 from svgf_cli.commands.options import (
-    WARMUP,
     SectionedCommand,
     describe_params,
+    frame_options,
     params_from_options,
     svgf_param_options,
     warmup_label,
 )
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
-from svgf_cli.filters.params import AUTO_ITERATIONS, AUTO_PIXEL_FILTER, atrous_iterations_for
+from svgf_cli.filters.params import (
+    AUTO_ITERATIONS,
+    AUTO_PIXEL_FILTER,
+    SVGFParams,
+    atrous_iterations_for,
+)
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS, SIGNAL_CHOICES
 from svgf_cli.progress import PROGRESS_MODES, Progress
 
@@ -49,7 +56,8 @@ def _check_combinations(o: dict[str, Any], bidirectional: bool) -> None:
 
 
 # --help sections, everyday options first; an option named nowhere lands in "Other options",
-# the SVGF parameters (and --preset) in the filter section at the end.
+# --set and --list-params in the filter section at the end. The per-parameter
+# options (--alpha, --history-clamp, ...) are hidden aliases of --set.
 SECTIONS = [
     ("Input and output", ["output", "colour_only", "float_output", "compression", "debug_aovs"]),
     (
@@ -60,7 +68,8 @@ SECTIONS = [
     ("Presets and layers", ["preset", "preset_aovs", "signals", "aovs", "motion_convention"]),
     (
         "Run and progress",
-        ["threads", "scratch_dir", "progress_mode", "quiet", "verbose", "dry_run", "check_only"],
+        ["bidirectional", "threads", "scratch_dir", "progress_mode", "quiet", "verbose",
+         "dry_run", "check_only"],
     ),
     ("Farm chunks and Dask", ["chunk_size", "workers", "scheduler"]),
 ]
@@ -111,22 +120,7 @@ SECTIONS = [
     default=None,
     help="Meaning of the motion channels [default: the AOV preset's].",
 )
-@click.option(
-    "-f",
-    "--frames",
-    "frames_spec",
-    metavar="SPEC",
-    help="Frames to write: 1001-1100, 1,5,7-9, 1001-1100x2 [default: all on disk].",
-)
-@click.option(
-    "--warmup",
-    type=WARMUP,
-    default=None,
-    metavar="N|all",
-    help="Frames processed, not written, before the first output frame; 'all' replays from "
-    f"the first frame (bit-identical to one sequential run) [default: {DEFAULT_WARMUP} with "
-    "--frames, else all].",
-)
+@frame_options(plan=False)
 @click.option("--allow-gaps", is_flag=True, help="A missing frame resets history (WARNING).")
 @click.option(
     "--skip-existing",
@@ -211,33 +205,65 @@ SECTIONS = [
     metavar="tcp://HOST:PORT",
     help="Run chunks on an existing Dask scheduler (shared storage).",
 )
-@click.option(
-    "--chunk-size",
-    type=click.IntRange(min=1),
-    default=None,
-    metavar="N",
-    help="Output frames per chunk; each chunk replays its own warm-up.",
-)
 def command(**options: Any) -> None:
     """Denoise an EXR sequence with SVGF (Schied et al. 2017).
 
     INPUTS is one pattern (in.####.exr, in.%04d.exr, in.@.exr, in.$F4.exr, or a concrete
-    frame such as in.1001.exr) or a list of files.
+    frame such as in.1001.exr) or a list of files. Filter parameters: --preset and
+    --set NAME=VALUE; `svgf params` lists them.
     """
-    from svgf_cli.farm.job import build_job
-    from svgf_cli.filters.pixel_filter import pixel_filter_weight
-    from svgf_cli.io.atomic import remove_stale_temporaries
-    from svgf_cli.io.exr import (
-        centre_sampled,
-        check_compression,
-        compression_name,
-        fix_signal_set,
-        read_info,
-        refuse_multiview,
+    run = _start(options)
+    signal_warning = _read_first_frame(run)
+    for warning in run.job.warnings:
+        run.progress.warning(warning)
+    if signal_warning:
+        run.progress.warning(signal_warning)
+    if options["check_only"]:
+        _check_inputs(run.job, run.mapping, run.progress)
+        return
+    if options["dry_run"]:
+        for line in run.job.describe():
+            click.echo(line)
+        return
+    if not _prepare_outputs(run):
+        return
+    stats = _execute(run)
+    written = max(stats.frames_written, 1)
+    run.progress.finish(
+        f"Done: {stats.frames_written} frame(s) written, {stats.frames_processed} processed in "
+        f"{stats.wall_seconds:.1f} s ({stats.wall_seconds / written:.2f} s/frame; read "
+        f"{stats.read_seconds:.1f} s, compute {stats.compute_seconds:.1f} s, write "
+        f"{stats.write_seconds:.1f} s)"
     )
-    from svgf_cli.io.layers import build_mapping, resolve_layers, resolve_output_colour
-    from svgf_cli.io.signals import plan_signals
-    from svgf_cli.runner import RunConfig, RunStats, load_history, run_sequence, stop_on_signals
+
+
+@dataclass
+class _Run:
+    """What the steps of one `svgf denoise` share."""
+
+    options: dict[str, Any]
+    params: SVGFParams
+    warmup: int | None
+    warmup_note: str
+    mapping: Any  # io.layers.LayerMapping; the signal set is fixed by _read_first_frame
+    debug_names: list[str]
+    history: Any  # the loaded --load-history, or None
+    job: Any  # farm.job.Job
+    progress: Progress
+    threads: int
+
+    @property
+    def distributed(self) -> bool:
+        return self.options["workers"] is not None or self.options["scheduler"] is not None
+
+
+def _start(options: dict[str, Any]) -> _Run:
+    """Everything checked before a frame is read: parameters, option combinations, layers,
+    codec, history, the job (frames and outputs), progress and threads."""
+    from svgf_cli.farm.job import build_job
+    from svgf_cli.io.exr import check_compression, compression_name
+    from svgf_cli.io.layers import build_mapping
+    from svgf_cli.run.history import load_history
 
     params = params_from_options(options["preset"], options)
     warmup, warmup_note = _resolve_warmup(options)
@@ -252,7 +278,6 @@ def command(**options: Any) -> None:
         check_compression(compression, ["R", "G", "B", "A", *debug_names])
 
     history = load_history(options["load_history"]) if options["load_history"] else None
-    distributed = options["workers"] is not None or options["scheduler"] is not None
     job = build_job(
         options["inputs"],
         options["output"],
@@ -272,23 +297,55 @@ def command(**options: Any) -> None:
         verbose=options["verbose"],
     )
     threads = _apply_threads(options["threads"], options["workers"])
+    return _Run(options, params, warmup, warmup_note, mapping, debug_names, history, job,
+                progress, threads)
 
+
+def _read_first_frame(run: _Run) -> str | None:
+    """Resolve the layers and the signal set on the sequence's first frame, check the codec
+    against its channels and log the start-up lines; return the signal set's warning."""
+    from svgf_cli.io.exr import check_compression, fix_signal_set, read_info, refuse_multiview
+    from svgf_cli.io.layers import resolve_layers, resolve_output_colour
+    from svgf_cli.io.signals import plan_signals
+
+    job, options = run.job, run.options
     first_input = job.chunk_tasks[0][0].input if job.chunk_tasks else job.timeline[0][1]
     info = read_info(first_input)
     refuse_multiview(info)
-    resolved = resolve_layers(mapping, info.channels, str(first_input))
+    resolved = resolve_layers(run.mapping, info.channels, str(first_input))
     # The signal set is decided once, on the sequence's first frame, so that every chunk and
     # farm task of a sequence filters the same signals (they cannot change mid-run).
-    mapping, decided = fix_signal_set(job.timeline[0][1], mapping)
-    resolved.plan = plan_signals(mapping, resolved, info.channels, str(first_input))
+    run.mapping, decided = fix_signal_set(job.timeline[0][1], run.mapping)
+    resolved.plan = plan_signals(run.mapping, resolved, info.channels, str(first_input))
     resolved.requested_signals = options["signals"]
-    colour = resolve_output_colour(mapping, info.channels)
+    colour = resolve_output_colour(run.mapping, info.channels)
+    compression = options["compression"]
     if compression is not None and not options["colour_only"]:
         # Every input channel is written too: a lossy codec must not touch its data layers.
-        check_compression(compression, [*info.channels, *debug_names])
+        check_compression(compression, [*info.channels, *run.debug_names])
+    _log_start(run, info)
+    run.progress.info(
+        f"Layers ({options['preset_aovs']} AOVs, motion {run.mapping.motion_convention}, "
+        f"from {first_input}):\n{resolved.describe()}\n  {info.luminance_weights.describe()}"
+    )
+    run.progress.info(
+        f"Output: denoised colour as {', '.join(colour or ('R', 'G', 'B'))}"
+        + ("" if colour else " (the input has no colour layer)")
+        + ("; colour layer only" if options["colour_only"] else "; every other channel as read")
+    )
+    _log_frames(run)
+    return decided.signal_warning
+
+
+def _log_start(run: _Run, info: Any) -> None:
+    """Version, threads, preset, every parameter, and what auto resolved to on ``info``."""
+    from svgf_cli.filters.pixel_filter import pixel_filter_weight
+    from svgf_cli.io.exr import centre_sampled
+
+    params, progress = run.params, run.progress
     progress.info(f"svgf {__version__} denoise")
-    progress.info(f"Threads: {threads}")
-    progress.info(f"Preset: {options['preset']}")
+    progress.info(f"Threads: {run.threads}")
+    progress.info(f"Preset: {run.options['preset']}")
     progress.info(f"Parameters: {describe_params(params)}")
     if params.atrous_iterations == AUTO_ITERATIONS:
         count = atrous_iterations_for(params, info.height, info.width)
@@ -299,51 +356,43 @@ def command(**options: Any) -> None:
         progress.info(f"Pixel filter: {weight:g} (auto: "
                       + ("the header says one sample through the pixel centre)" if centre
                          else "the header does not say the samples are pixel centres)"))
-    progress.info(
-        f"Layers ({options['preset_aovs']} AOVs, motion {mapping.motion_convention}, "
-        f"from {first_input}):\n{resolved.describe()}\n  {info.luminance_weights.describe()}"
-    )
-    progress.info(
-        f"Output: denoised colour as {', '.join(colour or ('R', 'G', 'B'))}"
-        + ("" if colour else " (the input has no colour layer)")
-        + ("; colour layer only" if options["colour_only"] else "; every other channel as read")
-    )
-    selected = len(job.selected)
-    progress.info(
-        f"Frames: {job.frames_to_write} to write of {selected} selected, "
-        f"{len(job.timeline)} on disk; warm-up {warmup_label(warmup)}"
-        + (" before and after each chunk" if params.bidirectional else "")
-        + warmup_note
+
+
+def _log_frames(run: _Run) -> None:
+    """The frames line (to write, selected, on disk, warm-up, resume) and the bidirectional
+    scratch folder."""
+    job, history = run.job, run.history
+    run.progress.info(
+        f"Frames: {job.frames_to_write} to write of {len(job.selected)} selected, "
+        f"{len(job.timeline)} on disk; warm-up {warmup_label(run.warmup)}"
+        + (" before and after each chunk" if run.params.bidirectional else "")
+        + run.warmup_note
         + (f"; {len(job.skipped_existing)} existing skipped" if job.skipped_existing else "")
         + (f"; history from {history.path} (frame {history.last_frame})" if history else "")
     )
-    if params.bidirectional:
-        from svgf_cli.bidir import scratch_note
+    if run.params.bidirectional:
+        from svgf_cli.run.bidirectional import scratch_note
 
-        progress.info(
+        run.progress.info(
             "Bidirectional: a forward and a reverse pass, combined per pixel; forward "
-            f"state kept in a scratch folder under {scratch_note(options['scratch_dir'])}"
+            f"state kept in a scratch folder under {scratch_note(run.options['scratch_dir'])}"
         )
-    for warning in job.warnings:
-        progress.warning(warning)
-    if decided.signal_warning:
-        progress.warning(decided.signal_warning)
-    del decided
-    if options["check_only"]:
-        _check_inputs(job, mapping, progress)
-        return
-    if options["dry_run"]:
-        for line in job.describe():
-            click.echo(line)
-        return
+
+
+def _prepare_outputs(run: _Run) -> bool:
+    """Remove dead runs' temporaries and create the output folders; False when every output
+    exists already (nothing to do)."""
+    from svgf_cli.io.atomic import remove_stale_temporaries
+
+    job, progress = run.job, run.progress
     # Temporaries of these outputs left by dead runs (a SIGKILL inside a write); never
     # a live writer's, here or on another host (see svgf_cli.io.atomic).
     removed = remove_stale_temporaries(job.outputs.values())
     if removed:
         progress.info(f"Removed {len(removed)} temporary file(s) left by dead runs")
     if not job.chunks:
-        progress.finish(f"Nothing to do: all {selected} outputs exist")
-        return
+        progress.finish(f"Nothing to do: all {len(job.selected)} outputs exist")
+        return False
     for path in sorted({p.parent for p in job.outputs.values()}):
         try:
             path.mkdir(parents=True, exist_ok=True)
@@ -352,54 +401,57 @@ def command(**options: Any) -> None:
             raise SvgfError(f"cannot create the output folder: {reason}", str(path)) from None
     for line in job.describe():
         progress.detail(line)
+    return True
 
+
+def _execute(run: _Run) -> Any:
+    """Run every chunk, sequentially here or on Dask; return the runner's RunStats."""
+    from svgf_cli.run.chunk import run_sequence
+    from svgf_cli.run.stop import stop_on_signals
+    from svgf_cli.run.tasks import RunConfig, RunStats
+
+    options = run.options
     config = RunConfig(
-        params=params,
+        params=run.params,
         preset=options["preset"],
-        mapping=mapping,
+        mapping=run.mapping,
         float_colour=options["float_output"],
         colour_only=options["colour_only"],
-        compression=compression,
+        compression=options["compression"],
         debug_aovs=options["debug_aovs"],
-        warmup_label=warmup_label(warmup),
+        warmup_label=warmup_label(run.warmup),
         scratch_dir=options["scratch_dir"],
         # Dask workers set their own threads; a remote scheduler's workers keep theirs
         # unless --threads was given.
-        threads=(threads if options["workers"] else options["threads"]) if distributed else None,
+        threads=(run.threads if options["workers"] else options["threads"])
+        if run.distributed else None,
     )
-    if distributed:
+    if run.distributed:
         from svgf_cli.farm.dask_backend import run_chunks_dask
 
         with stop_on_signals(immediate=True):
-            stats = run_chunks_dask(
-                job.chunk_tasks,
+            return run_chunks_dask(
+                run.job.chunk_tasks,
                 config,
-                progress,
+                run.progress,
                 workers=options["workers"],
                 scheduler=options["scheduler"],
                 overwrite=options["overwrite"],
             )
-    else:
-        stats = RunStats()
-        with stop_on_signals() as stop:
-            for tasks in job.chunk_tasks:
-                stats.merge(
-                    run_sequence(
-                        tasks,
-                        config,
-                        progress,
-                        stop=stop,
-                        history=history,
-                        save_history_to=options["save_history"],
-                    )
+    stats = RunStats()
+    with stop_on_signals() as stop:
+        for tasks in run.job.chunk_tasks:
+            stats.merge(
+                run_sequence(
+                    tasks,
+                    config,
+                    run.progress,
+                    stop=stop,
+                    history=run.history,
+                    save_history_to=options["save_history"],
                 )
-    written = max(stats.frames_written, 1)
-    progress.finish(
-        f"Done: {stats.frames_written} frame(s) written, {stats.frames_processed} processed in "
-        f"{stats.wall_seconds:.1f} s ({stats.wall_seconds / written:.2f} s/frame; read "
-        f"{stats.read_seconds:.1f} s, compute {stats.compute_seconds:.1f} s, write "
-        f"{stats.write_seconds:.1f} s)"
-    )
+            )
+    return stats
 
 
 def _resolve_warmup(options: dict[str, Any]) -> tuple[int | None, str]:

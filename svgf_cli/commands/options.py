@@ -1,72 +1,103 @@
-"""Click options shared by commands: one option per SVGF parameter, built from its metadata.
+"""Click options shared by commands: the SVGF parameters, the frame/chunk options, --help
+sections.
 
-The SVGF parameters are documented once, in ``SVGFParams`` field metadata; this module turns
-each field into exactly one ``--option`` so the help text, the README table and the stored
-``svgf/params`` never drift apart. Every option defaults to None: the preset supplies the
-value and an explicit option overrides it.
+Each SVGF parameter is declared once, in ``SVGFParams`` field metadata (help, group, valid
+range: ``svgf_cli.filters.params``); this module only turns that into click types. The
+documented way to set a parameter is ``--set NAME=VALUE`` (repeatable); each parameter also
+keeps its own ``--option`` as a hidden alias (not listed in --help), so existing farm
+templates, scripts and docs keep working. ``svgf params`` (and ``svgf denoise
+--list-params``) lists the parameters with ``parameter_listing``. Every parameter defaults
+to None: the preset supplies the value and an explicit option overrides it.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 import click
 
 from svgf_cli.errors import UsageError
+from svgf_cli.farm.plan import DEFAULT_WARMUP
 from svgf_cli.filters.params import (
     AUTO_ITERATIONS,
     AUTO_PIXEL_FILTER,
     DEFAULT_PRESET,
+    DEPARTURES,
+    GROUPS,
     PRESETS,
+    Range,
     SVGFParams,
     atrous_iterations_for,
+    check_params,
+    param_fields,
     resolve_params,
 )
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-
 class AutoOrNumber(click.ParamType):
-    """A number in ``[low, high]`` or ``auto`` (``sentinel``, resolved later: the a-trous
-    count from the image size, the pixel filter from the frame's header)."""
+    """A number in a declared ``Range`` that also takes ``auto`` (its sentinel, resolved
+    later: the a-trous count from the image size, the pixel filter from the frame's header)
+    or an ``off`` value outside the range (despike 0)."""
 
-    def __init__(self, name: str, kind: type, low: float, high: float, shown_range: str,
-                 noun: str, sentinel: float) -> None:
-        self.name = name
+    def __init__(self, kind: type, valid: Range) -> None:
         self.kind = kind
-        self.low, self.high = low, high
-        self.shown_range = shown_range
-        self.noun = noun
-        self.sentinel = sentinel
+        self.valid = valid
+        self.name = f"{kind.__name__.upper()}|auto" if valid.auto is not None else "FLOAT"
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
-        if value is None or isinstance(value, self.kind):
+        if value is None or (isinstance(value, self.kind) and not isinstance(value, bool)):
             return value
         text = str(value).strip().lower()
-        if text == "auto":
-            return self.kind(self.sentinel)
+        valid = self.valid
+        if text == "auto" and valid.auto is not None:
+            return self.kind(valid.auto)
         try:
             number = self.kind(text)
         except ValueError:
-            self.fail(f"{value!r}: expected {self.noun} or 'auto'", param, ctx)
-        if not self.low <= number <= self.high:
-            self.fail(f"{number}: must lie in {self.shown_range} or be 'auto'", param, ctx)
+            either = " or 'auto'" if valid.auto is not None else ""
+            self.fail(f"{value!r}: expected {valid.noun}{either}", param, ctx)
+        if valid.auto is not None and not valid.in_bounds(number):
+            self.fail(f"{number}: must lie in {valid.bounds_text()} or be 'auto'", param, ctx)
+        if not valid.contains(number):
+            self.fail(f"{number}: must be {valid.text()}", param, ctx)
         return number
 
 
-# ``N`` (0 to 12 a-trous iterations; step 4096 at most) or ``auto``.
-ITERATIONS_TYPE = AutoOrNumber("N|auto", int, 0, 12, "0..12", "a number of iterations",
-                               AUTO_ITERATIONS)
-# ``W`` (a neighbour weight in 0..1/3; 0 = off) or ``auto``.
-PIXEL_FILTER_TYPE = AutoOrNumber("W|auto", float, 0.0, 1.0 / 3.0, "0..1/3", "a weight",
-                                 AUTO_PIXEL_FILTER)
+def _type_name(f: dataclasses.Field[Any]) -> str:
+    # `from __future__ import annotations` in params.py makes types strings; accept both.
+    return f.type if isinstance(f.type, str) else f.type.__name__
+
+
+def param_type(f: dataclasses.Field[Any]) -> click.ParamType:
+    """The click type of one parameter, from its declared range (booleans: click.BOOL)."""
+    type_name = _type_name(f)
+    valid: Range | None = f.metadata["valid"]
+    if type_name == "bool":
+        return click.BOOL
+    kind = {"int": int, "float": float}[type_name]
+    if valid is None:
+        return click.INT if kind is int else click.FLOAT
+    if valid.auto is not None or valid.off is not None:
+        return AutoOrNumber(kind, valid)
+    if kind is int:
+        return click.IntRange(valid.low, valid.high, min_open=valid.low_open,
+                              max_open=valid.high_open)
+    low, high = (None if b is None else float(b) for b in (valid.low, valid.high))
+    return click.FloatRange(low, high, min_open=valid.low_open, max_open=valid.high_open)
+
+
+PARAM_TYPES: dict[str, click.ParamType] = {f.name: param_type(f) for f in param_fields()}
+PARAM_FIELD_NAMES = frozenset(PARAM_TYPES)
 
 
 def param_label(name: str, value: Any) -> str:
     """A parameter value as the user writes it (``auto`` for the automatic a-trous count
-    and pixel filter)."""
+    and pixel filter; booleans as on/off in listings are the caller's choice)."""
     if name == "atrous_iterations" and value == AUTO_ITERATIONS:
         return "auto"
     if name == "pixel_filter" and value == AUTO_PIXEL_FILTER:
@@ -74,43 +105,205 @@ def param_label(name: str, value: Any) -> str:
     return str(value)
 
 
-_CLICK_TYPES: dict[str, click.ParamType] = {"float": click.FLOAT, "int": click.INT}
+def value_text(f: dataclasses.Field[Any]) -> str:
+    """What ``--set NAME=VALUE`` takes for field ``f``: ``true|false``, ``float in (0, 1]``."""
+    if _type_name(f) == "bool":
+        return "true|false (on|off, 1|0)"
+    valid: Range | None = f.metadata["valid"]
+    if valid is None:
+        return _type_name(f)
+    text = valid.text()
+    joint = ", " if valid.off is not None else " " if text[0] in "<>" else " in "
+    return f"{_type_name(f)}{joint}{text}"
 
-# The valid range of each numeric SVGF parameter; click refuses a value outside it (exit 2)
-# and shows the range in --help. A parameter missing here takes any number.
-PARAM_RANGES: dict[str, click.ParamType] = {
-    "alpha": click.FloatRange(0.0, 1.0, min_open=True),
-    "moments_alpha": click.FloatRange(0.0, 1.0, min_open=True),
-    "history_cap": click.IntRange(min=1),
-    "depth_tolerance": click.FloatRange(min=0.0),
-    "depth_slack": click.FloatRange(min=0.0),
-    "normal_tolerance": click.FloatRange(min=0.0),
-    "variance_history_threshold": click.IntRange(min=0),
-    "spatial_variance_radius": click.IntRange(min=0),
-    "spatial_variance_sigma_luminance": click.FloatRange(min=0.0, min_open=True),
-    "atrous_iterations": ITERATIONS_TYPE,
-    "feedback_iteration": click.IntRange(min=-1),
-    "sigma_luminance": click.FloatRange(min=0.0, min_open=True),
-    "sigma_normal": click.FloatRange(min=0.0, min_open=True),
-    "sigma_depth": click.FloatRange(min=0.0, min_open=True),
-    "albedo_epsilon": click.FloatRange(min=0.0, min_open=True),
-    "guide_albedo_floor": click.FloatRange(0.0, 1.0),
-    "firefly_clamp": click.FloatRange(min=0.0),
-    "history_clamp": click.FloatRange(min=0.0),
-    "spread_fireflies": click.FloatRange(min=0.0),
-    "despike": click.FloatRange(min=0.0),
-    "taa_alpha": click.FloatRange(0.0, 1.0, min_open=True),
-    "pixel_filter": PIXEL_FILTER_TYPE,
-    "antilag_radius": click.IntRange(1, 16),
-    "antilag_sigma": click.FloatRange(min=0.0),
-    "antilag_spatial_samples": click.FloatRange(min=1.0),
-    "antilag_tolerance": click.FloatRange(min=0.0),
-    "glossy_history_clamp": click.FloatRange(min=0.0),
-    "glossy_sigma_luminance": click.FloatRange(min=0.0),
-    "mixed_sigma_luminance": click.FloatRange(min=0.0),
-}
 
 FILTER_SECTION = "Filter parameters (each overrides its --preset value)"
+
+
+# --- --set NAME=VALUE ------------------------------------------------------------------
+
+
+_BOOLEANS = {"true": True, "on": True, "1": True, "false": False, "off": False, "0": False}
+
+
+def _parse_setting(item: str, param: click.Parameter, ctx: click.Context) -> tuple[str, Any]:
+    name, sep, text = item.partition("=")
+    name = name.strip().replace("-", "_")
+    if not sep or not name:
+        raise click.BadParameter(f"{item!r}: expected NAME=VALUE (svgf params lists the names)",
+                                 ctx, param)
+    if name not in PARAM_TYPES:
+        close = difflib.get_close_matches(name, PARAM_TYPES, n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise click.BadParameter(f"no parameter {name!r}{hint}; svgf params lists them",
+                                 ctx, param)
+    f = SVGFParams.__dataclass_fields__[name]
+    value = text.strip()
+    if PARAM_TYPES[name] is click.BOOL:
+        if value.lower() not in _BOOLEANS:
+            raise click.BadParameter(f"{name}: {value!r} is not {value_text(f)}", ctx, param)
+        return name, _BOOLEANS[value.lower()]
+    try:
+        return name, PARAM_TYPES[name].convert(value, param, ctx)
+    except click.BadParameter as exc:
+        reason = exc.message.rstrip(".")
+        raise click.BadParameter(f"{name}: {reason} ({name} takes {value_text(f)})",
+                                 ctx, param) from None
+
+
+def _settings_callback(ctx: click.Context, param: click.Parameter,
+                       items: Sequence[str]) -> dict[str, Any]:
+    """``--set`` values as {field name: converted value}; a later one wins."""
+    return dict(_parse_setting(item, param, ctx) for item in items or ())
+
+
+def _list_params_callback(ctx: click.Context, param: click.Parameter, value: bool) -> None:
+    if value and not ctx.resilient_parsing:
+        click.echo(parameter_listing(), nl=False)
+        ctx.exit()
+
+
+# Parameters that choose a run mode rather than tune the filter: their flag stays in --help.
+SHOWN_PARAMETERS = ("bidirectional",)
+
+
+def _hidden_param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
+    """Today's ``--option`` per parameter, kept as a hidden alias of ``--set`` (shown in
+    --help only for the run modes of ``SHOWN_PARAMETERS``)."""
+    flag = "--" + f.name.replace("_", "-")
+    hidden = f.name not in SHOWN_PARAMETERS
+    help_text = f.metadata["help"] if not hidden else None
+    if _type_name(f) == "bool":
+        negative = "--no-" + f.name.replace("_", "-")
+        return click.option(f"{flag}/{negative}", f.name, default=None, hidden=hidden,
+                            help=help_text)
+    return click.option(flag, f.name, type=PARAM_TYPES[f.name], default=None, hidden=hidden,
+                        help=help_text)
+
+
+def svgf_param_options(func: F) -> F:
+    """Add ``--preset``, ``--set NAME=VALUE``, ``--list-params`` and the hidden
+    per-parameter options to a click command.
+
+    The command receives ``preset``, ``settings`` (a dict) and one keyword per field (None
+    when not given); pass them all to ``params_from_options``.
+    """
+    for f in reversed(param_fields()):
+        func = _hidden_param_option(f)(func)
+    func = click.option(
+        "--list-params", is_flag=True, expose_value=False, is_eager=True,
+        callback=_list_params_callback,
+        help="List every filter parameter (group, range, each preset's value) and exit.",
+    )(func)
+    func = click.option(
+        "--set", "settings", multiple=True, metavar="NAME=VALUE", callback=_settings_callback,
+        help="Set one filter parameter, e.g. --set history_clamp=2 --set antilag=off "
+        "(repeatable; auto where the range says so); svgf params lists them.",
+    )(func)
+    return click.option(
+        "--preset",
+        type=click.Choice(sorted(PRESETS)),
+        default=DEFAULT_PRESET,
+        show_default=True,
+        help="Parameter preset: default (the paper's filter with anti-lag and the departures "
+        "svgf params --preset default lists), paper (as published), falcor.",
+    )(func)
+
+
+def pop_param_options(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Remove the SVGF parameter keywords (and ``settings``) from ``kwargs``; return them."""
+    popped = {name: kwargs.pop(name, None) for name in PARAM_FIELD_NAMES}
+    popped["settings"] = kwargs.pop("settings", None)
+    return popped
+
+
+def params_from_options(preset: str, kwargs: Mapping[str, Any]) -> SVGFParams:
+    """Resolve the preset plus the explicitly given parameters (``--set`` and the hidden
+    per-parameter options; the same parameter given both ways is refused).
+
+    ``kwargs`` may hold other command keywords too; only SVGFParams fields and ``settings``
+    are used.
+    """
+    overrides = {k: v for k, v in kwargs.items() if k in PARAM_FIELD_NAMES and v is not None}
+    settings = kwargs.get("settings") or {}
+    for name, value in settings.items():
+        if name in overrides and overrides[name] != value:
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{name} is given twice: {flag} {overrides[name]} and --set "
+                             f"{name}={param_label(name, value)}")
+    try:
+        params = resolve_params(preset, **{**overrides, **settings})
+        check_params(params)
+    except (ValueError, TypeError) as exc:
+        raise UsageError(str(exc)) from exc
+    _check_combinations(params)
+    return params
+
+
+def _check_combinations(params: SVGFParams) -> None:
+    """The checks a range cannot make: they involve two parameters."""
+    if params.bidirectional and params.taa:
+        raise UsageError("--taa filters the output causally; it cannot be combined with "
+                         "--bidirectional")
+    # With auto, the smallest count any image gets (that of a 1x1 image) bounds the index.
+    iterations = atrous_iterations_for(params, 1, 1)
+    if not -1 <= params.feedback_iteration < max(iterations, 1):
+        raise UsageError(
+            f"--feedback-iteration {params.feedback_iteration}: must be -1 or an iteration "
+            f"index below --atrous-iterations ({param_label('atrous_iterations', iterations)})"
+        )
+
+
+def describe_params(params: SVGFParams) -> str:
+    """One line of every resolved parameter, for the start-up log."""
+    return " ".join(f"{f.name}={param_label(f.name, getattr(params, f.name))}"
+                    for f in param_fields())
+
+
+# --- the parameter listing (svgf params, svgf denoise --list-params) --------------------
+
+
+def _shown(name: str, value: Any) -> str:
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return param_label(name, value)
+
+
+def _field_entry(f: dataclasses.Field[Any], presets: Sequence[str], width: int) -> list[str]:
+    """One parameter: name and range, each preset's value (with the reason where it departs
+    from the paper's), and its meaning."""
+    indent = " " * 6
+    values = ", ".join(f"{p} {_shown(f.name, getattr(PRESETS[p], f.name))}" for p in presets)
+    lines = [f"  {f.name} = {value_text(f)}", f"{indent}{values}"]
+    for preset in presets:
+        for departure in DEPARTURES[preset]:
+            if departure.name == f.name:
+                lines += textwrap.wrap(f"why {preset}: {departure.reason}", width,
+                                       initial_indent=indent, subsequent_indent=indent + "  ",
+                                       break_long_words=False, break_on_hyphens=False)
+    lines += textwrap.wrap(f.metadata["help"], width, initial_indent=indent,
+                           subsequent_indent=indent, break_on_hyphens=False)
+    return lines
+
+
+def parameter_listing(preset: str | None = None, group: str | None = None,
+                      width: int = 78) -> str:
+    """Every filter parameter (or one preset's, one group's): by group, its range, the
+    presets' values, the reasons a preset departs from the paper, and its meaning. The one
+    place this text is made (``svgf params``, ``svgf denoise --list-params``)."""
+    presets = [preset] if preset else list(PRESETS)
+    lines = [f"Set with --set NAME=VALUE (repeatable). Values: {', '.join(presets)}."]
+    for key, title in GROUPS.items():
+        if group is not None and key != group:
+            continue
+        lines += ["", f"{key}: {title}"]
+        for f in param_fields():
+            if f.metadata["group"] == key:
+                lines += _field_entry(f, presets, width)
+    return "\n".join(lines) + "\n"
+
+
+# --- frames, warm-up and chunks (denoise and plan) ---------------------------------------
 
 
 class WarmupType(click.ParamType):
@@ -141,13 +334,49 @@ def warmup_label(warmup: int | None) -> str:
     return "all" if warmup is None else str(warmup)
 
 
+def frame_options(*, plan: bool) -> Callable[[F], F]:
+    """``-f/--frames``, ``--warmup`` and ``--chunk-size``, declared once for ``denoise``
+    and ``plan`` (``plan=True``: --frames and --chunk-size are required there).
+
+    The warm-up default is ``DEFAULT_WARMUP`` for both. The one place it differs is by design
+    (docs/farm.md, "A bounded default warm-up for frame ranges"): ``denoise`` without
+    --frames runs the whole sequence and replays from its first frame (``all``, exact); its
+    ``_resolve_warmup`` applies that when --warmup was not given.
+    """
+    where = "" if plan else " with --frames, else all (the whole sequence)"
+
+    def decorate(func: F) -> F:
+        func = click.option(
+            "--chunk-size", type=click.IntRange(min=1), required=plan, default=None,
+            metavar="N", help="Output frames per chunk (one farm task each); each chunk "
+            "replays its own warm-up.",
+        )(func)
+        func = click.option(
+            "--warmup", type=WARMUP, default=DEFAULT_WARMUP, metavar="N|all",
+            help="Frames processed, not written, before each chunk's first output frame; "
+            "'all' replays from the first frame (bit-identical to one sequential run) "
+            f"[default: {DEFAULT_WARMUP}{where}].",
+        )(func)
+        return click.option(
+            "-f", "--frames", "frames_spec", required=plan, metavar="SPEC",
+            help="Frames to write: 1001-1100, 1,5,7-9, 1001-1100x2"
+            + ("." if plan else " [default: all on disk]."),
+        )(func)
+
+    return decorate
+
+
+# --- --help in sections ------------------------------------------------------------------
+
+
 class SectionedCommand(click.Command):
     """A click command whose --help lists its options in titled sections.
 
     ``sections`` is a list of ``(title, [parameter names])`` in display order; options named
     nowhere fall into ``default_section``, shown after the named sections except the ones in
     ``trailing`` (e.g. the filter parameters, which come last). Adding an option therefore
-    needs at most one line here, or none.
+    needs at most one line here, or none. Hidden options (the per-parameter aliases of
+    --set) are not listed.
     """
 
     def __init__(
@@ -163,11 +392,14 @@ class SectionedCommand(click.Command):
         self.trailing = list(trailing)
         self.default_section = default_section
 
-    def format_options(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+    def _section_of(self) -> dict[str, str]:
         section_of = {name: title for title, names in self.sections for name in names}
-        for param in self.params:
-            if param.name and param.name in PARAM_FIELD_NAMES | {"preset"}:
-                section_of.setdefault(param.name, FILTER_SECTION)
+        for name in ("preset", "settings", "list_params"):
+            section_of.setdefault(name, FILTER_SECTION)
+        return section_of
+
+    def format_options(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        section_of = self._section_of()
         titles = [t for t, _ in self.sections if t not in self.trailing]
         titles += [self.default_section, *self.trailing]
         rows: dict[str, list[tuple[str, str]]] = {title: [] for title in titles}
@@ -185,97 +417,3 @@ class SectionedCommand(click.Command):
             if records:
                 with formatter.section(title):
                     formatter.write_dl(records)
-
-
-def param_fields() -> list[dataclasses.Field[Any]]:
-    """The SVGFParams fields, in declaration order."""
-    return list(dataclasses.fields(SVGFParams))
-
-
-PARAM_FIELD_NAMES = frozenset(f.name for f in param_fields())
-
-
-def option_name(field_name: str) -> str:
-    """``moments_alpha`` -> ``--moments-alpha``."""
-    return "--" + field_name.replace("_", "-")
-
-
-def _field_type_name(f: dataclasses.Field[Any]) -> str:
-    # `from __future__ import annotations` in params.py makes types strings; accept both.
-    return f.type if isinstance(f.type, str) else f.type.__name__
-
-
-def _param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:
-    help_text = f.metadata.get("help", "")
-    defaults = ", ".join(f"{name}: {param_label(f.name, getattr(p, f.name))}"
-                         for name, p in PRESETS.items())
-    help_text = f"{help_text} [{defaults}]"
-    type_name = _field_type_name(f)
-    flag = option_name(f.name)
-    if type_name == "bool":
-        negative = "--no-" + f.name.replace("_", "-")
-        return click.option(f"{flag}/{negative}", f.name, default=None, help=help_text)
-    click_type = PARAM_RANGES.get(f.name, _CLICK_TYPES.get(type_name))
-    if click_type is None:
-        raise TypeError(f"SVGFParams.{f.name}: unsupported type {type_name}")
-    metavar = click_type.name.upper() if isinstance(click_type, AutoOrNumber) else None
-    return click.option(flag, f.name, type=click_type, default=None,
-                        metavar=metavar or type_name.upper(), help=help_text)
-
-
-def svgf_param_options(func: F) -> F:
-    """Add ``--preset`` and one option per SVGF parameter to a click command.
-
-    The command receives ``preset`` plus one keyword per field (None when not given); pass
-    them to ``params_from_options``.
-    """
-    for f in reversed(param_fields()):
-        func = _param_option(f)(func)
-    return click.option(
-        "--preset",
-        type=click.Choice(sorted(PRESETS)),
-        default=DEFAULT_PRESET,
-        show_default=True,
-        help="Parameter preset: default (the paper's filter with anti-lag), paper (as"
-        " published), falcor; any parameter option overrides its value.",
-    )(func)
-
-
-def pop_param_options(kwargs: dict[str, Any]) -> dict[str, Any]:
-    """Remove the SVGF parameter keywords from ``kwargs`` and return them."""
-    return {f.name: kwargs.pop(f.name, None) for f in param_fields()}
-
-
-def params_from_options(preset: str, kwargs: Mapping[str, Any]) -> SVGFParams:
-    """Resolve the preset plus the explicitly given parameter options.
-
-    ``kwargs`` may hold other command keywords too; only SVGFParams fields are used.
-    """
-    names = {f.name for f in param_fields()}
-    overrides = {k: v for k, v in kwargs.items() if k in names and v is not None}
-    try:
-        params = resolve_params(preset, **overrides)
-    except (ValueError, TypeError) as exc:
-        raise UsageError(str(exc)) from exc
-    _check_ranges(params)
-    return params
-
-
-def _check_ranges(params: SVGFParams) -> None:
-    """The checks click's range types cannot make: they involve two options."""
-    if params.bidirectional and params.taa:
-        raise UsageError("--taa filters the output causally; it cannot be combined with "
-                         "--bidirectional")
-    # With auto, the smallest count any image gets (that of a 1x1 image) bounds the index.
-    iterations = atrous_iterations_for(params, 1, 1)
-    if not -1 <= params.feedback_iteration < max(iterations, 1):
-        raise UsageError(
-            f"--feedback-iteration {params.feedback_iteration}: must be -1 or an iteration "
-            f"index below --atrous-iterations ({param_label('atrous_iterations', iterations)})"
-        )
-
-
-def describe_params(params: SVGFParams) -> str:
-    """One line of every resolved parameter, for the start-up log."""
-    return " ".join(f"{f.name}={param_label(f.name, getattr(params, f.name))}"
-                    for f in param_fields())

@@ -3,6 +3,7 @@ parameters of the OpenJD template, or a Deadline 10 job info / plugin info pair.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shlex
 from collections.abc import Sequence
@@ -10,9 +11,9 @@ from pathlib import Path
 
 import click
 
-from svgf_cli.commands.options import WARMUP, warmup_label
+from svgf_cli.commands.options import frame_options, warmup_label
 from svgf_cli.errors import UsageError
-from svgf_cli.farm.plan import DEFAULT_WARMUP, plan_chunks
+from svgf_cli.farm.plan import plan_chunks
 from svgf_cli.farm.submit import (
     OPENJD_TEMPLATE,
     FarmJob,
@@ -31,29 +32,7 @@ _PLANNED_OPTIONS = ("-f", "--frames", "--warmup", "--chunk-size", "--workers", "
     short_help="Print the chunk list (JSON or commands) for farm submission.",
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100}
 )
-@click.option(
-    "-f",
-    "--frames",
-    "frames_spec",
-    required=True,
-    metavar="SPEC",
-    help="Frames to write: 1001-1100, 1,5,7-9, 1001-1100x2.",
-)
-@click.option(
-    "--chunk-size",
-    type=click.IntRange(min=1),
-    required=True,
-    metavar="N",
-    help="Output frames per chunk (one farm task each).",
-)
-@click.option(
-    "--warmup",
-    type=WARMUP,
-    default=DEFAULT_WARMUP,
-    show_default=True,
-    metavar="N|all",
-    help="Frames each chunk replays before its first output frame.",
-)
+@frame_options(plan=True)
 @click.option(
     "--first-frame",
     type=int,
@@ -124,8 +103,7 @@ def command(
     end = frames[-1] if last_frame is None else last_frame
     if end < frames[-1]:
         raise UsageError(f"--last-frame {end} is before the last requested frame {frames[-1]}")
-    flags = [a for a in denoise_args if a in ("--bidirectional", "--no-bidirectional")]
-    bidirectional = bool(flags) and flags[-1] == "--bidirectional"
+    bidirectional = _bidirectional(denoise_args)
     warmup_frames = warmup
     # The timeline is every frame of the sequence; the plan does not look at disk.
     timeline = list(range(start, end + 1))
@@ -160,6 +138,23 @@ def command(
             warm,
         ]
         click.echo(shlex.join(words))
+
+
+def _bidirectional(denoise_args: Sequence[str]) -> bool:
+    """Whether the denoise arguments ask for a bidirectional run: the last of
+    --bidirectional, --no-bidirectional and --set bidirectional=BOOL wins."""
+    wanted = False
+    for i, arg in enumerate(denoise_args):
+        if arg in ("--bidirectional", "--no-bidirectional"):
+            wanted = arg == "--bidirectional"
+        setting = arg.removeprefix("--set=") if arg.startswith("--set=") else None
+        if arg == "--set" and i + 1 < len(denoise_args):
+            setting = denoise_args[i + 1]
+        name, sep, value = (setting or "").partition("=")
+        if sep and name.strip().replace("-", "_") == "bidirectional":
+            with contextlib.suppress(click.BadParameter):  # `denoise` refuses it itself
+                wanted = click.BOOL.convert(value, None, None)
+    return wanted
 
 
 # The denoise options the OpenJD template has a job parameter for (the rest must be added to

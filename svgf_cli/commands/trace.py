@@ -5,13 +5,20 @@ from __future__ import annotations
 import os
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from svgf_cli.errors import OutputExistsError, UsageError
 from svgf_cli.io.patterns import SequencePattern, parse_frame_spec
 from svgf_cli.progress import Progress
+
+if TYPE_CHECKING:
+    from svgf_trace.animation import Animation
+    from svgf_trace.render import TraceStats
+    from svgf_trace.scene import Scene
 
 _RESOLUTION = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
 
@@ -132,7 +139,50 @@ def command(
         raise UsageError(f"--frames: {exc}") from exc
     if reference is None and (reference_half or reference_layers != "full"):
         raise UsageError("--reference-half and --reference-channels need --reference")
+    out_paths, ref_paths = _claim_outputs(output, reference, frame_list, overwrite)
 
+    # Heavy imports only once the arguments are known to be good.
+    from svgf_trace.animation import Animation, load_animation
+    from svgf_trace.render import TraceStats
+    from svgf_trace.scene import load_obj
+
+    loaded = load_obj(scene)
+    anim = (
+        load_animation(animation, [o.name for o in loaded.objects]) if animation else Animation()
+    )
+    settings = _TraceSettings(
+        width=width, height=height, spp=spp, max_depth=max_depth, seed=seed,
+        reference_spp=reference_spp if reference else 0,
+        reference_supersample=reference_supersample, float_radiance=float_radiance,
+        lobes=lobes, motion_next=motion_next, gradient_samples=gradient_samples,
+        skip_layers=skip_layers, compression=compression, reference_layers=reference_layers,
+        reference_half=reference_half, threads=resolve_threads(threads),
+    )  # fmt: skip
+    for path in out_paths + ref_paths:
+        path.parent.mkdir(parents=True, exist_ok=True)
+
+    progress = Progress("auto", len(frame_list), quiet=quiet)
+    progress.info(_summary(scene, loaded, settings))
+    stats = TraceStats()
+    started = time.perf_counter()
+    for index, frame in enumerate(frame_list):
+        frame_started = time.perf_counter()
+        ref_path = ref_paths[index] if ref_paths else None
+        _trace_frame(loaded, anim, frame, out_paths[index], ref_path, settings, stats)
+        progress.frame_done(frame, time.perf_counter() - frame_started)
+    elapsed = time.perf_counter() - started
+    progress.finish(
+        f"Wrote {len(frame_list)} frame(s) to {output}"
+        + (f" and references to {reference}" if reference else "")
+        + f" in {elapsed:.1f} s ({stats.rays / max(elapsed, 1e-9) / 1e6:.2f} Mrays/s)"
+    )
+
+
+def _claim_outputs(
+    output: str, reference: str | None, frame_list: list[int], overwrite: bool
+) -> tuple[list[Path], list[Path]]:
+    """The input and reference files to write; UsageError where they clash,
+    OutputExistsError for an existing one without ``overwrite``."""
     out_paths = _output_paths(output, frame_list, "--output")
     ref_paths = _output_paths(reference, frame_list, "--reference") if reference else []
     clash = set(out_paths) & set(ref_paths)
@@ -142,71 +192,89 @@ def command(
         for path in out_paths + ref_paths:
             if path.exists():
                 raise OutputExistsError("output exists (use --overwrite to replace it)", str(path))
+    return out_paths, ref_paths
 
-    # Heavy imports only once the arguments are known to be good.
+
+@dataclass(frozen=True)
+class _TraceSettings:
+    """How every frame is traced and written (the command's options, checked)."""
+
+    width: int
+    height: int
+    spp: int
+    max_depth: int
+    seed: int
+    reference_spp: int  # 0: no reference
+    reference_supersample: int
+    float_radiance: bool
+    lobes: bool
+    motion_next: bool
+    gradient_samples: bool
+    skip_layers: tuple[str, ...]
+    compression: str
+    reference_layers: str
+    reference_half: bool
+    threads: int
+
+
+def _summary(scene: Path, loaded: Scene, settings: _TraceSettings) -> str:
+    """The line announcing what is traced."""
+    s = settings
+    return (
+        f"Tracing {scene} ({loaded.triangle_count} triangles, {len(loaded.objects)} objects) "
+        f"at {s.width}x{s.height}, {s.spp} spp, max depth {s.max_depth}, seed {s.seed}"
+        + (f", reference {s.reference_spp} spp" if s.reference_spp else "")
+        + "".join(f", {name}" for name, on in (("lobe passes", s.lobes),
+                  ("motion_next", s.motion_next), ("gradient samples", s.gradient_samples))
+                  if on)
+        + f"; using {s.threads} threads on cpu"
+    )  # fmt: skip
+
+
+def _trace_frame(
+    loaded: Scene,
+    anim: Animation,
+    frame: int,
+    out_path: Path,
+    ref_path: Path | None,
+    settings: _TraceSettings,
+    stats: TraceStats,
+) -> None:
+    """Render one frame (and its reference when ``ref_path`` is given) and write them."""
     from svgf_cli.io.exr import write_exr
-    from svgf_trace.animation import Animation, load_animation
     from svgf_trace.output import (
         frame_attributes,
         input_attributes,
         input_channels,
         reference_channels,
     )
-    from svgf_trace.render import TraceStats, render_frame
-    from svgf_trace.scene import load_obj
+    from svgf_trace.render import render_frame
 
-    loaded = load_obj(scene)
-    anim = (
-        load_animation(animation, [o.name for o in loaded.objects]) if animation else Animation()
-    )
-    n_threads = resolve_threads(threads)
-    for path in out_paths + ref_paths:
-        path.parent.mkdir(parents=True, exist_ok=True)
-
-    progress = Progress("auto", len(frame_list), quiet=quiet)
-    progress.info(
-        f"Tracing {scene} ({loaded.triangle_count} triangles, {len(loaded.objects)} objects) "
-        f"at {width}x{height}, {spp} spp, max depth {max_depth}, seed {seed}"
-        + (f", reference {reference_spp} spp" if reference else "")
-        + "".join(f", {name}" for name, on in (("lobe passes", lobes),
-                  ("motion_next", motion_next), ("gradient samples", gradient_samples)) if on)
-        + f"; using {n_threads} threads on cpu"
+    s = settings
+    result, ref = render_frame(
+        loaded, anim, frame, s.width, s.height, s.spp, s.max_depth, s.seed,
+        reference_spp=s.reference_spp, threads=s.threads, stats=stats, lobes=s.lobes,
+        motion_next=s.motion_next, gradient_samples=s.gradient_samples,
+        reference_supersample=s.reference_supersample,
     )  # fmt: skip
-    extra = input_attributes(lobes=lobes, motion_next=motion_next,
-                             gradient_samples=gradient_samples)  # fmt: skip
-    stats = TraceStats()
-    started = time.perf_counter()
-    for index, frame in enumerate(frame_list):
-        frame_started = time.perf_counter()
-        result, ref = render_frame(
-            loaded, anim, frame, width, height, spp, max_depth, seed,
-            reference_spp=reference_spp if reference else 0,
-            threads=n_threads, stats=stats, lobes=lobes, motion_next=motion_next,
-            gradient_samples=gradient_samples, reference_supersample=reference_supersample,
-        )  # fmt: skip
-        channels, half = input_channels(result, half_radiance=not float_radiance,
-                                        skip=skip_layers)  # fmt: skip
-        attrs = frame_attributes(
-            result, frame=frame, spp=spp, seed=seed, max_depth=max_depth, kind="input",
-            extra=extra,
-        )
-        write_exr(out_paths[index], channels, attributes=attrs, half=half,
-                  compression=compression)
-        if ref is not None:
-            ref_attrs = frame_attributes(
-                ref, frame=frame, spp=reference_spp, seed=seed, max_depth=max_depth,
-                kind="reference",
-                extra={"svgf/reference/supersample": reference_supersample}
-                if reference_supersample > 1 else None,
-            )
-            write_exr(ref_paths[index],
-                      reference_channels(ref, rgb_only=reference_layers == "rgb"),
-                      attributes=ref_attrs, half=reference_half,
-                      compression=compression)  # fmt: skip
-        progress.frame_done(frame, time.perf_counter() - frame_started)
-    elapsed = time.perf_counter() - started
-    progress.finish(
-        f"Wrote {len(frame_list)} frame(s) to {output}"
-        + (f" and references to {reference}" if reference else "")
-        + f" in {elapsed:.1f} s ({stats.rays / max(elapsed, 1e-9) / 1e6:.2f} Mrays/s)"
+    channels, half = input_channels(result, half_radiance=not s.float_radiance,
+                                    skip=s.skip_layers)  # fmt: skip
+    extra = input_attributes(lobes=s.lobes, motion_next=s.motion_next,
+                             gradient_samples=s.gradient_samples)  # fmt: skip
+    attrs = frame_attributes(
+        result, frame=frame, spp=s.spp, seed=s.seed, max_depth=s.max_depth, kind="input",
+        extra=extra,
     )
+    write_exr(out_path, channels, attributes=attrs, half=half, compression=s.compression)
+    if ref is not None:
+        assert ref_path is not None
+        ref_attrs = frame_attributes(
+            ref, frame=frame, spp=s.reference_spp, seed=s.seed, max_depth=s.max_depth,
+            kind="reference",
+            extra={"svgf/reference/supersample": s.reference_supersample}
+            if s.reference_supersample > 1 else None,
+        )
+        write_exr(ref_path,
+                  reference_channels(ref, rgb_only=s.reference_layers == "rgb"),
+                  attributes=ref_attrs, half=s.reference_half,
+                  compression=s.compression)  # fmt: skip

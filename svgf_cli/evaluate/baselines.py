@@ -10,9 +10,10 @@
   with spatial variance, every frame cold.
 * ``forward``: our SVGF pipeline as given but causal (``bidirectional=False``);
 * ``bidirectional``: the same with ``bidirectional=True``, run by the real file driver
-  (``svgf_cli.bidir``: both passes, the forward state spilled to a scratch folder) into a
-  temporary folder before scoring, then read back frame by frame. Together the two compare
-  forward-only against bidirectional on any sequence, whichever the denoised files are.
+  (``svgf_cli.run.bidirectional``: both passes, the forward state spilled to a scratch
+  folder) into a temporary folder before scoring, then read back frame by frame. Together
+  the two compare forward-only against bidirectional on any sequence, whichever the
+  denoised files are.
 * ``input``: the raw noisy radiance itself (not a baseline one chooses; added by ``--input``).
 
 Every method turns one :class:`Frame` into one ``(3, H, W)`` float32 radiance image. The
@@ -145,7 +146,8 @@ class BidirectionalMethod:
         from svgf_cli.io.exr import read_rgb
         from svgf_cli.io.layers import build_mapping
         from svgf_cli.progress import Progress
-        from svgf_cli.runner import FrameTask, RunConfig, run_sequence
+        from svgf_cli.run.chunk import run_sequence
+        from svgf_cli.run.tasks import FrameTask, RunConfig
 
         self._folder = tempfile.TemporaryDirectory(prefix="svgf-evaluate-")
         self._read = read_rgb

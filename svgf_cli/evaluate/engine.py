@@ -12,6 +12,7 @@ import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +24,9 @@ from svgf_cli.evaluate.report import EvaluationReport, FrameScore, MethodResult
 from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS, SVGFParams
 from svgf_cli.frame import Frame
 from svgf_cli.io.patterns import SequencePattern
+
+if TYPE_CHECKING:
+    from svgf_cli.io.layers import LayerMapping
 
 SVGF = "svgf"
 INPUT = "input"
@@ -160,18 +164,31 @@ def _source(name: str, request: EvaluationRequest) -> str:
     }[name]
 
 
-def run_evaluation(
-    request: EvaluationRequest, log: Log | None = None
-) -> tuple[EvaluationReport, list[ContactFrame]]:
-    """Score the denoised sequence, the raw input and the baselines against the reference."""
-    say = log or (lambda _msg: None)
+@dataclass
+class _Sequences:
+    """The parsed file patterns of an evaluation and its frames, every file checked."""
+
+    output: SequencePattern
+    reference: SequencePattern
+    input: SequencePattern | None
+    compare: list[tuple[str, SequencePattern]]
+    frames: list[int]  # scored
+    fed: list[int]  # read: the scored frames and, for temporal baselines, those in between
+
+
+def _checked_baselines(request: EvaluationRequest) -> list[str]:
+    """The requested baselines, once each; UsageError for an unknown one or no input."""
     unknown = [b for b in request.baselines if b not in BASELINES]
     if unknown:
         raise UsageError(f"unknown baseline {unknown[0]!r} (choose from {', '.join(BASELINES)})")
     baselines = list(dict.fromkeys(request.baselines))
     if baselines and request.input is None:
         raise UsageError("--baseline needs --input: the baselines run on the noisy input frames")
+    return baselines
 
+
+def _sequences(request: EvaluationRequest, baselines: Sequence[str]) -> _Sequences:
+    """Parse the patterns, pick the frames and check every file exists before any work."""
     _check_compare(request, baselines)
     out_pattern = SequencePattern.parse(request.output)
     compare_patterns = [(n, SequencePattern.parse(p)) for n, p in request.compare]
@@ -192,14 +209,22 @@ def run_evaluation(
     missing_contact = sorted(set(request.contact_frames) - set(frames))
     if missing_contact:
         raise UsageError(f"--contact-frames {missing_contact[0]} is not an evaluated frame")
+    return _Sequences(out_pattern, ref_pattern, in_pattern, compare_patterns, frames, fed)
 
-    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)), None, out_pattern)]
-    for name, pattern in compare_patterns:
+
+def _tracks(
+    request: EvaluationRequest, seqs: _Sequences, baselines: Sequence[str]
+) -> tuple[list[_Track], str | None]:
+    """One track per method (svgf, compared sequences, baselines, input) and the pyoidn
+    version when the oidn baseline runs."""
+    tracks: list[_Track] = [_Track(MethodResult(SVGF, _source(SVGF, request)), None, seqs.output)]
+    for name, pattern in seqs.compare:
         tracks.append(_Track(MethodResult(name, pattern.display), None, pattern))
     oidn_version = None
+    in_pattern = seqs.input
     for name in baselines:
         assert in_pattern is not None
-        method = make_method(name, request.params, [(f, in_pattern.path(f)) for f in fed],
+        method = make_method(name, request.params, [(f, in_pattern.path(f)) for f in seqs.fed],
                              request.layers)
         tracks.append(_Track(MethodResult(name, _source(name, request)), method))
         if name == "oidn":
@@ -209,59 +234,65 @@ def run_evaluation(
     if in_pattern is not None:
         input_method = make_method(INPUT, request.params)
         tracks.append(_Track(MethodResult(INPUT, _source(INPUT, request)), input_method))
+    return tracks, oidn_version
 
-    from svgf_cli.io.exr import fix_signal_set, read_frame, read_rgb
+
+def _input_mapping(request: EvaluationRequest, seqs: _Sequences, say: Log) -> LayerMapping:
+    """The layer mapping files are read with; with an input sequence, fixed to the signal set
+    decided on its first frame (one set for the whole sequence)."""
+    from svgf_cli.io.exr import fix_signal_set
     from svgf_cli.io.layers import build_mapping
 
     mapping = build_mapping(request.layers, signals=request.signals)
-    if in_pattern is not None:
-        # One signal set for the whole input sequence, decided on its first frame.
-        mapping, decided = fix_signal_set(in_pattern.path(fed[0]), mapping)
+    if seqs.input is not None:
+        mapping, decided = fix_signal_set(seqs.input.path(seqs.fed[0]), mapping)
         if decided.signal_warning:
             say(f"WARNING: {decided.signal_warning}")
         del decided
-    scored = set(frames)
-    contact_wanted = set(request.contact_frames)
-    contacts: list[ContactFrame] = []
+    return mapping
+
+
+@dataclass
+class _Scorer:
+    """Scores every track frame by frame; keeps the reference's previous display image (for
+    the temporal error) and the contact-sheet frames."""
+
+    seqs: _Sequences
+    tracks: list[_Track]
+    mapping: LayerMapping
+    contact_wanted: set[int]
+    contacts: list[ContactFrame] = field(default_factory=list)
     ref_previous: np.ndarray | None = None
     ref_previous_frame: int | None = None
 
-    for index, frame in enumerate(fed):
-        input_frame: Frame | None = None
-        if in_pattern is not None:
-            input_frame = read_frame(in_pattern.path(frame), mapping).frame
-        if frame not in scored:
-            # Only advance the stateful baselines through the gap.
-            for track in tracks:
-                if track.method is not None and track.result.name != INPUT:
-                    assert input_frame is not None
-                    track.method.process(input_frame)
-            continue
-        say(f"frame {frame} ({index + 1}/{len(fed)})")
-        ref_path = ref_pattern.path(frame)
-        reference, _ = read_rgb(ref_path, mapping)
+    def advance(self, input_frame: Frame | None) -> None:
+        """A frame that is not scored: only advance the stateful baselines through the gap."""
+        for track in self.tracks:
+            if track.method is not None and track.result.name != INPUT:
+                assert input_frame is not None
+                track.method.process(input_frame)
+
+    def score(self, frame: int, input_frame: Frame | None) -> None:
+        """Score every track's image of ``frame`` against the reference."""
+        from svgf_cli.io.exr import read_rgb
+
+        in_pattern = self.seqs.input
+        ref_path = self.seqs.reference.path(frame)
+        reference, _ = read_rgb(ref_path, self.mapping)
         bad = metrics.nonfinite_pixels(reference)
         if bad:
             raise InputError(f"reference has {bad} NaN or infinite pixel(s)", str(ref_path))
         if input_frame is not None and in_pattern is not None:
             _check_shape(input_frame.albedo, reference, in_pattern.path(frame), ref_path)
         ref_display = metrics.tone_map(reference)
-        contact = ContactFrame(frame, ref_display, {}, None) if frame in contact_wanted else None
-        for track in tracks:
-            if track.pattern is not None:
-                path = track.pattern.path(frame)
-                image, _ = read_rgb(path, mapping)
-                _check_shape(image, reference, path, ref_path)
-                file = str(path)
-            else:
-                assert input_frame is not None
-                image = track.method.process(input_frame)
-                is_input = track.result.name == INPUT and in_pattern is not None
-                file = str(in_pattern.path(frame)) if is_input else None
+        wanted = frame in self.contact_wanted
+        contact = ContactFrame(frame, ref_display, {}, None) if wanted else None
+        for track in self.tracks:
+            image, file = self._image(track, frame, input_frame, reference, ref_path)
             consecutive = (
                 track.previous_frame is not None
                 and track.previous_frame == frame - 1
-                and ref_previous_frame == frame - 1
+                and self.ref_previous_frame == frame - 1
             )
             score, display, flip_map = score_frame(
                 frame,
@@ -269,7 +300,7 @@ def run_evaluation(
                 reference,
                 ref_display,
                 previous=track.previous if consecutive else None,
-                ref_previous=ref_previous if consecutive else None,
+                ref_previous=self.ref_previous if consecutive else None,
             )
             score.file = file
             track.result.frames.append(score)
@@ -281,21 +312,69 @@ def run_evaluation(
                 )
                 if track.result.name == SVGF:
                     contact.error_map = flip_map
-        ref_previous, ref_previous_frame = ref_display, frame
+        self.ref_previous, self.ref_previous_frame = ref_display, frame
         if contact is not None:
-            contacts.append(contact)
+            self.contacts.append(contact)
+
+    def _image(
+        self,
+        track: _Track,
+        frame: int,
+        input_frame: Frame | None,
+        reference: np.ndarray,
+        ref_path: Path,
+    ) -> tuple[np.ndarray, str | None]:
+        """A track's image of ``frame`` (read from its file or made by its method) and the
+        file it comes from."""
+        if track.pattern is not None:
+            from svgf_cli.io.exr import read_rgb
+
+            path = track.pattern.path(frame)
+            image, _ = read_rgb(path, self.mapping)
+            _check_shape(image, reference, path, ref_path)
+            return image, str(path)
+        assert input_frame is not None
+        image = track.method.process(input_frame)
+        in_pattern = self.seqs.input
+        is_input = track.result.name == INPUT and in_pattern is not None
+        return image, str(in_pattern.path(frame)) if is_input else None
+
+
+def run_evaluation(
+    request: EvaluationRequest, log: Log | None = None
+) -> tuple[EvaluationReport, list[ContactFrame]]:
+    """Score the denoised sequence, the raw input and the baselines against the reference."""
+    say = log or (lambda _msg: None)
+    baselines = _checked_baselines(request)
+    seqs = _sequences(request, baselines)
+    tracks, oidn_version = _tracks(request, seqs, baselines)
+
+    from svgf_cli.io.exr import read_frame
+
+    mapping = _input_mapping(request, seqs, say)
+    scorer = _Scorer(seqs, tracks, mapping, set(request.contact_frames))
+    scored = set(seqs.frames)
+    for index, frame in enumerate(seqs.fed):
+        input_frame: Frame | None = None
+        if seqs.input is not None:
+            input_frame = read_frame(seqs.input.path(frame), mapping).frame
+        if frame not in scored:
+            scorer.advance(input_frame)
+            continue
+        say(f"frame {frame} ({index + 1}/{len(seqs.fed)})")
+        scorer.score(frame, input_frame)
 
     report = EvaluationReport(
-        frames=frames,
+        frames=seqs.frames,
         methods=[t.result for t in tracks],
         inputs={
             "output": request.output,
             "reference": request.reference,
             "input": request.input,
         },
-        settings=_settings(request, oidn_version, mapping.signals if in_pattern else None),
+        settings=_settings(request, oidn_version, mapping.signals if seqs.input else None),
     )
-    return report, contacts
+    return report, scorer.contacts
 
 
 def score_frame(

@@ -17,7 +17,8 @@ from typing import Any
 from svgf_cli.errors import UsageError
 from svgf_cli.openmp import wait_passively
 from svgf_cli.progress import Progress
-from svgf_cli.runner import FrameTask, RunConfig, RunStats, pending_tasks, run_sequence, trim_tail
+from svgf_cli.run.chunk import run_sequence
+from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats, pending_tasks, trim_tail
 
 # A failed task (a worker died, say) is resubmitted this many times before the job fails.
 TASK_RETRIES = 2

@@ -20,7 +20,7 @@ from svgf_cli.io.patterns import (
     has_frame_token,
     parse_frame_spec,
 )
-from svgf_cli.runner import FrameTask
+from svgf_cli.run.tasks import FrameTask
 
 
 @dataclass
@@ -88,6 +88,102 @@ def _check_not_inputs(outputs: dict[int, Path], timeline: list[tuple[int, Path]]
         seen[real] = frame
 
 
+def _missing_path(pattern: SequencePattern | None, frame: int) -> str:
+    """What an error about missing ``frame`` names: its file when the input is a sequence."""
+    return (
+        str(pattern.path(frame))
+        if pattern is not None and pattern.is_sequence
+        else (f"frame {frame}")
+    )
+
+
+def _select_frames(
+    frames_spec: str | None,
+    inputs: Sequence[str],
+    timeline: list[tuple[int, Path]],
+    pattern: SequencePattern | None,
+    allow_gaps: bool,
+    warnings: list[str],
+) -> list[int]:
+    """The frames ``--frames`` selects (all frames on disk without it); requested frames
+    missing on disk are an InputError, or skipped with a warning under ``allow_gaps``."""
+    if frames_spec is None:
+        return [f for f, _ in timeline]
+    by_frame = dict(timeline)
+    try:
+        selected = parse_frame_spec(frames_spec)
+    except ValueError as exc:
+        raise UsageError(f"--frames: {exc}") from None
+    absent = [f for f in selected if f not in by_frame]
+    if absent:
+        if not allow_gaps:
+            raise InputError(
+                f"requested frame {absent[0]} not found on disk ({len(absent)} of "
+                f"{len(selected)} requested frames missing; --allow-gaps skips them)",
+                _missing_path(pattern, absent[0]),
+            )
+        warnings.append(
+            f"{len(absent)} requested frame(s) missing on disk, skipped: "
+            f"{format_frame_spec(absent)}"
+        )
+        selected = [f for f in selected if f in by_frame]
+    if not selected:
+        raise InputError(f"none of the frames {frames_spec} exist", inputs[0])
+    return selected
+
+
+def _existing_outputs(
+    outputs: dict[int, Path], selected: list[int], overwrite: bool, skip_existing: bool
+) -> list[int]:
+    """The selected frames whose output exists; OutputExistsError unless the run may
+    overwrite or skip them."""
+    existing = [f for f in selected if outputs[f].exists()]
+    if existing and not (overwrite or skip_existing):
+        raise OutputExistsError(
+            f"output exists ({len(existing)} of {len(selected)} outputs exist; "
+            "use --overwrite or --skip-existing)",
+            str(outputs[existing[0]]),
+        )
+    return existing
+
+
+def _chunk_tasks(
+    chunk: Chunk,
+    usable: list[tuple[int, Path]],
+    outputs: dict[int, Path],
+    *,
+    contiguous: bool,
+    allow_gaps: bool,
+    history_last_frame: int | None,
+    pattern: SequencePattern | None,
+    warnings: list[str],
+) -> list[FrameTask]:
+    """One chunk's frame tasks in order; a gap in a contiguous sequence is an InputError, or
+    resets the history with a warning under ``allow_gaps``."""
+    write = set(chunk.write)
+    frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]
+    expected_previous = (
+        history_last_frame if history_last_frame is not None and chunk.index == 0 else None
+    )
+    tasks: list[FrameTask] = []
+    previous = expected_previous
+    for f, p in frames:
+        reset = False
+        if contiguous and previous is not None and f != previous + 1:
+            gap = f"{previous + 1}" if f == previous + 2 else f"{previous + 1}-{f - 1}"
+            if not allow_gaps:
+                raise InputError(
+                    f"frame {previous + 1} is missing on disk (frames {gap}; needed for the "
+                    f"history of frame {f}; --allow-gaps resets history instead)",
+                    _missing_path(pattern, previous + 1),
+                )
+            reset = True
+            warnings.append(f"frame(s) {gap} missing on disk: history reset at frame {f}")
+        tasks.append(FrameTask(f, p, outputs[f] if f in write else None, reset))
+        previous = f
+    return tasks
+
+
 def build_job(
     inputs: Sequence[str],
     output: str,
@@ -110,40 +206,10 @@ def build_job(
     if skip_existing and overwrite:
         raise UsageError("--skip-existing and --overwrite contradict each other")
     timeline = expand_inputs(list(inputs))
-    by_frame = dict(timeline)
     pattern = SequencePattern.parse(inputs[0]) if len(inputs) == 1 else None
     contiguous = pattern is not None and pattern.is_sequence
     warnings: list[str] = []
-
-    def missing_path(frame: int) -> str:
-        return (
-            str(pattern.path(frame))
-            if pattern is not None and pattern.is_sequence
-            else (f"frame {frame}")
-        )
-
-    if frames_spec is not None:
-        try:
-            selected = parse_frame_spec(frames_spec)
-        except ValueError as exc:
-            raise UsageError(f"--frames: {exc}") from None
-        absent = [f for f in selected if f not in by_frame]
-        if absent:
-            if not allow_gaps:
-                raise InputError(
-                    f"requested frame {absent[0]} not found on disk ({len(absent)} of "
-                    f"{len(selected)} requested frames missing; --allow-gaps skips them)",
-                    missing_path(absent[0]),
-                )
-            warnings.append(
-                f"{len(absent)} requested frame(s) missing on disk, skipped: "
-                f"{format_frame_spec(absent)}"
-            )
-            selected = [f for f in selected if f in by_frame]
-        if not selected:
-            raise InputError(f"none of the frames {frames_spec} exist", inputs[0])
-    else:
-        selected = [f for f, _ in timeline]
+    selected = _select_frames(frames_spec, inputs, timeline, pattern, allow_gaps, warnings)
 
     usable = timeline
     if history_last_frame is not None:
@@ -156,43 +222,19 @@ def build_job(
         usable = [(f, p) for f, p in timeline if f > history_last_frame]
         warmup = None  # continue from the frame after the saved one: exact
 
-    outputs = resolve_outputs(output, selected, by_frame)
+    outputs = resolve_outputs(output, selected, dict(timeline))
     _check_not_inputs(outputs, timeline)
-    existing = [f for f in selected if outputs[f].exists()]
-    if existing and not (overwrite or skip_existing):
-        raise OutputExistsError(
-            f"output exists ({len(existing)} of {len(selected)} outputs exist; "
-            "use --overwrite or --skip-existing)",
-            str(outputs[existing[0]]),
-        )
+    existing = _existing_outputs(outputs, selected, overwrite, skip_existing)
     write_frames = [f for f in selected if not (skip_existing and f in existing)]
 
     chunks = plan_chunks(write_frames, [f for f, _ in usable], chunk_size=chunk_size,
                          warmup=warmup, bidirectional=bidirectional)
-    chunk_tasks: list[list[FrameTask]] = []
-    for chunk in chunks:
-        write = set(chunk.write)
-        frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]
-        expected_previous = (
-            history_last_frame if history_last_frame is not None and chunk.index == 0 else None
-        )
-        tasks: list[FrameTask] = []
-        previous = expected_previous
-        for f, p in frames:
-            reset = False
-            if contiguous and previous is not None and f != previous + 1:
-                gap = f"{previous + 1}" if f == previous + 2 else f"{previous + 1}-{f - 1}"
-                if not allow_gaps:
-                    raise InputError(
-                        f"frame {previous + 1} is missing on disk (frames {gap}; needed for the "
-                        f"history of frame {f}; --allow-gaps resets history instead)",
-                        missing_path(previous + 1),
-                    )
-                reset = True
-                warnings.append(f"frame(s) {gap} missing on disk: history reset at frame {f}")
-            tasks.append(FrameTask(f, p, outputs[f] if f in write else None, reset))
-            previous = f
-        chunk_tasks.append(tasks)
+    chunk_tasks = [
+        _chunk_tasks(chunk, usable, outputs, contiguous=contiguous, allow_gaps=allow_gaps,
+                     history_last_frame=history_last_frame, pattern=pattern,
+                     warnings=warnings)
+        for chunk in chunks
+    ]  # fmt: skip
     return DenoiseJob(
         timeline=timeline,
         outputs=outputs,

@@ -1,9 +1,14 @@
-"""SVGF parameters: one dataclass with the paper's defaults, documented once.
+"""SVGF parameters: one flat dataclass with the paper's defaults, each documented once.
 
-Every field's ``metadata["help"]`` is the single place its meaning is written down; the CLI
-builds one ``--option`` per field from it (``svgf_cli.commands.options``), the README table
-is generated from the same text, and the resolved values are stored in every output's
-metadata as ``svgf/params``.
+Every field's metadata is the single place its meaning (``help``), its group (``group``, one
+of ``GROUPS``) and its valid range (``valid``, a ``Range``) are written down: ``check_params``
+checks the range, the CLI builds its click types, ``--set NAME=VALUE`` and ``svgf params``
+from them (``svgf_cli.commands.options``), and the resolved values are stored in every
+output's metadata as ``svgf/params``. The grouping is metadata only: the dataclass stays flat,
+so ``to_json`` and history files do not change.
+
+A preset is the paper's values plus a named list of departures, each with its reason
+(``DEPARTURES``).
 """
 
 from __future__ import annotations
@@ -11,16 +16,72 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 # ``atrous_iterations`` value that picks the count from the image size.
 AUTO_ITERATIONS = -1
 # ``pixel_filter`` from the frame's header (svgf_cli.filters.pixel_filter).
 AUTO_PIXEL_FILTER = -1.0
 
+# The parameter groups, in display order, with a one-line title each.
+GROUPS: dict[str, str] = {
+    "temporal": "temporal accumulation and reprojection (paper 4.1)",
+    "variance": "variance estimation (paper 4.2)",
+    "antilag": "anti-lag: history that no longer matches the frame is shortened",
+    "glossy": "glossy signals (reflections move with what they show)",
+    "atrous": "the a-trous wavelet filter (paper 4.3)",
+    "demodulation": "demodulation and remodulation by the albedo (paper 4)",
+    "guards": "guards: firefly clamp and spread, history clamp, despike",
+    "output": "the output: pixel filter and temporal anti-aliasing",
+}
 
-def _p(default: Any, help: str, **extra: Any) -> Any:
-    return field(default=default, metadata={"help": help, **extra})
+
+@dataclass(frozen=True)
+class Range:
+    """The valid values of a numeric parameter: ``low``/``high`` (None = unbounded; open or
+    closed), plus ``auto`` (a sentinel the user writes as ``auto``) and ``off`` (a value
+    outside the range that switches the feature off)."""
+
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    auto: float | None = None
+    off: float | None = None
+    shown: str | None = None  # how the bounds are written, where the default text is poor
+    noun: str = "a number"  # what a value is, for "expected ..." messages
+
+    def in_bounds(self, value: float) -> bool:
+        if self.low is not None and (value < self.low or (self.low_open and value == self.low)):
+            return False
+        return self.high is None or not (value > self.high
+                                          or (self.high_open and value == self.high))
+
+    def contains(self, value: float) -> bool:
+        return value in (self.auto, self.off) or self.in_bounds(value)
+
+    def bounds_text(self) -> str:
+        """``(0, 1]``, ``[1, 16]``, ``> 0``, ``>= 1``."""
+        if self.shown is not None:
+            return self.shown
+        low, high = (None if b is None else f"{b:g}" for b in (self.low, self.high))
+        if low is not None and high is not None:
+            return f"{'(' if self.low_open else '['}{low}, {high}{')' if self.high_open else ']'}"
+        if low is not None:
+            return f"{'>' if self.low_open else '>='} {low}"
+        return f"{'<' if self.high_open else '<='} {high}" if high is not None else "any"
+
+    def text(self) -> str:
+        """The whole range as a user reads it: ``0..12 or auto``, ``0 (off) or >= 1``."""
+        text = self.bounds_text()
+        if self.off is not None:
+            text = f"{self.off:g} (off) or {text}"
+        return f"{text} or auto" if self.auto is not None else text
+
+
+def _p(default: Any, help: str, *, group: str, valid: Range | None = None) -> Any:
+    assert group in GROUPS, group
+    return field(default=default, metadata={"help": help, "group": group, "valid": valid})
 
 
 @dataclass(frozen=True)
@@ -28,22 +89,35 @@ class SVGFParams:
     """Resolved SVGF parameters. Defaults are Schied et al. 2017 (``--preset paper``)."""
 
     # Temporal accumulation (paper section 4.1).
-    alpha: float = _p(0.2, "Minimum colour blend factor; alpha = max(alpha, 1/history_length).")
-    moments_alpha: float = _p(0.2, "Minimum blend factor of the luminance moments.")
-    history_cap: int = _p(32, "Maximum history length in frames.")
-    temporal: bool = _p(True, "Reuse history through motion vectors (off: every frame cold).")
+    alpha: float = _p(
+        0.2, "Minimum colour blend factor; alpha = max(alpha, 1/history_length).",
+        group="temporal", valid=Range(0, 1, low_open=True),
+    )
+    moments_alpha: float = _p(
+        0.2, "Minimum blend factor of the luminance moments.",
+        group="temporal", valid=Range(0, 1, low_open=True),
+    )
+    history_cap: int = _p(32, "Maximum history length in frames.", group="temporal", valid=Range(1))
+    temporal: bool = _p(
+        True, "Reuse history through motion vectors (off: every frame cold).",
+        group="temporal",
+    )
     depth_tolerance: float = _p(
         10.0,
         "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient"
         " + depth_slack * z).",
+        group="temporal", valid=Range(0),
     )
     depth_slack: float = _p(
         0.002,
         "Depth-relative slack of the reprojection depth test (scale-free stand-in for"
         " Falcor's absolute 0.01).",
+        group="temporal", valid=Range(0),
     )
     normal_tolerance: float = _p(
-        16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01)."
+        16.0,
+        "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01).",
+        group="temporal", valid=Range(0),
     )
     history_catmull_rom: bool = _p(
         False,
@@ -51,55 +125,69 @@ class SVGFParams:
         " the 4x4 taps (clamped to the bilinear taps' range) where all 16 pass the"
         " reprojection tests, bilinear elsewhere: bilinear resampling blurs the history a"
         " little more every frame.",
+        group="temporal",
     )
     bidirectional: bool = _p(
         False,
         "Offline: also run the filter backwards in time and combine both passes' histories"
         " per pixel before the spatial filter (frames after the current one count too;"
         " about twice the work; docs/bidirectional.md).",
+        group="temporal",
     )
     # Variance estimation (paper section 4.2).
     variance_history_threshold: int = _p(
-        4, "Below this history length the variance is estimated spatially (7x7 bilateral)."
+        4, "Below this history length the variance is estimated spatially (7x7 bilateral).",
+        group="variance", valid=Range(0),
     )
-    spatial_variance_radius: int = _p(3, "Radius of the spatial variance estimate (3 = 7x7).")
+    spatial_variance_radius: int = _p(
+        3, "Radius of the spatial variance estimate (3 = 7x7).",
+        group="variance", valid=Range(0),
+    )
     spatial_variance_sigma_luminance: float = _p(
         10.0,
         "Weak luminance edge-stop of the spatial variance estimate, relative to the pair's"
         " mean luminance: exp(-|dl| / (sigma * mean l)) (Falcor's raw phiColor at l = 1,"
         " the same at every brightness).",
+        group="variance", valid=Range(0, low_open=True),
     )
     spatial_variance_blur_color: bool = _p(
         False,
         "Also replace short-history colour by the spatially filtered colour (Falcor; the"
         " paper filters only the variance).",
+        group="variance",
     )
     # Anti-lag (filters/antilag.py): history that no longer matches the frame is shortened.
     antilag: bool = _p(
         False,
         "Shorten the history where it disagrees with the current frame beyond the noise"
         " (moving lights and shadows, lights switched or dimmed, moving reflections).",
+        group="antilag",
     )
     antilag_radius: int = _p(
-        2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels)."
+        2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels).",
+        group="antilag", valid=Range(1, 16),
     )
     antilag_sigma: float = _p(
         3.5,
         "Anti-lag significance: the history is stale where it differs from the frame by more"
         " than this many standard errors of the window's noise.",
+        group="antilag", valid=Range(0),
     )
     antilag_spatial_samples: float = _p(
         64.0,
         "Anti-lag strength: pixels the spatial filter is assumed to average; the current frame"
         " gets weight b^2 / (b^2 + var / N) for a stale history of bias b.",
+        group="antilag", valid=Range(1),
     )
     antilag_tolerance: float = _p(
-        0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept."
+        0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept.",
+        group="antilag", valid=Range(0),
     )
     antilag_gradients: bool = _p(
         True,
         "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
         " (svgf trace --gradient-samples).",
+        group="antilag",
     )
     # Glossy signals (Signal.glossy: reflections and refractions move with what they show,
     # not with the surface, so their reprojected history is unreliable).
@@ -107,11 +195,13 @@ class SVGFParams:
         0.0,
         "Clamp a glossy signal's reprojected history to the current 3x3 mean +- k*sigma"
         " (0 = as history_clamp).",
+        group="glossy", valid=Range(0),
     )
     glossy_sigma_luminance: float = _p(
         0.0,
         "sigma_l of glossy signals: reflections carry detail the spatial filter must keep"
         " (0 = the same as sigma_luminance).",
+        group="glossy", valid=Range(0),
     )
     mixed_sigma_luminance: float = _p(
         0.0,
@@ -119,6 +209,7 @@ class SVGFParams:
         " lobe's whole light): their variance is the indirect light's, which would blur the"
         " direct light's detail (0 = the same as sigma_luminance; glossy signals keep"
         " glossy_sigma_luminance).",
+        group="glossy", valid=Range(0),
     )
     glossy_emitter_radiance: bool = _p(
         False,
@@ -127,6 +218,7 @@ class SVGFParams:
         " where a specular path reached a light) at the pixel and at a neighbour: a reflected"
         " light is filtered with the pixels that also see it, not blurred into the surface"
         " around it.",
+        group="glossy",
     )
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
@@ -134,24 +226,39 @@ class SVGFParams:
         "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none; auto (-1 in"
         " svgf/params) = from the image's shorter side: 3 below 160 pixels, 4 below 320,"
         " else 5.",
+        group="atrous", valid=Range(
+            0, 12, auto=AUTO_ITERATIONS, shown="0..12", noun="a number of iterations"
+        ),
     )
     feedback_iteration: int = _p(
-        0, "A-trous iteration whose output becomes the colour history (-1 = unfiltered)."
+        0, "A-trous iteration whose output becomes the colour history (-1 = unfiltered).",
+        group="atrous", valid=Range(-1),
     )
     moving_feedback_share: float = _p(
         1.0,
         "Share of the feedback iteration's output in the colour history where the pixel"
         " moves (the rest: the unfiltered accumulation; 1 = the paper's feedback everywhere).",
+        group="atrous", valid=Range(0, 1),
     )
-    sigma_luminance: float = _p(4.0, "sigma_l: luminance edge-stopping against sqrt(variance).")
-    sigma_normal: float = _p(128.0, "sigma_n: exponent of the normal edge-stopping weight.")
-    sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.")
+    sigma_luminance: float = _p(
+        4.0, "sigma_l: luminance edge-stopping against sqrt(variance).",
+        group="atrous", valid=Range(0, low_open=True),
+    )
+    sigma_normal: float = _p(
+        128.0, "sigma_n: exponent of the normal edge-stopping weight.",
+        group="atrous", valid=Range(0, low_open=True),
+    )
+    sigma_depth: float = _p(
+        1.0, "sigma_z: depth edge-stopping against the depth gradient.",
+        group="atrous", valid=Range(0, low_open=True),
+    )
     # Demodulation (paper section 4).
     albedo_epsilon: float = _p(
         1e-3,
         "Demodulation floor: a signal's colour below it in every channel is black and filtered"
         " as radiance; otherwise each channel is floored at max(albedo_epsilon, 0.02 * the"
         " brightest channel).",
+        group="demodulation", valid=Range(0, low_open=True),
     )
     guide_albedo_floor: float = _p(
         0.0,
@@ -159,6 +266,7 @@ class SVGFParams:
         " over the renderer's albedo AOV): glossy light over a dark diffuse base is not"
         " modulated by that albedo, and dividing by it amplifies the light (0 ="
         " albedo_epsilon).",
+        group="demodulation", valid=Range(0, 1),
     )
     temporal_albedo: bool = _p(
         False,
@@ -168,6 +276,7 @@ class SVGFParams:
         " mean): at 1 spp a pixel's colour is one sample of a texture edge, a renderer's"
         " reference the pixel-filtered mean (off for a renderer whose references are point"
         " samples, as svgf trace's are by default: the mean only blurs them).",
+        group="demodulation",
     )
     albedo_catmull_rom: bool = _p(
         False,
@@ -175,29 +284,34 @@ class SVGFParams:
         " taps (clamped to the bilinear taps' range) where all 16 pass its tests, bilinear"
         " elsewhere: bilinear resampling blurs the texture the means converge to a little"
         " more every frame.",
+        group="demodulation",
     )
     # Optional extras from the lecture notes; all off unless asked.
     firefly_clamp: float = _p(
         0.0,
         "Clamp input luminance to mean + k*sigma of the 8 neighbours before accumulation"
         " (0 = off).",
+        group="guards", valid=Range(0),
     )
     spread_fireflies: float = _p(
         0.0,
         "Before accumulation, a sample above both its history's m1 + k*sigma and 4x its"
         " second-brightest same-mode neighbour is bounded there and its excess shared over the"
         " same surface in the 9x9 around it (energy kept; glossy signals excepted; 0 = off).",
+        group="guards", valid=Range(0),
     )
     history_clamp: float = _p(
         0.0,
         "Clamp the reprojected history to the 3x3 mean +- k*sigma of the current frame,"
         " its luminance moments scaled with it (0 = off; glossy signals: glossy_history_clamp).",
+        group="guards", valid=Range(0),
     )
     despike: float = _p(
         0.0,
         "Output guard: a filtered pixel brighter than this many times its second-brightest"
         " same-mode neighbour (any neighbour, in the output, for a pixel whose mode none"
         " shares) is brought down to that bound (fireflies the a-trous kept; 0 = off).",
+        group="guards", valid=Range(1, off=0),
     )
     pixel_filter: float = _p(
         0.0,
@@ -205,15 +319,21 @@ class SVGFParams:
         " its emission: the renderer's pixel filter, which frames sampled at pixel centres"
         " lack (0 = off; auto (-1 in svgf/params) = 0.05 where the header says the frame is"
         " one sample through the pixel centre, Cycles at 1 spp, else off).",
+        group="output",
+        valid=Range(0, 1 / 3, auto=AUTO_PIXEL_FILTER, shown="0..1/3", noun="a weight"),
     )
     taa: bool = _p(
         False,
         "Temporal anti-aliasing of the output at object outlines (the paper's last step):"
         " the previous output, Catmull-Rom resampled and clipped to the current 3x3, blended"
         " in where a jittered sample flips between two surfaces.",
+        group="output",
     )
-    taa_alpha: float = _p(0.5, "The current output's share in the TAA blend (before the"
-                               " luminance weighting).")
+    taa_alpha: float = _p(
+        0.5,
+        "The current output's share in the TAA blend (before the luminance weighting).",
+        group="output", valid=Range(0, 1, low_open=True),
+    )
 
     def to_json(self) -> str:
         """Stable JSON of every field (sorted keys), stored in output metadata."""
@@ -223,37 +343,73 @@ class SVGFParams:
         return dataclasses.replace(self, **changes)
 
 
-PRESETS: dict[str, SVGFParams] = {
-    # Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128, sigma_z 1, 5 iterations,
-    # first iteration fed back as history.
-    "paper": SVGFParams(),
-    # The recommended set (measured in docs/results.md): the paper's filter plus anti-lag, a
-    # loose history clamp against outliers (k = 3), the glossy rules (reflected lights
-    # filtered as radiance: docs/signals.md), a tighter luminance
-    # stop for the short-history spatial variance (0.5: fireflies and lit/shadowed
-    # neighbours no longer inflate it into an over-blur), firefly spreading (k = 10),
-    # despike (ratio 2),
-    # demodulation by the G-buffer albedo only where it is at least 0.1, the temporal
-    # albedo with its means resampled by Catmull-Rom (docs/algorithm.md), the feedback
-    # a-trous output kept as history only where pixels stand still (where they move the
-    # blur compounds with the resampling: docs/algorithm.md), and an a-trous reach that
-    # grows with the image (atrous_iterations_for).
-    "default": SVGFParams(antilag=True, history_clamp=3.0, glossy_history_clamp=1.0,
-                          glossy_sigma_luminance=1.0, glossy_emitter_radiance=True,
-                          mixed_sigma_luminance=2.5, spatial_variance_sigma_luminance=0.5,
-                          despike=2.0, spread_fireflies=10.0, guide_albedo_floor=0.1,
-                          temporal_albedo=True, albedo_catmull_rom=True,
-                          moving_feedback_share=0.0, atrous_iterations=AUTO_ITERATIONS,
-                          pixel_filter=AUTO_PIXEL_FILTER),
-    # Falcor's SVGFPass defaults (see shared/research/svgf-anchors.md, section 2).
-    "falcor": SVGFParams(
-        alpha=0.05,
-        moments_alpha=0.2,
-        sigma_luminance=10.0,
-        atrous_iterations=4,
-        feedback_iteration=1,
-        spatial_variance_blur_color=True,
+class Departure(NamedTuple):
+    """One value a preset changes from the paper's, and why."""
+
+    name: str
+    value: Any
+    reason: str
+
+
+_ALG = "docs/algorithm.md"
+_FIREFLIES = f"{_ALG}#fireflies-despike-and-the-short-history-variance"
+_GLOSSY = f"{_ALG}#2a-anti-lag-and-glossy-signals"
+_FALCOR = "Falcor's SVGFPass default (shared/research/svgf-anchors.md, section 2)"
+
+# Each preset is the paper's values (Schied et al. 2017: alpha 0.2, sigma_l 4, sigma_n 128,
+# sigma_z 1, 5 iterations, the first fed back as history) plus these departures.
+DEPARTURES: dict[str, tuple[Departure, ...]] = {
+    "paper": (),
+    # The recommended set: it wins overall on every bundled sequence (docs/results.md).
+    "default": (
+        Departure("antilag", True, "moving lights and shadows, lights switched or dimmed"
+                  f" and moving reflections lag otherwise: {_GLOSSY}"),
+        Departure("history_clamp", 3.0, "a loose clamp of the history against outliers:"
+                  f" {_GLOSSY}"),
+        Departure("glossy_history_clamp", 1.0, "reflections move with what they show, so"
+                  f" their reprojected history is unreliable: {_GLOSSY}"),
+        Departure("glossy_sigma_luminance", 1.0, "reflections carry detail the spatial filter"
+                  " must keep: docs/signals.md"),
+        Departure("glossy_emitter_radiance", True, "a reflected light is filtered as radiance,"
+                  " not blurred into the surface around it: docs/signals.md"),
+        Departure("mixed_sigma_luminance", 2.5, "a combined colour's variance is the indirect"
+                  f" light's, which would blur the direct light's detail: {_ALG}"
+                  "#4-à-trous-wavelet-filter-paper-43"),
+        Departure("spatial_variance_sigma_luminance", 0.5, "fireflies and lit/shadowed"
+                  " neighbours no longer inflate the short-history variance into an"
+                  f" over-blur: {_FIREFLIES}"),
+        Departure("despike", 2.0, f"bounds the fireflies the a-trous kept: {_FIREFLIES}"),
+        Departure("spread_fireflies", 10.0, "shares a firefly's excess over its surface,"
+                  f" energy kept: {_FIREFLIES}"),
+        Departure("guide_albedo_floor", 0.1, "glossy light over a dark diffuse base is not"
+                  " amplified by dividing by the G-buffer albedo: "
+                  f"{_ALG}#1-signals-and-demodulation"),
+        Departure("temporal_albedo", True, "a renderer's reference is the pixel-filtered"
+                  " texture, a 1-spp colour one sample of it: "
+                  f"{_ALG}#5-remodulation-and-the-temporal-albedo"),
+        Departure("albedo_catmull_rom", True, "bilinear resampling blurs the texture the"
+                  f" means converge to a little more every frame: {_ALG}"
+                  "#sharper-history-resampling-catmull-rom"),
+        Departure("moving_feedback_share", 0.0, "where pixels move the feedback blur compounds"
+                  f" with the resampling: {_ALG}#feedback-where-pixels-move"),
+        Departure("atrous_iterations", AUTO_ITERATIONS, "the filter's reach grows with the"
+                  f" image (atrous_iterations_for): {_ALG}#the-filters-reach-grows-with-the-image"),
+        Departure("pixel_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres lack the"
+                  f" renderer's pixel filter: {_ALG}"
+                  "#the-pixel-filter-of-centre-sampled-frames---pixel-filter"),
     ),
+    "falcor": (
+        Departure("alpha", 0.05, _FALCOR),
+        Departure("sigma_luminance", 10.0, _FALCOR),
+        Departure("atrous_iterations", 4, _FALCOR),
+        Departure("feedback_iteration", 1, _FALCOR),
+        Departure("spatial_variance_blur_color", True, _FALCOR),
+    ),
+}
+
+PRESETS: dict[str, SVGFParams] = {
+    name: SVGFParams(**{d.name: d.value for d in departures})
+    for name, departures in DEPARTURES.items()
 }
 
 
@@ -281,6 +437,16 @@ def atrous_iterations_for(params: SVGFParams, height: int, width: int) -> int:
 DEFAULT_PRESET = "default"
 
 
+def param_fields() -> list[dataclasses.Field[Any]]:
+    """The SVGFParams fields, in declaration order."""
+    return list(dataclasses.fields(SVGFParams))
+
+
+def param_range(name: str) -> Range | None:
+    """The declared valid range of parameter ``name`` (None: a boolean)."""
+    return SVGFParams.__dataclass_fields__[name].metadata["valid"]
+
+
 def resolve_params(preset: str = DEFAULT_PRESET, **overrides: Any) -> SVGFParams:
     """Start from a preset and apply the overrides that are not None."""
     if preset not in PRESETS:
@@ -290,3 +456,14 @@ def resolve_params(preset: str = DEFAULT_PRESET, **overrides: Any) -> SVGFParams
     if unknown:
         raise ValueError(f"unknown parameter(s): {', '.join(sorted(unknown))}")
     return PRESETS[preset].replace(**changes)
+
+
+def check_params(p: SVGFParams) -> None:
+    """ValueError naming the first parameter of ``p`` outside its declared range, with its
+    value and the range."""
+    for f in param_fields():
+        valid = f.metadata["valid"]
+        value = getattr(p, f.name)
+        if valid is not None and not valid.contains(value):
+            auto = "" if valid.auto is None else f" (auto is {valid.auto:g})"
+            raise ValueError(f"{f.name} = {value!r}: must be {valid.text()}{auto}")

@@ -23,7 +23,7 @@ import OpenEXR
 import OpenImageIO as oiio
 
 from svgf_cli.errors import InputError, SvgfError, UsageError
-from svgf_cli.frame import Frame
+from svgf_cli.frame import Frame, Signal
 from svgf_cli.io import atomic
 from svgf_cli.io.colour import LuminanceWeights, luminance_weights
 from svgf_cli.io.layers import (
@@ -754,6 +754,169 @@ def _renormalise(normal: np.ndarray) -> int:
     return count
 
 
+def _read_one_view_info(path: Path) -> ExrInfo:
+    """The header(s) of a file that is read for its pixels: multi-view files refused."""
+    info = read_info(path)
+    refuse_multiview(info)
+    return info
+
+
+@dataclass
+class _ReadPlan:
+    """What `read_frame` reads from one file: the resolved layers, the signal plan, the
+    ``combined`` fallback of a checked set, and the channels to decode."""
+
+    resolved: ResolvedLayers
+    plan: SignalPlan
+    fallback: SignalPlan | None
+    names: list[str]  # the channels of the roles to read
+    gradient: list[str]  # A-SVGF gradient-sample channels of the plan and its fallback
+
+
+def _plan_read(mapping: LayerMapping, info: ExrInfo, path: Path) -> _ReadPlan:
+    """Resolve ``mapping`` against the file's channels and plan its signals."""
+    resolved = resolve_layers(mapping, info.channels, str(path))
+    plan = plan_signals(mapping, resolved, info.channels, str(path))
+    assert plan is not None  # resolve_layers refused a file without any signal
+    # The combined colour is the fallback of a checked set: read it too.
+    fallback = None
+    if plan.checked and not mapping.signals_fixed:
+        fallback = plan_signals(mapping, resolved, info.channels, str(path),
+                                requested="combined")
+    resolved.plan = plan
+    resolved.requested_signals = mapping.signals
+    roles = resolved.roles_to_read()
+    if fallback is not None:
+        roles = list(dict.fromkeys([*roles, *fallback.roles()]))
+    names = [name for role in roles for name in (resolved[role] or ())]
+    gradient = [p.gradient_mask for p in (plan, fallback) if p and p.gradient_mask]
+    gradient += [name for p in (plan, fallback) if p
+                 for _, pair in p.gradient_channels for name in pair]
+    return _ReadPlan(resolved, plan, fallback, names, gradient)
+
+
+def _clean_role(role: str, data: np.ndarray, path: Path, warnings: list[str]) -> int:
+    """Clean one role's planes in place by its rules; returns how many values changed."""
+    if role in (*RADIANCE_ROLES, "albedo") or role.endswith("_color"):
+        return _scrub(role, data, path, warnings, clamp_negative=True)
+    if role == "depth":
+        return _clean_depth(data[0], path, warnings)
+    if role == "normal":
+        changed = _scrub("normal", data, path, warnings, clamp_negative=False)
+        return changed + _renormalise(data)
+    if role in ("motion", "motion_next", "alpha"):
+        return _scrub(role, data, path, warnings, clamp_negative=False)
+    return 0  # id: read as is (the mesh id is derived from it later)
+
+
+@dataclass
+class _RoleReader:
+    """Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
+    the source reference the copy instead of holding the same values twice. The G-buffer
+    is gathered first (`read_gbuffer`); the signals' roles when the composition asks for
+    them (`fetch`, `channel`, `release` are what `compose_signals` calls)."""
+
+    planes: _Planes
+    resolved: ResolvedLayers
+    path: Path
+    warnings: list[str]
+    values: dict[str, np.ndarray] = field(default_factory=dict)
+    gathered: dict[str, np.ndarray] = field(default_factory=dict)
+    gbuffer: list[str] = field(default_factory=list)
+
+    def fetch(self, role: str) -> np.ndarray:
+        if role in self.values:
+            return self.values[role]
+        channel_names = self.resolved[role]
+        assert channel_names is not None
+        data = self.values[role] = self.planes.gather(channel_names)
+        if not _clean_role(role, data, self.path, self.warnings):
+            self.planes.share(channel_names, data)
+        return data
+
+    def read_gbuffer(self) -> None:
+        self.gbuffer = [r for r in (*REQUIRED_ROLES, "motion_next", "id", "alpha")
+                        if self.resolved[r] is not None]
+        for role in self.gbuffer:
+            self.fetch(role)
+        self.values["depth"] = _depth_with_surfaces(
+            self.values["depth"], self.resolved, self.planes, self.path, self.warnings
+        )
+
+    def release(self, role: str) -> None:
+        if role not in self.gbuffer:
+            self.values.pop(role, None)
+
+    def channel(self, name: str) -> np.ndarray:
+        if name not in self.gathered:
+            self.gathered[name] = self.planes.gather((name,))[0]
+        return self.gathered[name]
+
+
+@dataclass
+class _Signals:
+    """The composed signals of a frame, with the light-pass check that chose them."""
+
+    plan: SignalPlan
+    signals: list[Signal]
+    emission: np.ndarray | None
+    sum_check: SumCheck | None = None
+    signal_warning: str | None = None
+
+
+def _compose_checked(read: _ReadPlan, reader: _RoleReader, path: Path) -> _Signals:
+    """Compose the planned signals; a checked set whose light passes do not add up to the
+    colour warns and, when not fixed, is composed again as its ``combined`` fallback."""
+    plan = read.plan
+    signals, emission = compose_signals(plan, reader.fetch, reader.channel, reader.release)
+    if not plan.checked:
+        return _Signals(plan, signals, emission)
+    warnings = reader.warnings
+    sum_check = check_sum(signals, emission, reader.fetch("color"))
+    signal_warning = None
+    if not sum_check.passed:
+        signal_warning = _sum_warning(path, plan, sum_check, read.fallback is None)
+        warnings.append(signal_warning)
+        if read.fallback is not None:
+            plan = read.fallback
+            read.resolved.plan = plan
+            signals, emission = compose_signals(plan, reader.fetch, reader.channel,
+                                                reader.release)
+    # A role gathered again for the fallback is cleaned again: report its fixes once.
+    warnings[:] = dict.fromkeys(warnings)
+    return _Signals(plan, signals, emission, sum_check, signal_warning)
+
+
+def _assemble_frame(
+    values: dict[str, np.ndarray], composed: _Signals, info: ExrInfo, convention: str
+) -> Frame:
+    """The validated `Frame` from the cleaned role planes and the composed signals."""
+    depth = values["depth"][0]
+    motion = to_backward_pixels(values["motion"], convention)
+
+    if "id" in values:
+        mesh_id = mesh_ids(values["id"][0])
+    else:
+        mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
+
+    frame = Frame(
+        signals=composed.signals,
+        albedo=values["albedo"],
+        normal=values["normal"],
+        depth=np.ascontiguousarray(depth),
+        motion=motion,
+        mesh_id=mesh_id,
+        emission=composed.emission,
+        # The filter's luminance is the file's own (its chromaticities), never negative.
+        luminance_weights=info.luminance_weights.for_filter(),
+        centre_sampled=centre_sampled(info.attributes),
+    )
+    if "motion_next" in values:
+        frame.motion_next = to_next_pixels(values["motion_next"], convention)
+    frame.validate()
+    return frame
+
+
 def read_frame(
     path: str | os.PathLike[str],
     mapping: LayerMapping,
@@ -780,139 +943,39 @@ def read_frame(
     """
     path = Path(path)
     convention = motion_convention or mapping.motion_convention
-    image = _open(path)
-    try:
-        info = _read_header(image, path)
-    except UnicodeError as exc:
-        raise InputError(f"header holds text that is not UTF-8 ({exc})", str(path)) from None
-    finally:
-        image.close()
-    refuse_multiview(info)
-    resolved = resolve_layers(mapping, info.channels, str(path))
-    plan = plan_signals(mapping, resolved, info.channels, str(path))
-    assert plan is not None  # resolve_layers refused a file without any signal
-    # The combined colour is the fallback of a checked set: read it too.
-    fallback = None
-    if plan.checked and not mapping.signals_fixed:
-        fallback = plan_signals(mapping, resolved, info.channels, str(path),
-                                requested="combined")
-    resolved.plan = plan
-    resolved.requested_signals = mapping.signals
-    roles = resolved.roles_to_read()
-    if fallback is not None:
-        roles = list(dict.fromkeys([*roles, *fallback.roles()]))
-    names = [name for role in roles for name in (resolved[role] or ())]
-    gradient = [p.gradient_mask for p in (plan, fallback) if p and p.gradient_mask]
-    gradient += [name for p in (plan, fallback) if p
-                 for _, pair in p.gradient_channels for name in pair]
+    info = _read_one_view_info(path)
+    read = _plan_read(mapping, info, path)
+    resolved = read.resolved
     colour_channels = resolve_output_colour(mapping, info.channels)
-    planes = _read_channels(info, list(dict.fromkeys([*names, *gradient])),
+    planes = _read_channels(info, list(dict.fromkeys([*read.names, *read.gradient])),
                             also_in_window=colour_channels or ())
 
     # The output replaces the colour channels: the writer never needs their input values.
-    colour_is_read = set(colour_channels or ()) & set(names)
+    colour_is_read = set(colour_channels or ()) & set(read.names)
     for name in (colour_channels or ()) if not colour_is_read else ():
         planes.source.release(name)
-    # Role by role: gather a float32 copy, clean it, and when cleaning changed nothing let
-    # the source reference the copy instead of holding the same values twice. The G-buffer
-    # is gathered now; the signals' roles when the composition asks for them.
-    warnings: list[str] = []
-    values: dict[str, np.ndarray] = {}
-
-    def fetch(role: str) -> np.ndarray:
-        if role in values:
-            return values[role]
-        channel_names = resolved[role]
-        assert channel_names is not None
-        data = values[role] = planes.gather(channel_names)
-        if role in (*RADIANCE_ROLES, "albedo") or role.endswith("_color"):
-            changed = _scrub(role, data, path, warnings, clamp_negative=True)
-        elif role == "depth":
-            changed = _clean_depth(data[0], path, warnings)
-        elif role == "normal":
-            changed = _scrub("normal", data, path, warnings, clamp_negative=False)
-            changed += _renormalise(data)
-        elif role in ("motion", "motion_next", "alpha"):
-            changed = _scrub(role, data, path, warnings, clamp_negative=False)
-        else:  # id: read as is (the mesh id is derived from it below)
-            changed = 0
-        if not changed:
-            planes.share(channel_names, data)
-        return data
-
-    gbuffer = [r for r in (*REQUIRED_ROLES, "motion_next", "id", "alpha")
-               if resolved[r] is not None]
-    for role in gbuffer:
-        fetch(role)
-    values["depth"] = _depth_with_surfaces(values["depth"], resolved, planes, path, warnings)
-
-    def release(role: str) -> None:
-        if role not in gbuffer:
-            values.pop(role, None)
-
-    gathered: dict[str, np.ndarray] = {}
-
-    def channel(name: str) -> np.ndarray:
-        if name not in gathered:
-            gathered[name] = planes.gather((name,))[0]
-        return gathered[name]
-
-    signals, emission = compose_signals(plan, fetch, channel, release)
-    sum_check = signal_warning = None
-    if plan.checked:
-        sum_check = check_sum(signals, emission, fetch("color"))
-        if not sum_check.passed:
-            signal_warning = _sum_warning(path, plan, sum_check, fallback is None)
-            warnings.append(signal_warning)
-            if fallback is not None:
-                plan = fallback
-                resolved.plan = plan
-                signals, emission = compose_signals(plan, fetch, channel, release)
-        # A role gathered again for the fallback is cleaned again: report its fixes once.
-        warnings[:] = dict.fromkeys(warnings)
+    reader = _RoleReader(planes, resolved, path, warnings=[])
+    reader.read_gbuffer()
+    composed = _compose_checked(read, reader, path)
     # The output replaces the colour channels: the writer never needs their input values.
     for name in colour_channels or ():
         planes.source.release(name)
     if not passthrough:
         _keep_colour_part_only(planes.source, colour_channels, resolved)
-    height, width = values["depth"].shape[1:]
-    depth = values["depth"][0]
-    motion = to_backward_pixels(values["motion"], convention)
-
-    if "id" in values:
-        mesh_id = mesh_ids(values["id"][0])
-    else:
-        mesh_id = np.where(depth > 0, 0, -1).astype(np.int32)
-
-    alpha = values["alpha"][0] if "alpha" in values else None
-
-    frame = Frame(
-        signals=signals,
-        albedo=values["albedo"],
-        normal=values["normal"],
-        depth=np.ascontiguousarray(depth),
-        motion=motion,
-        mesh_id=mesh_id,
-        emission=emission,
-        # The filter's luminance is the file's own (its chromaticities), never negative.
-        luminance_weights=info.luminance_weights.for_filter(),
-        centre_sampled=centre_sampled(info.attributes),
-    )
-    if "motion_next" in values:
-        frame.motion_next = to_next_pixels(values["motion_next"], convention)
-    frame.validate()
+    values = reader.values
+    frame = _assemble_frame(values, composed, info, convention)
     return ReadResult(
         frame=frame,
-        alpha=alpha,
+        alpha=values["alpha"][0] if "alpha" in values else None,
         info=info,
         resolved=resolved,
-        warnings=warnings,
+        warnings=reader.warnings,
         source=planes.source,
         colour_channels=colour_channels,
         luminance_weights=info.luminance_weights,
-        plan=plan,
-        sum_check=sum_check,
-        signal_warning=signal_warning,
+        plan=composed.plan,
+        sum_check=composed.sum_check,
+        signal_warning=composed.signal_warning,
     )
 
 
@@ -950,14 +1013,7 @@ def read_rgb(
     NaN/Inf are left as they are: evaluation should see what the file holds.
     """
     path = Path(path)
-    image = _open(path)
-    try:
-        info = _read_header(image, path)
-    except UnicodeError as exc:
-        raise InputError(f"header holds text that is not UTF-8 ({exc})", str(path)) from None
-    finally:
-        image.close()
-    refuse_multiview(info)
+    info = _read_one_view_info(path)
     names = resolve_output_colour(mapping or build_mapping(), info.channels)
     if names is None and all(c in info.channels for c in "RGB"):
         names = ("R", "G", "B")

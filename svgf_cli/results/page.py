@@ -122,75 +122,9 @@ def _ratio_text(a: float | None, b: float | None) -> str:
 
 def findings(run: SequenceRun) -> list[str]:
     """Short computed statements of what the numbers of one sequence show."""
-    report, names = run.report, run.names
-    svgf = report.method(SVGF)
-    out = []
-    ranks = report.ranks(RELMSE)
-    best = min(
-        (m for m in report.methods if ranks[m.name] is not None),
-        key=lambda m: ranks[m.name] or 0,
-        default=None,
-    )
-    if best is not None:
-        out.append(
-            f"Lowest relMSE (trimmed): `{best.name}` ({number(best.summary(RELMSE), RELMSE)}); "
-            f"`svgf` is {ranks[SVGF]} of {sum(r is not None for r in ranks.values())} "
-            f"({number(svgf.summary(RELMSE), RELMSE)}); overall rank of `svgf`: "
-            f"{report.overall_ranks()[SVGF]}."
-        )
-    for other, what in (
-        (SPATIAL, "spatial-only (`svgf-no-temporal`)"),
-        (PAPER, "the paper preset (`svgf-paper`)"),
-        ("oidn", "OIDN"),
-        (BIDIRECTIONAL, "`svgf-bidirectional`"),
-    ):
-        if other not in names:
-            continue
-        o = report.method(other)
-        parts = ", ".join(
-            f"{METRIC_INFO[k].label.split(' ')[0]} {_ratio_text(svgf.summary(k), o.summary(k))}"
-            for k in (RELMSE, "flip", "temporal")
-        )
-        out.append(f"`svgf` against {what}: {parts} (below 1 = `svgf` better).")
-    if SPATIAL in names:
-        for event, k in recovery(run, SVGF):
-            paper = dict(recovery(run, PAPER)).get(event) if PAPER in names else None
-            peak = _peak_ratio(run, event.frame)
-            text = (
-                f"After the step at frame {event.frame} ({event.text}) `svgf`'s per-frame "
-                f"relMSE (trimmed) is "
-                + (
-                    "within 2x of spatial-only's from the step frame on"
-                    if k == 0
-                    else f"back within 2x of spatial-only's after {frames_text(k)}"
-                    if k is not None
-                    else "not back within 2x of spatial-only's before the next step or the end"
-                )
-            )
-            if PAPER in names:
-                text += f" (paper preset: {frames_text(paper)})"
-            text += f"; at the step it is {peak} spatial-only's."
-            out.append(text)
-    hot = [
-        (m.summary("hot_max"), m.name)
-        for m in report.methods
-        if m.name != INPUT and m.summary("hot_max") is not None
-    ]
-    over = sorted(name for value, name in hot if value is not None and value > HOT_THRESHOLD)
-    worst = number(svgf.summary("hot_max"), "hot_max")
-    pixels = run.size[0] * run.size[1]
-    shares = [f.values.get("hot_share") for f in svgf.frames]
-    count = round(sum(v for v in shares if v is not None) * pixels)
-    out.append(
-        f"Hot pixels: `svgf`'s brightest output pixel is {worst} the reference's local 5x5 "
-        f"maximum (worst frame); {count} `svgf` pixel(s) above {HOT_THRESHOLD:g}x over all "
-        f"{len(svgf.frames)} frames; "
-        + (
-            f"above {HOT_THRESHOLD:g}x: {', '.join(f'`{n}`' for n in over)}."
-            if over
-            else f"no denoiser goes above {HOT_THRESHOLD:g}x."
-        )
-    )
+    report = run.report
+    out = [*_ranking_finding(report), *_comparison_findings(run), *_recovery_findings(run)]
+    out.append(_hot_pixel_finding(run))
     ratio = cold_start(report, SVGF)
     if ratio is not None:
         out.append(
@@ -205,6 +139,101 @@ def findings(run: SequenceRun) -> list[str]:
             + "."
         )
     return out
+
+
+def _ranking_finding(report: EvaluationReport) -> list[str]:
+    """Which method has the lowest relMSE (trimmed), and where `svgf` ranks (none when no
+    method has one)."""
+    svgf = report.method(SVGF)
+    ranks = report.ranks(RELMSE)
+    best = min(
+        (m for m in report.methods if ranks[m.name] is not None),
+        key=lambda m: ranks[m.name] or 0,
+        default=None,
+    )
+    if best is None:
+        return []
+    return [
+        f"Lowest relMSE (trimmed): `{best.name}` ({number(best.summary(RELMSE), RELMSE)}); "
+        f"`svgf` is {ranks[SVGF]} of {sum(r is not None for r in ranks.values())} "
+        f"({number(svgf.summary(RELMSE), RELMSE)}); overall rank of `svgf`: "
+        f"{report.overall_ranks()[SVGF]}."
+    ]
+
+
+def _comparison_findings(run: SequenceRun) -> list[str]:
+    """`svgf`'s summary metrics as ratios to each reference method that was run."""
+    report, names = run.report, run.names
+    svgf = report.method(SVGF)
+    out = []
+    for other, what in (
+        (SPATIAL, "spatial-only (`svgf-no-temporal`)"),
+        (PAPER, "the paper preset (`svgf-paper`)"),
+        ("oidn", "OIDN"),
+        (BIDIRECTIONAL, "`svgf-bidirectional`"),
+    ):
+        if other not in names:
+            continue
+        o = report.method(other)
+        parts = ", ".join(
+            f"{METRIC_INFO[k].label.split(' ')[0]} {_ratio_text(svgf.summary(k), o.summary(k))}"
+            for k in (RELMSE, "flip", "temporal")
+        )
+        out.append(f"`svgf` against {what}: {parts} (below 1 = `svgf` better).")
+    return out
+
+
+def _recovery_findings(run: SequenceRun) -> list[str]:
+    """How soon `svgf` is back within 2x of spatial-only after each step of the scene."""
+    names = run.names
+    if SPATIAL not in names:
+        return []
+    out = []
+    for event, k in recovery(run, SVGF):
+        paper = dict(recovery(run, PAPER)).get(event) if PAPER in names else None
+        peak = _peak_ratio(run, event.frame)
+        text = (
+            f"After the step at frame {event.frame} ({event.text}) `svgf`'s per-frame "
+            f"relMSE (trimmed) is "
+            + (
+                "within 2x of spatial-only's from the step frame on"
+                if k == 0
+                else f"back within 2x of spatial-only's after {frames_text(k)}"
+                if k is not None
+                else "not back within 2x of spatial-only's before the next step or the end"
+            )
+        )
+        if PAPER in names:
+            text += f" (paper preset: {frames_text(paper)})"
+        text += f"; at the step it is {peak} spatial-only's."
+        out.append(text)
+    return out
+
+
+def _hot_pixel_finding(run: SequenceRun) -> str:
+    """`svgf`'s brightest pixel against the reference, and which denoisers go over the limit."""
+    report = run.report
+    svgf = report.method(SVGF)
+    hot = [
+        (m.summary("hot_max"), m.name)
+        for m in report.methods
+        if m.name != INPUT and m.summary("hot_max") is not None
+    ]
+    over = sorted(name for value, name in hot if value is not None and value > HOT_THRESHOLD)
+    worst = number(svgf.summary("hot_max"), "hot_max")
+    pixels = run.size[0] * run.size[1]
+    shares = [f.values.get("hot_share") for f in svgf.frames]
+    count = round(sum(v for v in shares if v is not None) * pixels)
+    return (
+        f"Hot pixels: `svgf`'s brightest output pixel is {worst} the reference's local 5x5 "
+        f"maximum (worst frame); {count} `svgf` pixel(s) above {HOT_THRESHOLD:g}x over all "
+        f"{len(svgf.frames)} frames; "
+        + (
+            f"above {HOT_THRESHOLD:g}x: {', '.join(f'`{n}`' for n in over)}."
+            if over
+            else f"no denoiser goes above {HOT_THRESHOLD:g}x."
+        )
+    )
 
 
 def _peak_ratio(run: SequenceRun, frame: int) -> str:

@@ -145,6 +145,51 @@ def run_sequence(
     folder = repo / spec.folder
     inputs = str(folder / spec.inputs)
     references = str(folder / spec.references)
+    outputs, notes, seconds = _denoise_methods(spec, methods, skipped, inputs, work, runner,
+                                               frames)  # fmt: skip
+    if SVGF not in outputs:
+        failed = next((n.text for n in notes if n.method == SVGF), "not run")
+        raise RuntimeError(f"{spec.folder}: svgf denoise (default preset) failed: {failed}")
+
+    baselines = [
+        m.baseline
+        for m in methods
+        if m.baseline is not None and m.name not in skipped and m.applies_to(spec)
+    ]
+    contact_frames = [f for f in spec.contact_frames if frames is None or f in frames]
+    request = EvaluationRequest(
+        output=outputs[SVGF],
+        reference=references,
+        input=inputs,
+        frames=list(frames) if frames else None,
+        baselines=tuple(b for b in baselines if b is not None),
+        params=PRESETS[DEFAULT_PRESET],
+        preset=DEFAULT_PRESET,
+        layers=spec.aovs,
+        contact_frames=contact_frames,
+        compare=[(name, path) for name, path in outputs.items() if name != SVGF],
+    )
+    start = time.perf_counter()
+    report, contacts = run_evaluation(request)
+    elapsed = time.perf_counter() - start
+    _publishable(report, spec, methods, repo)
+    from svgf_cli.io.exr import read_info
+
+    info = read_info(SequencePattern.parse(references).path(report.frames[0]))
+    return SequenceRun(spec, report, contacts, notes, seconds, elapsed, (info.width, info.height))
+
+
+def _denoise_methods(
+    spec: SequenceSpec,
+    methods: Sequence[MethodSpec],
+    skipped: dict[str, str],
+    inputs: str,
+    work: Path,
+    runner: DenoiseRunner,
+    frames: Sequence[int] | None,
+) -> tuple[dict[str, str], list[MethodNote], dict[str, float]]:
+    """Run `svgf denoise` for every applicable method that is not a baseline: the output
+    pattern of each that succeeded, notes on failures and warnings, and the seconds each took."""
     notes: list[MethodNote] = []
     outputs: dict[str, str] = {}
     seconds: dict[str, float] = {}
@@ -185,36 +230,7 @@ def run_sequence(
                 )
             )
         outputs[method.name] = output
-    if SVGF not in outputs:
-        failed = next((n.text for n in notes if n.method == SVGF), "not run")
-        raise RuntimeError(f"{spec.folder}: svgf denoise (default preset) failed: {failed}")
-
-    baselines = [
-        m.baseline
-        for m in methods
-        if m.baseline is not None and m.name not in skipped and m.applies_to(spec)
-    ]
-    contact_frames = [f for f in spec.contact_frames if frames is None or f in frames]
-    request = EvaluationRequest(
-        output=outputs[SVGF],
-        reference=references,
-        input=inputs,
-        frames=list(frames) if frames else None,
-        baselines=tuple(b for b in baselines if b is not None),
-        params=PRESETS[DEFAULT_PRESET],
-        preset=DEFAULT_PRESET,
-        layers=spec.aovs,
-        contact_frames=contact_frames,
-        compare=[(name, path) for name, path in outputs.items() if name != SVGF],
-    )
-    start = time.perf_counter()
-    report, contacts = run_evaluation(request)
-    elapsed = time.perf_counter() - start
-    _publishable(report, spec, methods, repo)
-    from svgf_cli.io.exr import read_info
-
-    info = read_info(SequencePattern.parse(references).path(report.frames[0]))
-    return SequenceRun(spec, report, contacts, notes, seconds, elapsed, (info.width, info.height))
+    return outputs, notes, seconds
 
 
 def _publishable(

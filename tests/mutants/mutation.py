@@ -1,4 +1,4 @@
-"""Mutation testing of svgf_cli/filters/, svgf_cli/io/ and svgf_cli/runner.py with cosmic-ray.
+"""Mutation testing of svgf_cli/filters/, svgf_cli/io/ and svgf_cli/run/ with cosmic-ray.
 
 cosmic-ray writes each mutant to disk and runs a test command, so the numba kernels are
 mutated like any other code (mutmut 3 skips every decorated function, hence every
@@ -131,18 +131,21 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
     "svgf_cli/io/spill.py": ("tests/test_bidir_runs.py",),
     "svgf_cli/io/output.py": _READ_TESTS,
     "svgf_cli/io/atomic.py": _WRITE_TESTS,
-    "svgf_cli/runner.py": ("tests/test_runner_tasks.py", "tests/test_runner_output.py",
-                           "tests/test_io_write_safety.py", "tests/test_cli_denoise.py",
-                           "tests/test_farm_runner.py",
-                           "tests/test_farm_chunks.py", "tests/test_farm_resume.py",
-                           "tests/test_cli_ground_truth.py",
-                           "tests/robustness/test_fault_files.py",
-                           "tests/robustness/test_fault_values.py",
-                           "tests/robustness/test_fault_structure.py",
-                           "tests/robustness/test_fault_processes.py",
-                           "tests/test_bidir_runs.py"),
 }
-PACKAGES = {"io": ("svgf_cli/io", "svgf_cli/runner.py"), "filters": ("svgf_cli/filters",)}
+# The file driver (svgf_cli/run/, every module): its tests, fastest first.
+_RUN_TESTS = ("tests/test_runner_tasks.py", "tests/test_runner_output.py",
+              "tests/test_io_write_safety.py", "tests/test_cli_denoise.py",
+              "tests/test_farm_runner.py",
+              "tests/test_farm_chunks.py", "tests/test_farm_resume.py",
+              "tests/test_cli_ground_truth.py",
+              "tests/robustness/test_fault_files.py",
+              "tests/robustness/test_fault_values.py",
+              "tests/robustness/test_fault_structure.py",
+              "tests/robustness/test_fault_processes.py",
+              "tests/test_bidir_runs.py", "tests/test_bidir_memory.py")
+# filters/stages/: the host side of each stage (what was the Denoiser's), no numba kernels.
+PACKAGES = {"io": ("svgf_cli/io", "svgf_cli/run"),
+            "filters": ("svgf_cli/filters", "svgf_cli/filters/stages")}
 TIMEOUT_S = {"io": 180.0, "filters": 300.0}
 
 
@@ -159,14 +162,15 @@ class Equivalent:
 # by line number, so the list survives edits elsewhere in the file.
 EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/filters/despike.py", "despike", "core/ReplaceComparisonOperator_Gt_GtE",
-               "if d[x] > _ZERO and neighbour_max[x] >= _ZERO and lum[x] > bound:",
-               "d > 0 -> d >= 0: a background pixel's luminance is -inf in the plane (pass 1), "
-               "never above a bound, so it is left alone either way"),
-    Equivalent("svgf_cli/filters/despike.py", "despike", "core/ReplaceBinaryOperator_Add_Sub",
+               "if d[x] > _ZERO and reference >= _ZERO and lum[x] > bound:",
+               "d > 0 -> d >= 0: a background pixel's luminance is _NONE (-FLT_MAX) in the "
+               "plane (pass 1), never above a bound >= 0, so it is left alone either way"),
+    Equivalent("svgf_cli/filters/despike.py", "_neighbours", "core/ReplaceBinaryOperator_Add_Sub",
                "yy = y + dy",
                "y - dy over dy in -1..1 with every dx visits the same 8 neighbours (the offset "
-               "set is symmetric) and takes their maximum: the same bound"),
-    Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer",
+               "set is symmetric) and takes their maximum, second maximum and agreeing mode "
+               "bits, none of which depends on the order: the same bound"),
+    Equivalent("svgf_cli/io/exr.py", "_assemble_frame", "core/NumberReplacer",
                'depth = values["depth"][0]',
                "[0] -> [-1]: the depth role is one plane (1, H, W), first and last are the same"),
     Equivalent("svgf_cli/io/exr.py", "ExrPart", "core/ReplaceFalseWithTrue",
@@ -181,7 +185,8 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/layers.py", "_expand_layer", "core/NumberReplacer",
                'if len(names) == width and (width > 1 or "." in names[0]):',
                "names[0] -> names[-1]: read only when len(names) == width == 1"),
-    Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer", "changed = 0",
+    Equivalent("svgf_cli/io/exr.py", "_clean_role", "core/NumberReplacer",
+               "return 0  # id: read as is (the mesh id is derived from it later)",
                "0 -> -1 for the id plane: its float plane is copied instead of shared, the "
                "values are the same (sharing only saves memory)"),
     Equivalent("svgf_cli/io/layers.py", "_suffix_index", "core/NumberReplacer",
@@ -191,11 +196,11 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/source.py", "decode_source", "core/NumberReplacer",
                "path: str | os.PathLike[str], threads: int = 0, expected_parts: int | None = "
                "None", "default decode threads 0 -> 1: same pixels; both callers pass threads="),
-    Equivalent("svgf_cli/runner.py", "build_output", "core/NumberReplacer",
-               "keep_only = {_layer_alpha(names[0])} & set(part.channels)",
+    Equivalent("svgf_cli/run/output.py", "build_output", "core/NumberReplacer",
+               "keep_only = {layer_alpha(names[0])} & set(part.channels)",
                "names[0] -> names[1]: the colour's three channels are one layer (one prefix "
                "in layers._match_tuple, or R,G,B), so their alpha name is the same"),
-    Equivalent("svgf_cli/runner.py", "close", "core/NumberReplacer",
+    Equivalent("svgf_cli/run/workers.py", "close", "core/NumberReplacer",
                "self._pending[1].result()",
                "[1] -> [0]: the task has no result(), the AttributeError is suppressed like a "
                "write error, and executor.shutdown(wait=True) still waits for the write"),
@@ -219,8 +224,9 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "(missing folder, full disk, RLIMIT_FSIZE: test_fault_disk.py)"),
     Equivalent("svgf_cli/io/spill.py", "read", "core/NumberReplacer", "part = exr.parts[0]",
                "[0] -> [-1]: a scratch file is written by Spill.write with one part"),
-    Equivalent("svgf_cli/runner.py", "_default_reader", "core/ReplaceTrueWithFalse",
-               "def _default_reader(path: Path, mapping: Any, *, passthrough: bool = True) -> Any:",
+    Equivalent("svgf_cli/run/workers.py", "default_reader", "core/ReplaceTrueWithFalse",
+               "def default_reader(path: Path, mapping: LayerMapping, *, passthrough: bool = True)"
+               " -> ReadResult:",
                "a default never used: frame_reader, its one caller, passes passthrough="),
     Equivalent("svgf_cli/io/exr.py", "_scrub", "core/ReplaceComparisonOperator_GtE_Gt",
                "if math.isfinite(low) and math.isfinite(high) and (low >= 0 or not "
@@ -244,7 +250,7 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "> -> >= at the 1e-5 tolerance: a normal exactly 1e-5 off unit length is "
                "renormalised or kept, both within the tolerance (accepted, not observable)"),
     Equivalent("svgf_cli/io/exr.py", "read_frame", "core/NumberReplacer",
-               'alpha = values["alpha"][0] if "alpha" in values else None',
+               'alpha=values["alpha"][0] if "alpha" in values else None,',
                "[0] -> [-1]: the alpha role is one plane (1, H, W), first and last are the same"),
     Equivalent("svgf_cli/io/patterns.py", "expand_inputs", "core/NumberReplacer",
                "pattern = SequencePattern.parse(inputs[0])",
@@ -280,7 +286,7 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "uses[role] = uses.get(role, 0) + 1",
                "+1 -> -1: a role plane is let go later (or early and gathered again, as "
                "above): same values, other memory"),
-    Equivalent("svgf_cli/runner.py", "close", "core/AddNot",
+    Equivalent("svgf_cli/run/workers.py", "close", "core/AddNot",
                "if self._pending is not None:",
                "either way executor.shutdown(wait=True) waits for the write and its result "
                "is discarded (suppressed); close() is the last call on the object"),
@@ -296,14 +302,10 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "while x < width and not needed[x]:",
                "skip loop off: runs start earlier, but the run kernel skips pixels with "
                "enough history, so the same pixels are written with the same values"),
-    Equivalent("svgf_cli/filters/denoiser.py", "process", "core/NumberReplacer",
-               "pairs = [slice(i, min(i + 2, len(names))) for i in range(0, len(names), 2)]",
-               "step 2 -> 1: overlapping pairs filter a signal twice from the same input into "
-               "the same output: same values, more work"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_row", "core/NumberReplacer",
                "if count <= 0:",
                "<= 0 -> <= -1: counts are >= 0 (sorted bounds) and _segment loops range(count)"),
-    Equivalent("svgf_cli/filters/denoiser.py", "process", "core/NumberReplacer",
+    Equivalent("svgf_cli/filters/stages/reproject.py", "run", "core/NumberReplacer",
                "history_length.fill(0.0)",
                "0 -> -1: accumulation reuses history only where h_prev > 0; both give h = 1"),
     Equivalent("svgf_cli/io/source.py", "data_window", "core/NumberReplacer",
@@ -325,32 +327,33 @@ EQUIVALENT: tuple[Equivalent, ...] = (
     Equivalent("svgf_cli/io/signals.py", "_gradient_channels", "core/NumberReplacer",
                'prefix = mask[0][: -len("gradient.mask")]',
                "[0] -> [-1]: match_channels of one wanted name returns one channel"),
-    Equivalent("svgf_cli/io/exr.py", "fetch", "core/NumberReplacer",
-               "changed = _clean_depth(data[0], path, warnings)",
+    Equivalent("svgf_cli/io/exr.py", "_clean_role", "core/NumberReplacer",
+               "return _clean_depth(data[0], path, warnings)",
                "[0] -> [-1]: the depth role is one plane (1, H, W), first and last are the same"),
     Equivalent("svgf_cli/io/patterns.py", None, "core/ReplaceTrueWithFalse",
                "@dataclass(frozen=True)",
                "frozen off: only attribute assignment and hashing differ; no code assigns to "
                "or hashes a SequencePattern (either would fail loudly, killed)"),
-    Equivalent("svgf_cli/runner.py", "close", "core/ReplaceTrueWithFalse",
+    Equivalent("svgf_cli/run/workers.py", "close", "core/ReplaceTrueWithFalse",
                "self._executor.shutdown(wait=True, cancel_futures=True)",
                "the read-ahead holds at most one prefetch, usually already running (then "
                "cancel cannot stop it either); its result is dropped unread either way"),
-    Equivalent("svgf_cli/runner.py", "save_history", "core/ReplaceOrWithAnd",
+    Equivalent("svgf_cli/run/filter.py", "save_history", "core/ReplaceOrWithAnd",
                "if self.size is None or self._stats.last_frame is None:",
                "or -> and: the same frame sets both (admit, then process) and save_history runs "
                "only after the loop: both are None or both are set"),
     Equivalent("svgf_cli/io/layers.py", "_match_tuple", "core/ReplaceComparisonOperator_Gt_GtE",
                "if len(hits) > 1:",
                "> 1 -> >= 1: len(hits) == 1 has returned just above, so both read len >= 2"),
-    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+    Equivalent("svgf_cli/filters/stages/reproject.py", "gradient_samples",
+               "core/NumberReplacer",
                "mask = np.where(finite & (gradient.mask > 0), F32(1.0), F32(0.0))",
                "the mask's one reader (_gradient_row_sums) tests only mask > 0: any positive "
                "value for a sample, 0 (or below) for none"),
-    Equivalent("svgf_cli/filters/denoiser.py", "_before_accumulation",
-               "core/ReplaceFalseWithTrue",
-               "for s, glossy in enumerate(temporal.glossy or (False,) * len(temporal.names)):",
-               "fallback never taken: the one caller passes one glossy flag per signal, and a "
+    Equivalent("svgf_cli/filters/stages/history_clamp.py", "run", "core/ReplaceFalseWithTrue",
+               "for glossy in temporal.glossy or (False,) * len(temporal.names)]",
+               "fallback never taken: the stage runs only on a reprojected frame, whose "
+               "TemporalState (stages/reproject.py) has one glossy flag per signal, and a "
                "frame has at least one signal"),
     Equivalent("svgf_cli/filters/variance.py", "spatial_variance",
                "core/ReplaceComparisonOperator_Lt_LtE", "while x < width:",
@@ -364,7 +367,7 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "the second glossy lobe instead of the first: glossy and transmission are "
                "adjacent in LOBES (the order of lobes.present), so the order is the same"),
     Equivalent("svgf_cli/io/output.py", "write_output", "core/NumberReplacer", "threads: int = 0,",
-               "a default never used: write_output's one caller (runner.frame_writer) passes "
+               "a default never used: write_output's one caller (run.workers.frame_writer) passes "
                "threads="),
     Equivalent("svgf_cli/io/signals.py", "compose_signals", "core/AddNot", "if fresh:",
                "not fresh (both sites): the next term is added, or the emission subtracted, "
@@ -380,14 +383,16 @@ EQUIVALENT: tuple[Equivalent, ...] = (
                "< -> <= at the degeneracy tolerance: primaries whose determinant is exactly "
                "1e-9 are degenerate either way (a tolerance boundary, not observable)"),
     Equivalent("svgf_cli/filters/atrous.py", "_atrous_rows", "core/NumberReplacer",
-               "sums = np.empty((2, 5, CHUNK), dtype=np.float32)",
-               "2 -> 3: a third scratch slice that is never written or read (the row kernel "
-               "always filters two signals, t in range(2), and reads back sums[s] for s < 2)"),
-    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+               "sums = np.empty((3, 5, CHUNK), dtype=np.float32)",
+               "3 -> 4: a fourth scratch slice that is never written or read (_atrous_row "
+               "fills and reads back sums[t] for t < 2, _atrous_row3 sums[s] for s < 3)"),
+    Equivalent("svgf_cli/filters/stages/reproject.py", "gradient_samples",
+               "core/NumberReplacer",
                "samples.append((mask, np.where(finite, gradient.previous, F32(0.0)),",
                "the stand-in for a non-finite sample only needs to be finite: its mask is 0 and "
                "_gradient_row_sums, the only reader, multiplies every term by the mask"),
-    Equivalent("svgf_cli/filters/denoiser.py", "_gradient_samples", "core/NumberReplacer",
+    Equivalent("svgf_cli/filters/stages/reproject.py", "gradient_samples",
+               "core/NumberReplacer",
                "np.where(finite, gradient.current, F32(0.0))))",
                "the stand-in for a non-finite sample only needs to be finite: its mask is 0 and "
                "_gradient_row_sums, the only reader, multiplies every term by the mask"),
@@ -412,6 +417,8 @@ def modules_of(package: str) -> list[str]:
 
 
 def tests_for(module: str) -> tuple[str, ...]:
+    if module.startswith("svgf_cli/run/"):
+        return _RUN_TESTS
     return MODULE_TESTS.get(module, FILTER_TESTS if module.startswith("svgf_cli/filters/")
                             else _READ_TESTS)
 
@@ -435,8 +442,8 @@ def filters_importers(tree: Path, module: str) -> set[str]:
                 names.add(node.module)
         imports[file.stem] = names
     stem = Path(module).stem
-    if not module.startswith("svgf_cli/filters/"):
-        return set()
+    if not module.startswith("svgf_cli/filters/") or module.startswith("svgf_cli/filters/stages/"):
+        return set()  # a stage module holds no kernels (its stem may be a kernel module's)
     affected, grew = {stem}, True
     while grew:
         grew = False
@@ -828,7 +835,7 @@ def collect(package: str) -> dict:
 
 
 def _group(module: str) -> str:
-    return module if module.endswith("runner.py") else module.rsplit("/", 1)[0] + "/"
+    return module.rsplit("/", 1)[0] + "/"
 
 
 def _wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

@@ -105,9 +105,9 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "atrous-linear-steps", "filters", "a-trous steps 1,2,3,4,5 instead of 2^i",
-        "svgf_cli/filters/denoiser.py",
-        (("                    1 << iteration, p.sigma_depth, p.sigma_normal, propagate,",
-          "                    iteration + 1, p.sigma_depth, p.sigma_normal, propagate,"),),
+        "svgf_cli/filters/stages/atrous.py",
+        (('            1 << iteration, p.sigma_depth, p.sigma_normal, propagate,',
+          '            iteration + 1, p.sigma_depth, p.sigma_normal, propagate,'),),
         FILTER_TESTS + ("tests/test_evaluate_regression.py",),
     ),
     Mutant(
@@ -232,22 +232,22 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "history-length-of-signal-0", "filters",
         "per-signal history length replaced by signal 0's",
-        "svgf_cli/filters/denoiser.py",
-        (("            shortened = self._before_accumulation(temporal)",
-          "            history_length[1:] = history_length[0]\n"
-          "            shortened = self._before_accumulation(temporal)"),),
+        "svgf_cli/filters/stages/reproject.py",
+        (('            ctx.temporal = TemporalState(\n',
+          '            history_length[1:] = history_length[0]\n'
+          '            ctx.temporal = TemporalState(\n'),),
         FILTER_TESTS,
     ),
     Mutant(
         "rec709-weights", "filters", "luminance weights ignored (Rec.709 constants used)",
-        "svgf_cli/filters/denoiser.py",
-        (("float32_weights(frame.luminance_weights),",
-          "float32_weights((0.2126, 0.7152, 0.0722)),"),),
+        "svgf_cli/filters/engine.py",
+        (('float32_weights(frame.luminance_weights),',
+          'float32_weights((0.2126, 0.7152, 0.0722)),'),),
         FILTER_TESTS,
     ),
     Mutant(
         "no-history-guard", "filters", "history guard removed",
-        "svgf_cli/filters/denoiser.py",
+        "svgf_cli/filters/stages/store_history.py",
         (('        counts["history_resets"] += values.reset_nonfinite_history(\n'
           '            history["history_illumination"], history["history_moments"],\n'
           '            history["history_length"], history["history_mode"],\n'
@@ -288,9 +288,9 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "glossy-no-clamp", "filters", "glossy signals' history not clamped",
-        "svgf_cli/filters/denoiser.py",
-        (("        ks = [glossy_k if glossy else p.history_clamp",
-          "        ks = [p.history_clamp"),),
+        "svgf_cli/filters/stages/history_clamp.py",
+        (('        ks = [glossy_k if glossy else p.history_clamp',
+          '        ks = [p.history_clamp'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -303,8 +303,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "guide-floor-ignored", "filters",
         "signals demodulated by the G-buffer albedo get no floor",
-        "svgf_cli/filters/denoiser.py",
-        (("params.guide_albedo_floor if guide else 0.0", "0.0"),),
+        "svgf_cli/filters/context.py",
+        (('params.guide_albedo_floor if guide else 0.0',
+          '0.0'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -324,9 +325,10 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "despike-changes-history", "filters", "despike runs on the colour history too",
-        "svgf_cli/filters/denoiser.py",
-        (("        if filtered.name == filtered.history_name:\n            illumination = "
-          "illumination.copy()\n", ""),),
+        "svgf_cli/filters/stages/despike.py",
+        (('        if filtered.name == filtered.history_name:\n'
+          '            illumination = illumination.copy()\n',
+          ''),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -340,8 +342,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "mixed-sigma-ignored", "filters",
         "a signal mixing direct and indirect light stops at the diffuse sigma_l",
-        "svgf_cli/filters/denoiser.py",
-        (("    if signal.mixed:\n", "    if False:\n"),),
+        "svgf_cli/filters/stages/atrous.py",
+        (('    if signal.mixed:\n',
+          '    if False:\n'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -371,9 +374,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "fireflies-spread-glossy", "filters",
         "firefly spreading also runs on glossy signals (a moving highlight is spread)",
-        "svgf_cli/filters/denoiser.py",
-        (("            tuple(not g for g in glossy), self.params.spread_fireflies,",
-          "            tuple(True for g in glossy), self.params.spread_fireflies,"),),
+        "svgf_cli/filters/stages/spread_fireflies.py",
+        (('            tuple(not g for g in glossy), ctx.params.spread_fireflies,',
+          '            tuple(True for g in glossy), ctx.params.spread_fireflies,'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -426,8 +429,9 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "despike-lone-skipped", "filters",
         "a pixel filtered alone in its mode is never compared with its output neighbours",
-        "svgf_cli/filters/denoiser.py",
-        (("            self._despike_lone(run, output)\n", ""),),
+        "svgf_cli/filters/stages/despike_lone.py",
+        (('        return params.despike > 0.0\n',
+          '        return False\n'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -456,48 +460,48 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "consistency-skipped", "filters",
         "a bidirectional run combines without the consistency test",
-        "svgf_cli/filters/denoiser.py",
-        (("                    reverse_length, temporal.depth, self._colour_counts,",
-          "                    temporal.history_length, temporal.depth, self._colour_counts,"),),
+        "svgf_cli/filters/stages/combine.py",
+        (('            reverse_length, temporal.depth, setup.colour_counts,',
+          '            temporal.history_length, temporal.depth, setup.colour_counts,'),),
         FILTER_TESTS,
     ),
     Mutant(
         "bidirectional-antilag-causal-sigma", "filters",
         "the passes of a bidirectional run test their history at the causal significance",
-        "svgf_cli/filters/denoiser.py",
-        (("(PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)",
-          "(1.0 if temporal.bidirectional else 1.0)"),),
+        "svgf_cli/filters/stages/antilag.py",
+        (('(PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)',
+          '(1.0 if temporal.bidirectional else 1.0)'),),
         FILTER_TESTS,
     ),
     Mutant(
         "bidirectional-glossy-reference-count", "filters",
         "a bidirectional run scales a glossy signal's variance as any other signal's",
-        "svgf_cli/filters/denoiser.py",
-        (("[GLOSSY_REFERENCE_COUNT if signal.glossy else self._moment_counts[-1]",
-          "[self._moment_counts[-1] if signal.glossy else self._moment_counts[-1]"),),
+        "svgf_cli/filters/stages/combine.py",
+        (('[GLOSSY_REFERENCE_COUNT if signal.glossy else setup.moment_counts[-1]',
+          '[setup.moment_counts[-1] if signal.glossy else setup.moment_counts[-1]'),),
         FILTER_TESTS,
     ),
     Mutant(
         "bidirectional-static-history-unfiltered", "filters",
         "the passes of a bidirectional run keep no filtered colour where pixels stand still",
-        "svgf_cli/filters/denoiser.py",
-        (("F32(STATIC_MOTION), F32(STATIC_FILTERED_SHARE), F32(0.0))",
-          "F32(STATIC_MOTION), F32(0.0), F32(0.0))"),),
+        "svgf_cli/filters/stages/pass_history.py",
+        (('F32(STATIC_MOTION), F32(STATIC_FILTERED_SHARE), F32(0.0))',
+          'F32(STATIC_MOTION), F32(0.0), F32(0.0))'),),
         FILTER_TESTS,
     ),
     Mutant(
         "glossy-sigma-ignored", "filters", "glossy signals filtered with the common sigma_l",
-        "svgf_cli/filters/denoiser.py",
-        (("        return params.glossy_sigma_luminance or params.sigma_luminance",
-          "        return params.sigma_luminance"),),
+        "svgf_cli/filters/stages/atrous.py",
+        (('        return params.glossy_sigma_luminance or params.sigma_luminance',
+          '        return params.sigma_luminance'),),
         FILTER_TESTS,
     ),
     Mutant(
         "emitter-mode-ignored", "filters",
         "glossy signals demodulated where the G-buffer albedo marks a reflected light",
-        "svgf_cli/filters/denoiser.py",
-        (("            frame = run.frame = self._mark_reflected_lights(frame, depth, work, marked)",
-          "            pass"),),
+        "svgf_cli/filters/stages/reflected_lights.py",
+        (('        return params.glossy_emitter_radiance\n',
+          '        return False\n'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -547,8 +551,9 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "emission-per-signal", "filters", "emission added once per signal",
-        "svgf_cli/filters/denoiser.py",
-        (("add_emission = has_emission and index == 0", "add_emission = has_emission"),),
+        "svgf_cli/filters/stages/remodulate.py",
+        (('add_emission = has_emission and index == 0',
+          'add_emission = has_emission'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -574,7 +579,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "history-no-temp", "io", "history .npz written without a temp file",
-        "svgf_cli/runner.py",
+        "svgf_cli/run/history.py",
         (('        with atomic_target(path) as tmp, open(tmp, "wb") as handle:',
           '        with open(path, "wb") as handle:'),),
         WRITE_TESTS,
@@ -606,18 +611,21 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-history-not-composed", "filters",
         "temporal albedo: the running mean is computed but the output is remodulated by"
         " this frame's colour",
-        "svgf_cli/filters/denoiser.py",
-        (("        run.frame = dataclasses.replace(frame, signals=signals)\n"
-          "        run.lap(\"albedo\")",
-          "        run.frame = frame\n        run.lap(\"albedo\")"),),
+        "svgf_cli/filters/stages/temporal_albedo.py",
+        (('        ctx.frame = dataclasses.replace(frame, signals=signals)\n'
+          '        return True',
+          '        ctx.frame = frame\n'
+          '        return True'),),
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
         "albedo-history-glossy-averaged", "filters",
         "temporal albedo: a glossy signal is remodulated by its colour's running mean too",
-        "svgf_cli/filters/denoiser.py",
-        (("        if signal.glossy:\n            slots.append(-1)",
-          "        if False:\n            slots.append(-1)"),),
+        "svgf_cli/filters/stages/temporal_albedo.py",
+        (('        if signal.glossy:\n'
+          '            slots.append(-1)',
+          '        if False:\n'
+          '            slots.append(-1)'),),
         ("tests/test_filters_albedo_history.py", "tests/test_reference_denoiser.py"),
     ),
     Mutant(
@@ -641,9 +649,9 @@ MUTANTS: tuple[Mutant, ...] = (
         "albedo-bidirectional-reverse-only", "filters",
         "temporal albedo: a bidirectional output is remodulated by the reverse pass's mean"
         " alone",
-        "svgf_cli/filters/denoiser.py",
-        (("        if forward is not None and forward.albedo is not None:\n",
-          "        if False:\n"),),
+        "svgf_cli/filters/stages/combine_albedo.py",
+        (('        if forward is None or ctx.forward is None or ctx.forward.albedo is None:\n',
+          '        if True:\n'),),
         ("tests/test_filters_albedo_history.py",),
     ),
     Mutant(
@@ -657,23 +665,25 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "combination-buffers-kept", "filters",
         "memory: the reverse pass keeps its combination buffers between output frames",
-        "svgf_cli/filters/denoiser.py",
-        (("        self._release_forward_buffers(work)\n", "        pass\n"),),
+        "svgf_cli/filters/stages/release.py",
+        (('            ctx.work.planes.pop(name, None)\n'
+          '        ctx.resident.forward_albedo = None\n',
+          '            pass\n'),),
         ("tests/test_filters_bidirectional.py",),
     ),
     Mutant(
         "read-beside-write", "io",
         "memory: the reverse pass reads a frame while two others are in memory",
-        "svgf_cli/bidir.py",
+        "svgf_cli/run/bidirectional.py",
         (("stats, after=writes.in_flight) as reads,", "stats) as reads,"),),
         ("tests/test_bidir_memory.py",),
     ),
     Mutant(
         "moving-feedback-ignored", "filters",
         "causal feedback: the filtered output kept as history where pixels move too",
-        "svgf_cli/filters/denoiser.py",
-        (("        keep_unfiltered = feedback >= 0 and p.moving_feedback_share < 1.0\n",
-          "        keep_unfiltered = False\n"),),
+        "svgf_cli/filters/stages/atrous.py",
+        (('    keep_unfiltered = feedback >= 0 and p.moving_feedback_share < 1.0\n',
+          '    keep_unfiltered = False\n'),),
         ("tests/test_filters_denoiser.py", "tests/test_reference_denoiser.py"),
     ),
     Mutant(

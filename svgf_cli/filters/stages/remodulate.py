@@ -1,0 +1,73 @@
+"""Composition: remodulate, sum the signals, add the emission, restore the background."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from svgf_cli.filters import modulate
+from svgf_cli.filters.context import FrameContext, StageBase, add_count
+
+F32 = np.float32
+
+
+class Remodulate(StageBase):
+    """The filtered illumination multiplied back by each signal's colour (Schied et al.
+    2017, sec. 4.1; radiance-mode pixels as they are), the signals summed and the emission
+    added, straight into a fresh output array handed to the caller (nothing full-frame
+    stays resident); the debug layers when asked."""
+
+    name = "remodulate"
+    reads = ("atrous_output", "variance", "history_length", "mode", "depth", "frame.signals")
+    writes = ("output",)
+    clock = "modulate"
+
+    def run(self, ctx: FrameContext) -> None:
+        spatial = ctx.spatial
+        assert spatial is not None
+        frame, depth, counts, rules = ctx.frame, ctx.depth, ctx.counts, ctx.setup.rules
+        height, width = depth.shape
+        radiance = np.zeros((3, height, width), dtype=F32)
+        emission = frame.emission
+        has_emission = emission is not None
+        # Without emission any (3, H, W) float32 plane will do: the kernel never reads it.
+        emission_plane = emission if emission is not None else radiance
+        rows = np.zeros((height, 2), dtype=np.int64)
+        for index, signal in enumerate(frame.signals):
+            add_emission = has_emission and index == 0
+            modulate.remodulate_add(spatial.illumination[index], signal.radiance,
+                                    signal.albedo, depth, emission_plane, add_emission,
+                                    *rules[signal.guide_albedo], radiance, rows)
+            if add_emission:
+                total = rows.sum(axis=0)
+                add_count(counts, "nonfinite", "emission", int(total[0]))
+                add_count(counts, "extreme", "emission", int(total[1]))
+            if ctx.setup.debug_layers:
+                debug_layers(ctx, index, emission_plane, rows)
+        ctx.output = radiance
+
+
+def debug_layers(ctx: FrameContext, index: int, emission_plane: np.ndarray,
+                 rows: np.ndarray) -> None:
+    """Signal ``index``'s own remodulated radiance, variance, history length, mode and
+    anti-lag weight as debug layers."""
+    spatial, signal, mode = ctx.spatial, ctx.frame.signals[index], ctx.mode
+    assert spatial is not None
+    height, width = ctx.depth.shape
+    name, layers = signal.name, ctx.layers
+    alone = np.zeros((3, height, width), dtype=F32)
+    modulate.remodulate_add(spatial.illumination[index], signal.radiance, signal.albedo,
+                            ctx.depth, emission_plane, False,
+                            *ctx.setup.rules[signal.guide_albedo], alone, rows)
+    for c, channel in enumerate("RGB"):
+        layers[f"{name}.{channel}"] = alone[c]
+    layers[f"variance.{name}"] = spatial.variance[index].copy()
+    layers[f"history_length.{name}"] = spatial.history_length[index].copy()
+    layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
+    if ctx.params.antilag:
+        layers[f"antilag.{name}"] = cells_to_pixels(
+            ctx.work["antilag_lambda"][index], height, width)
+
+
+def cells_to_pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:
+    """A per-cell (2x2 pixels) plane at pixel resolution (for the debug layers)."""
+    return np.ascontiguousarray(np.repeat(np.repeat(cells, 2, 0), 2, 1)[:height, :width])

@@ -1,0 +1,61 @@
+"""The entry point of a chunk (`run_sequence`): the causal driver (`causal`), or both
+passes of a bidirectional run (`bidirectional`, imported only then: it brings the
+two-pass filter in).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.heap import map_large_blocks
+from svgf_cli.progress import Progress
+from svgf_cli.run.causal import CausalFilter, default_denoiser, run_causal
+from svgf_cli.run.history import HistoryFile
+from svgf_cli.run.stages import describe_stages
+from svgf_cli.run.stop import StopFlag
+from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats
+from svgf_cli.run.workers import Reader, default_reader
+
+if TYPE_CHECKING:
+    from svgf_cli.io.exr import ReadResult
+
+
+def run_sequence(
+    tasks: Sequence[FrameTask],
+    config: RunConfig,
+    progress: Progress,
+    *,
+    stop: StopFlag | None = None,
+    history: HistoryFile | None = None,
+    save_history_to: Path | None = None,
+    warmup_total: int | None = None,
+    on_first_frame: Callable[[ReadResult], None] | None = None,
+    make_denoiser: Callable[[SVGFParams, bool], CausalFilter] = default_denoiser,
+    read: Reader = default_reader,
+) -> RunStats:
+    """Run the filter over ``tasks`` in order, writing the frames that have an output.
+
+    Raises InputError (exit 3) for an unreadable frame or a resolution change (the frames
+    before it are written, nothing for it), UsageError for a history file from other
+    parameters, Interrupted after a SIGINT/SIGTERM once the frame in flight is written.
+    A bidirectional run (``config.params.bidirectional``) uses neither a history file nor
+    ``make_denoiser``.
+    """
+    # Frame-sized arrays go back to the system when freed: without this the peak memory
+    # grows with the frames run (svgf_cli.heap).
+    map_large_blocks()
+    for line in describe_stages(config.params):
+        progress.detail(line)
+    if config.params.bidirectional:
+        from svgf_cli.run.bidirectional import run_bidirectional
+
+        return run_bidirectional(tasks, config, progress, stop=stop,
+                                 on_first_frame=on_first_frame, read=read)
+    return run_causal(
+        tasks, config, progress, stop=stop, history=history, save_history_to=save_history_to,
+        warmup_total=warmup_total, on_first_frame=on_first_frame,
+        make_denoiser=make_denoiser, read=read,
+    )

@@ -1,0 +1,131 @@
+"""What is written for one denoised frame: the colour converted by the output value policy,
+where it goes in the input's layout, the debug channels and the ``svgf/*`` provenance
+(`build_output` -> `OutputFrame`, `output_attributes`). The writer thread
+(`workers.WriteBehind`) writes it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from svgf_cli import __version__
+from svgf_cli.frame import DenoisedFrame
+from svgf_cli.run.stages import run_stages
+from svgf_cli.run.tasks import FrameTask, RunConfig
+
+if TYPE_CHECKING:
+    from svgf_cli.io.exr import ReadResult
+    from svgf_cli.io.source import SourceFile
+
+# Prefix of the debug channels (--debug-aovs): a layer name no renderer writes, so they
+# never collide with an input layer that is passed through.
+DEBUG_PREFIX = "svgf."
+
+
+def output_attributes(config: RunConfig, task: FrameTask) -> dict[str, str | int]:
+    """The ``svgf/*`` provenance added to the colour's part (every input attribute is kept
+    by the writer as it is).
+
+    Everything here is a function of the options and the frame, never of the run (no
+    timestamps, no host names), so a resumed or retried frame is byte-identical.
+    """
+    attributes: dict[str, str | int] = {
+        "svgf/version": __version__,
+        "svgf/preset": config.preset,
+        "svgf/params": config.params.to_json(),
+        "svgf/frame": int(task.frame),
+        "svgf/input": str(task.input),
+        "svgf/warmup": config.warmup_label,
+        "svgf/kind": "denoised",  # an input's svgf/kind ("input") would mislabel it
+    }
+    stages = run_stages(config.params)
+    if stages:
+        attributes["svgf/stages"] = ",".join(stages)
+    return attributes
+
+
+@dataclass
+class OutputFrame:
+    """One frame ready for the writer thread: the file layout and the new planes."""
+
+    source: SourceFile
+    part_index: int
+    channels: dict[str, np.ndarray]
+    attributes: dict[str, str | int]
+    keep_only: set[str] | None
+    warnings: list[str]
+
+
+def colour_layout(
+    result: ReadResult, frame_shape: tuple[int, int], input_path: Path
+) -> tuple[SourceFile, int, tuple[str, ...]]:
+    """(source, part index, channel names) the denoised colour is written to.
+
+    The input's colour layer when it has one (``colour_channels``), else ``R,G,B`` added to
+    the part holding the filtered signals. A reader without a decoded file (stand-ins in
+    tests, which may also lack the optional fields: hence ``getattr``) gets a one-part
+    layout with its alpha.
+    """
+    from svgf_cli.io.output import synthetic_source
+
+    source = getattr(result, "source", None)
+    if source is None:
+        info = result.info
+        source = synthetic_source(
+            input_path,
+            frame_shape,
+            getattr(info, "attributes", None),
+            getattr(info, "compression", None) or "zip",
+            getattr(result, "alpha", None),
+        )
+    names = getattr(result, "colour_channels", None)
+    anchor: str | None = names[0] if names else None
+    if anchor is None:
+        resolved = getattr(result, "resolved", None)
+        signal = resolved[resolved.signal_roles[0]] if resolved is not None else None
+        anchor = signal[0] if signal else None
+    part = source.part_holding(anchor) if anchor else None
+    return source, (part.index if part is not None else 0), tuple(names or ("R", "G", "B"))
+
+
+def layer_alpha(name: str) -> str:
+    """``ViewLayer.Combined.R`` -> ``ViewLayer.Combined.A``; ``R`` -> ``A``."""
+    layer, dot, _ = name.rpartition(".")
+    return f"{layer}{dot}A"
+
+
+def build_output(
+    result: ReadResult, denoised: DenoisedFrame, config: RunConfig, task: FrameTask
+) -> OutputFrame:
+    """Everything the writer needs for one frame, converted by the output value policy
+    (non-finite -> 0, then half clamped to +-65504; each counted for a warning)."""
+    from svgf_cli.io.output import prepare_colour
+
+    color = denoised.color
+    source, part_index, names = colour_layout(result, color.shape[1:], task.input)
+    part = source.parts[part_index]
+    stored = part.channels.get(names[0])
+    half = not config.float_colour and (stored is None or stored.type_name == "half")
+    prepared = prepare_colour(color, half)
+    warnings = []
+    if prepared.nonfinite:
+        warnings.append(f"{prepared.nonfinite} non-finite output value(s) set to 0")
+    if prepared.clamped:
+        warnings.append(
+            f"{prepared.clamped} output value(s) beyond the half-float range clamped to "
+            "+-65504 (--float keeps them)"
+        )
+    channels = dict(zip(names, prepared.planes, strict=True))
+    if config.debug_aovs:
+        for name, plane in denoised.layers.items():
+            channels[f"{DEBUG_PREFIX}{name}"] = np.ascontiguousarray(plane, dtype=np.float32)
+    keep_only = None
+    if config.colour_only:
+        keep_only = {layer_alpha(names[0])} & set(part.channels)
+    return OutputFrame(
+        source, part_index, channels, output_attributes(config, task), keep_only, warnings
+    )
