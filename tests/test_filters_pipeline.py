@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 from pathlib import Path
 
@@ -150,37 +149,3 @@ def test_held_bytes_are_not_larger_than_before(preset: str, signals: int) -> Non
         reverse.process(frames[t], kept[t] if t < 2 else None)
     for kind, held in (("causal", causal), ("forward", forward), ("reverse", reverse)):
         assert held.held_bytes() <= HELD_BEFORE[f"{preset}.{signals}.{kind}"], kind
-
-
-def _imports(path: Path) -> set[str]:
-    """Modules ``path`` imports, at the top or inside functions."""
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.ImportFrom) and node.module:
-            found.add(node.module)
-        elif isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-    return found
-
-
-def test_the_pipeline_modules_import_one_way() -> None:
-    filters = ROOT / "svgf_cli" / "filters"
-    paths = [*(filters / f"{name}.py" for name in (
-        "buffers", "context", "resident", "pipeline", "engine", "denoiser", "two_pass")),
-        *sorted((filters / "stages").glob("*.py"))]
-    modules = {
-        "svgf_cli.filters." + str(p.relative_to(filters).with_suffix("")).replace("/", "."): p
-        for p in paths}
-    graph = {name: {m for m in _imports(path) if m in modules} for name, path in modules.items()}
-    done: set[str] = set()
-
-    def visit(name: str, stack: tuple[str, ...]) -> None:
-        assert name not in stack, " -> ".join((*stack, name))
-        if name not in done:
-            for other in graph[name]:
-                visit(other, (*stack, name))
-            done.add(name)
-
-    for name in graph:
-        visit(name, ())
-    assert len(graph) > 20

@@ -297,6 +297,13 @@ def test_no_import_cycles() -> None:
     assert not cycles, "import cycles:\n  " + "\n  ".join(cycles)
 
 
+def test_the_run_package_init_imports_nothing_of_its_own() -> None:
+    """Importing any module of ``svgf_cli.run`` runs its ``__init__`` first: it must not
+    pull the drivers (or a cycle) in."""
+    own = {m for m in import_graph(REPO)["svgf_cli.run"] if m.startswith("svgf_cli.run.")}
+    assert not own, own
+
+
 def test_no_class_over_limit() -> None:
     _, classes = long_definitions(REPO)
     assert not classes, f"classes over {MAX_CLASS_LINES} lines:\n  " + "\n  ".join(
