@@ -50,7 +50,18 @@ mutation-report: $(MUTATION_STAMP)
 bench: $(STAMP)
 	$(PY) bench/run.py
 
-results: $(STAMP)
+# ColorVideoVDP for `make results` (optional extra `perceptual`, kept out of `make test`):
+# torch==2.13.0 first (where a local CPU wheel exists pip takes it: small), then cvvdp.
+# torchvision only has to match torch's version (cvvdp uses its Gaussian blur; a CPU torch
+# next to PyPI's CUDA-built torchvision gets a stand-in, svgf_cli/evaluate/perceptual.py).
+PERCEPTUAL_STAMP := $(VENV)/.perceptual-installed
+
+$(PERCEPTUAL_STAMP): $(STAMP)
+	$(PY) -m pip install -q 'torch==2.13.0' 'torchvision==0.28.0' || $(PY) -m pip install -q torch torchvision
+	$(PY) -m pip install -q -e '.[dev,perceptual]'
+	touch $(PERCEPTUAL_STAMP)
+
+results: $(PERCEPTUAL_STAMP)
 	$(PY) -m svgf_cli.results
 
 $(BLENDER_STAMP):

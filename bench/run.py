@@ -15,7 +15,7 @@ from pathlib import Path
 from svgf_cli.results import machine_description
 
 BENCH_DIR = Path(__file__).resolve().parent
-ORDER = ["filters", "io", "e2e", "trace", "oidn"]
+ORDER = ["filters", "io", "e2e", "trace", "oidn", "production"]
 
 
 def main(argv: list[str]) -> int:

@@ -7,7 +7,10 @@ Steps (each a subprocess of this Python, so it runs exactly what a user would ty
 2. ``svgf denoise demo/in.####.exr -o demo/den.####.exr``;
 3. ``svgf evaluate`` of the denoised frames against the references;
 4. a picture, ``demo/demo.png``: the last frame as noisy input | svgf | reference, labelled
-   with that frame's relMSE and FLIP (the image in the README comes from here).
+   with that frame's relMSE and FLIP (the image in the README comes from here);
+5. an animation, ``demo/demo.webp``: every frame as input | svgf | OIDN | reference (OIDN
+   only where ``pyoidn`` is installed), tone-mapped like the picture, 8 frames a second:
+   stills hide flicker. Written with Pillow; needs neither ffmpeg nor torch.
 
 Run ``python -m svgf_cli.demo [--frames 1-24] [--resolution 320x180] [--reference-spp 64]
 [--reference-supersample 4] [--out demo]``. Exits non-zero with an ``ERROR:`` line naming
@@ -69,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     _run("evaluate", ["evaluate", denoised, "--reference", reference, "--input", noisy])
     picture = out / "demo.png"
     write_picture(noisy, denoised, reference, picture)
+    animation = out / "demo.webp"
+    shown = write_animation(noisy, denoised, reference, animation)
 
     print(f"\nDemo outputs in {out.resolve()}/:")
     print(f"  {noisy}      noisy 1-spp input with its G-buffer")
@@ -76,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  {reference}     converged references ({args.reference_spp} spp over "
           f"{args.reference_supersample}x{args.reference_supersample} positions per pixel)")
     print(f"\nPicture (input | svgf | reference): {picture.resolve()}")
+    print(f"Animation ({' | '.join(shown)}): {animation.resolve()}")
     return 0
 
 
@@ -91,6 +97,27 @@ def write_picture(noisy: str, denoised: str, reference: str, path: Path) -> None
     )
     report, contacts = run_evaluation(request)
     write_contact_sheet(report, contacts, path, error_map=False, dpi=100)
+
+
+def write_animation(noisy: str, denoised: str, reference: str, path: Path) -> list[str]:
+    """Every frame as input | svgf | OIDN | reference (OIDN when pyoidn is installed), an
+    animated WebP or GIF (by ``path``'s extension); returns the panel labels."""
+    import importlib.util
+
+    from svgf_cli.evaluate.animation import Panel
+    from svgf_cli.evaluate.animation import write_animation as write
+    from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
+
+    oidn = importlib.util.find_spec("pyoidn") is not None
+    columns = [("input", "input (1 spp)"), ("svgf", "svgf"),
+               *([("oidn", "OIDN")] if oidn else []), ("reference", "reference")]  # fmt: skip
+    request = EvaluationRequest(output=denoised, reference=reference, input=noisy,
+                                baselines=("oidn",) if oidn else (),
+                                keep_displays=tuple(key for key, _ in columns))  # fmt: skip
+    report, _ = run_evaluation(request)
+    panels = [Panel(label, report.displays[key]) for key, label in columns]
+    write(panels, path, scale=1, frame_numbers=report.frames)
+    return [label for _, label in columns]
 
 
 if __name__ == "__main__":

@@ -96,6 +96,39 @@ class Signal:
     mixed: bool = False
 
 
+@dataclass
+class LightLayer:
+    """A light layer the file holds next to its colour (a light pass or a light group), to be
+    written denoised under its own channels (``svgf_cli.filters.composable``).
+
+    ``radiance`` is its light in the colour's units, (3, H, W) float32: for a pass the
+    renderer stores divided by its colour pass (Cycles' ``DiffDir``...), the stored light
+    times ``colour``; ``stored`` is the light as stored (float32), ``colour`` that colour pass
+    (None: stored as radiance). ``signal`` names the filtered signal whose light holds it
+    (empty: no one signal; its share of all the light). ``channels`` are its R, G, B channel
+    names: labels the denoised planes are returned under (the filter knows no files)."""
+
+    channels: tuple[str, str, str]
+    radiance: np.ndarray
+    stored: np.ndarray
+    colour: np.ndarray | None = None
+    signal: str = ""
+    # The colour pass's R, G, B channel names (written as the colour the filter remodulated
+    # by, so that the light x colour rebuild still holds).
+    colour_channels: tuple[str, str, str] | None = None
+
+
+@dataclass
+class LightLayers:
+    """The light layers of a frame to be written denoised: the light passes the signals are
+    built from and the light groups (each the light of some lights, together the colour)."""
+
+    passes: list[LightLayer] = field(default_factory=list)
+    groups: list[LightLayer] = field(default_factory=list)
+    # The emission passes (Cycles' Emit, Env): they take the light no lobe pass can carry.
+    emission: list[LightLayer] = field(default_factory=list)
+
+
 @dataclass(kw_only=True)
 class Frame:
     """One input frame: noisy radiance signals plus the noise-free G-buffer."""
@@ -112,6 +145,9 @@ class Frame:
     # The file says its one sample per pixel went through the pixel centre (Cycles at 1 spp),
     # while a converged frame of its renderer averages the pixel filter's footprint.
     centre_sampled: bool = False
+    # Light passes and light groups to be written denoised (None: none; the Denoiser itself
+    # ignores them, `filters.composable.LayeredDenoiser` composes them).
+    light: LightLayers | None = None
 
     # ----------------------------------------------------------------- constructors
     @classmethod
@@ -264,6 +300,8 @@ class DenoisedFrame:
     color: np.ndarray
     layers: dict[str, np.ndarray]
     counts: dict[str, int] = field(default_factory=dict)
+    # Denoised light layers, (H, W) float32 per channel name (`Frame.light`'s labels).
+    light: dict[str, np.ndarray] = field(default_factory=dict)
 
     def warnings(self) -> list[str]:
         """One message per problem counted in this frame (empty when there is none)."""

@@ -31,3 +31,22 @@ def test_picture_has_three_labelled_columns(tmp_path: Path) -> None:
             runs.append(length)
             length = 0
     assert len([r for r in runs if r > width / 10]) == 3
+
+
+def test_animation_shows_every_frame_side_by_side(tmp_path: Path) -> None:
+    import importlib.util
+
+    from PIL import Image
+
+    from svgf_cli.demo import write_animation
+    from svgf_cli.evaluate.animation import GAP, LABEL_HEIGHT
+
+    path = tmp_path / "demo.webp"
+    noisy = str(SEQ / "in.####.exr")
+    labels = write_animation(noisy, noisy, str(SEQ / "ref.####.exr"), path)
+    oidn = importlib.util.find_spec("pyoidn") is not None
+    assert labels == ["input (1 spp)", "svgf", *(["OIDN"] if oidn else []), "reference"]
+    with Image.open(path) as image:
+        assert image.n_frames == 10  # testdata/seq's frames 1-10
+        columns = len(labels)
+        assert image.size == (columns * 128 + (columns - 1) * GAP, 72 + LABEL_HEIGHT)

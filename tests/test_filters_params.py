@@ -4,8 +4,10 @@ Every parameter of ``SVGFParams`` has a row in the table of docs/denoise.md with
 valid range, ``paper`` and ``falcor`` values; ``default`` is ``paper`` except for the
 parameters that page lists, which are the preset's declared departures. Each preset's
 resolved values are pinned to the values before presets became departure lists (they are
-stored in every output's ``svgf/params``). (The filter tests compare the kernels with the
-float64 reference under the same parameters, so a changed preset value would pass them all.)
+stored in every output's ``svgf/params``); ``default``'s
+``feedback_iteration`` -1 since 2026-11-27 (docs/stability.md). (The filter tests compare
+the kernels with the float64 reference under the same parameters, so a changed preset value
+would pass them all.)
 ``check_params`` refuses a value outside the declared range with a message naming the
 parameter, its value and the range."""
 
@@ -60,7 +62,7 @@ PINNED: dict[str, dict[str, object]] = {
         "antilag_sigma": 3.5, "antilag_spatial_samples": 64.0, "antilag_tolerance": 0.02,
         "antilag_gradients": True, "glossy_history_clamp": 1.0, "glossy_sigma_luminance": 1.0,
         "mixed_sigma_luminance": 2.5, "glossy_emitter_radiance": True, "atrous_iterations": -1,
-        "feedback_iteration": 0, "moving_feedback_share": 0.0, "sigma_luminance": 4.0,
+        "feedback_iteration": -1, "moving_feedback_share": 0.0, "sigma_luminance": 4.0,
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.1, "temporal_albedo": True, "albedo_catmull_rom": True,
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
@@ -123,7 +125,7 @@ def _documented() -> tuple[dict[str, dict[str, object]], dict[str, object]]:
                          re.S)
     assert sentence is not None
     changes = {}
-    for name, value in re.findall(r"`([a-z_]+)`\s+\(([\w.]+)\)", sentence.group(1)):
+    for name, value in re.findall(r"`([a-z_]+)`\s+\((-?[\w.]+)\)", sentence.group(1)):
         field = _field(name)
         changes[field.name] = _value(value, field)
     return columns, changes

@@ -71,7 +71,8 @@ def test_every_method_is_scored_and_the_unknown_one_skipped(generated: dict) -> 
 
 def test_page_json_and_images_are_written_and_deterministic(generated: dict) -> None:
     first, second = generated["first"], generated["second"]
-    assert set(first) == {"seq.json", "seq_curves.png", "seq_contact.png"}, "stale file removed"
+    assert set(first) == {"seq.json", "seq_curves.png", "seq_contact.png", "seq_anim.webp"}, (
+        "stale file removed")
     assert first == second, "same inputs, same bytes (JSON and PNGs)"
     assert (generated["docs"] / "results.md").read_text() == generated["page"]
     report = json.loads(first["seq.json"])
@@ -81,12 +82,18 @@ def test_page_json_and_images_are_written_and_deterministic(generated: dict) -> 
     assert sources["svgf-paper"] == "svgf denoise --preset paper"
     for png in ("seq_curves.png", "seq_contact.png"):
         assert first[png][:8] == b"\x89PNG\r\n\x1a\n" and len(first[png]) < 150_000
+    from PIL import Image
+
+    with Image.open(generated["docs"] / "results" / "seq_anim.webp") as animation:
+        assert animation.n_frames == 2  # the evaluated frames; input | svgf | reference
+        assert animation.size[0] == 3 * 256 + 2 * 2
 
 
 def test_page_has_tables_findings_and_checklist(generated: dict) -> None:
     page = generated["page"]
     assert "## `testdata/seq`" in page
     assert "![contact sheet](results/seq_contact.png)" in page
+    assert "(results/seq_anim.webp)" in page and "ColorVideoVDP, JOD" in page
     assert "relMSE (trimmed) ↓" in page and "Hot max ↓" in page
     assert "What this shows:" in page and "`svgf` against the paper preset" in page
     assert "## Issue targets" in page

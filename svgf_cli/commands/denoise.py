@@ -59,7 +59,8 @@ def _check_combinations(o: dict[str, Any], bidirectional: bool) -> None:
 # --set and --list-params in the filter section at the end. The per-parameter
 # options (--alpha, --history-clamp, ...) are hidden aliases of --set.
 SECTIONS = [
-    ("Input and output", ["output", "colour_only", "float_output", "compression", "debug_aovs"]),
+    ("Input and output", ["output", "colour_only", "float_output", "compression", "debug_aovs",
+                          "light_layers"]),
     (
         "Frames, warm-up and resume",
         ["frames_spec", "warmup", "skip_existing", "overwrite", "allow_gaps", "save_history",
@@ -149,6 +150,14 @@ SECTIONS = [
     "--debug-aovs",
     is_flag=True,
     help="Also write variance, history length and the filtered direct/indirect (float).",
+)
+@click.option(
+    "--light-layers",
+    type=click.Choice(["denoised", "as-read"]),
+    default="denoised",
+    show_default=True,
+    help="Light passes and light groups: denoised, adding up to the denoised colour, or as "
+    "read (causal runs; a bidirectional run writes them as read).",
 )
 @click.option(
     "--save-history",
@@ -331,10 +340,21 @@ def _read_first_frame(run: _Run) -> str | None:
     run.progress.info(
         f"Output: denoised colour as {', '.join(colour or ('R', 'G', 'B'))}"
         + ("" if colour else " (the input has no colour layer)")
-        + ("; colour layer only" if options["colour_only"] else "; every other channel as read")
+        + ("; colour layer only" if options["colour_only"] else _light_text(run, options))
     )
     _log_frames(run)
     return decided.signal_warning
+
+
+def params_bidirectional(run: _Run) -> bool:
+    return bool(run.params.bidirectional)
+
+
+def _light_text(run: _Run, options: dict[str, Any]) -> str:
+    if options["light_layers"] == "as-read" or params_bidirectional(run):
+        return "; every other channel as read"
+    return ("; light layers (lobe passes, light groups) denoised, adding up to the colour; "
+            "every other channel as read")
 
 
 def _log_start(run: _Run, info: Any) -> None:
@@ -417,6 +437,7 @@ def _execute(run: _Run) -> Any:
         mapping=run.mapping,
         float_colour=options["float_output"],
         colour_only=options["colour_only"],
+        light_layers="as-read" if params_bidirectional(run) else options["light_layers"],
         compression=options["compression"],
         debug_aovs=options["debug_aovs"],
         warmup_label=warmup_label(run.warmup),

@@ -41,6 +41,35 @@ def _compare(values: tuple[str, ...]) -> list[tuple[str, str]]:
     return pairs
 
 
+def _jod_selection(jod: bool, methods: str | None, heat: str | None) -> list[str] | None:
+    """``EvaluationRequest.jod``: None = every method, [] = none, else the named ones."""
+    if methods is not None:
+        names = [n.strip() for n in methods.split(",") if n.strip()]
+        if not names:
+            raise UsageError("--jod-methods names no method")
+        return names if heat is None or "svgf" in names else [*names, "svgf"]
+    return None if jod else (["svgf"] if heat is not None else [])
+
+
+def _write_outputs(report: Any, contacts: Any, json_path: str | None, plot_path: str | None,
+                   sheet_path: str | None, jod_map: str | None) -> None:
+    """The JSON report, the plot, the contact sheet and the JOD heat map that were asked for."""
+    if json_path:
+        _write_text(json_path, report.to_json())
+    if plot_path:
+        from svgf_cli.evaluate.plot import write_plot
+
+        write_plot(report, plot_path)
+    if sheet_path:
+        from svgf_cli.evaluate.contact import write_contact_sheet
+
+        write_contact_sheet(report, contacts, sheet_path)
+    if jod_map:
+        from svgf_cli.evaluate.animation import write_heatmap
+
+        write_heatmap(report, jod_map)
+
+
 def _write_text(path: str, text: str) -> None:
     """Atomically (hidden unique temporary, then rename; see svgf_cli.io.atomic)."""
     from svgf_cli.io.atomic import write_atomically
@@ -110,6 +139,23 @@ def _write_text(path: str, text: str) -> None:
     show_default=True,
     help="Signal set the --input frames are read as (as in `svgf denoise`).",
 )
+@click.option(
+    "--jod",
+    is_flag=True,
+    help="Also score ColorVideoVDP video and still JOD (needs: pip install 'svgf[perceptual]').",
+)
+@click.option(
+    "--jod-methods",
+    metavar="A,B",
+    help="Only these methods get a JOD (e.g. svgf,oidn) [default: every method]; implies --jod.",
+)
+@click.option(
+    "--jod-map",
+    "jod_map",
+    metavar="FILE.png",
+    help="Write where svgf's output differs visibly: ColorVideoVDP's heat map, mean over "
+    "frames; implies --jod.",
+)
 @click.option("--per-frame", is_flag=True, help="Also print every method's per-frame table.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines on stderr.")
 @svgf_param_options
@@ -126,6 +172,9 @@ def command(
     contact_frames: str | None,
     layers: str,
     signals: str,
+    jod: bool,
+    jod_methods: str | None,
+    jod_map: str | None,
     per_frame: bool,
     quiet: bool,
     preset: str,
@@ -142,9 +191,8 @@ def command(
     sequence was denoised with); --baseline forward --baseline bidirectional compares the
     causal filter with the bidirectional one (docs/bidirectional.md).
     """
-    from svgf_cli.evaluate.contact import default_contact_frames, write_contact_sheet
+    from svgf_cli.evaluate.contact import default_contact_frames
     from svgf_cli.evaluate.engine import EvaluationRequest, run_evaluation
-    from svgf_cli.evaluate.plot import write_plot
 
     params = params_from_options(preset, param_options)
     frame_list = _frames(frames, "--frames")
@@ -170,17 +218,14 @@ def command(
         signals=signals,
         contact_frames=contact_list or (),
         compare=_compare(compare),
+        jod=_jod_selection(jod, jod_methods, jod_map),
+        jod_map=jod_map is not None,
     )
     log = None if quiet else (lambda msg: click.echo(f"evaluate: {msg}", err=True))
     report, contacts = run_evaluation(request, log=log)
 
     click.echo(report.format_table(per_frame=per_frame))
-    if json_path:
-        _write_text(json_path, report.to_json())
-    if plot_path:
-        write_plot(report, plot_path)
-    if sheet_path:
-        write_contact_sheet(report, contacts, sheet_path)
+    _write_outputs(report, contacts, json_path, plot_path, sheet_path, jod_map)
 
     flagged = report.flagged
     if flagged:

@@ -160,6 +160,27 @@ def _text(
     return "\n".join(lines)
 
 
+def _light_groups(info: ExrInfo, mapping: LayerMapping) -> list[str]:
+    from svgf_cli.io.lightlayers import find_light_groups
+
+    colour = resolve_output_colour(mapping, info.channels)
+    return [name for name, _ in find_light_groups(info.channels, colour)]
+
+
+def _additivity(name: str, mapping: LayerMapping, info: ExrInfo) -> list[Any]:
+    """The light groups' sum and the light passes' rebuild against the colour (`svgf
+    denoise` output or input alike)."""
+    from svgf_cli.io.lightlayers import file_additivity
+
+    if len(info.part_info) != 1:
+        return []  # the light layers are composed within the colour's part
+    return file_additivity(name, mapping)
+
+
+def _denoised(info: ExrInfo) -> bool:
+    return str(info.attributes.get("svgf/kind", "")) == "denoised"
+
+
 @click.command("inspect", short_help="Show an EXR's parts, channels and resolved layer roles.")
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option(
@@ -242,12 +263,26 @@ def command(
         elif check and not resolved.missing and resolved.plan.checked:
             # The light passes against the colour, as `svgf denoise` checks them on read.
             sum_check = read_frame(name, mapping).sum_check
+        additivity = _additivity(name, mapping, info) if check and not resolved.missing else []
         if as_json:
-            reports.append(_report(info, mapping, resolved, sum_check))
+            report = _report(info, mapping, resolved, sum_check)
+            report["light_groups"] = _light_groups(info, mapping)
+            report["additivity"] = [
+                {"what": a.what, "values": a.values, "failing": a.failing,
+                 "worst_relative": a.worst_relative, "passed": a.passed} for a in additivity]
+            reports.append(report)
         else:
             if index:
                 click.echo("")
             click.echo(_text(info, mapping, resolved, sum_check))
+            groups = _light_groups(info, mapping)
+            if groups:
+                click.echo(f"  light groups: {', '.join(groups)} (svgf denoise writes them "
+                           "denoised, adding up to the colour)")
+            for result in additivity:
+                click.echo(f"  light-layer check: {result.describe()}")
+        if _denoised(info) and any(not a.passed for a in additivity):
+            fail(InputError("the denoised light layers do not add up to the colour", name))
     if as_json:
         click.echo(json.dumps({"files": reports}, indent=2))
     if failures:

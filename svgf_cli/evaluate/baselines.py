@@ -1,9 +1,14 @@
 """The methods SVGF is compared with, each produced in memory from the noisy input sequence.
 
 * ``oidn``: Intel Open Image Denoise (``pyoidn``), RT filter, one frame at a time, HDR colour
-  with the noise-free albedo and normal as guides (``clean_aux``). No temporal reuse. The
-  emission plane (when the input has one) is taken out before and added back after, as SVGF
-  does.
+  with the albedo and normal as guides. No temporal reuse. The emission plane (when the input
+  has one) is taken out before and added back after, as SVGF does. Where the G-buffer is
+  noisy (a renderer's 1-spp AOVs: every ``--preset-aovs`` but ``svgf``) it runs the way
+  Blender's Denoise node and OIDN's documentation do: the albedo and the normal are first
+  denoised by their own RT filters (the *prefilter*), then the beauty with ``clean_aux``.
+  ``svgf trace``'s G-buffer is noise-free, so there the aux goes in as it is (``clean_aux``).
+* ``oidn-noprefilter``: the same with the aux always taken as clean (no prefilter), to show
+  what the prefilter is worth on noisy-aux inputs.
 * ``accumulate``: our SVGF pipeline with ``atrous_iterations=0``: plain exponential temporal
   accumulation through the motion vectors, no spatial filter.
 * ``atrous``: our SVGF pipeline with ``temporal=False``: the edge-aware a-trous wavelet filter
@@ -34,7 +39,10 @@ from svgf_cli.errors import UsageError
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import Frame
 
-BASELINES: tuple[str, ...] = ("oidn", "accumulate", "atrous", "forward", "bidirectional")
+BASELINES: tuple[str, ...] = (
+    "oidn", "oidn-noprefilter", "accumulate", "atrous", "forward", "bidirectional",
+)
+OIDN_BASELINES = ("oidn", "oidn-noprefilter")
 # Baselines that carry history: they must see every frame between the scored ones.
 TEMPORAL_BASELINES = ("accumulate", "forward", "bidirectional")
 
@@ -81,27 +89,39 @@ class DenoiserMethod:
         return np.ascontiguousarray(self._denoiser.process(frame).color, dtype=np.float32)
 
 
+def oidn_prefilters(layers: str) -> bool:
+    """Whether the ``oidn`` baseline prefilters the aux of inputs read with ``layers``: the
+    tracer's G-buffer (``svgf``) is noise-free, a renderer's 1-spp AOVs are not."""
+    return layers != "svgf"
+
+
 class OidnMethod:
-    """Intel Open Image Denoise, RT filter, per frame, HDR colour + clean albedo + normal."""
+    """Intel Open Image Denoise, RT filter, per frame, HDR colour + albedo + normal; with
+    ``prefilter`` the albedo and normal are denoised first (OIDN's noisy-aux recipe)."""
 
-    name = "oidn"
-
-    def __init__(self, quality: str = "high") -> None:
+    def __init__(self, quality: str = "high", prefilter: bool = False,
+                 name: str = "oidn") -> None:
         self._pyoidn = import_pyoidn()
         self.quality = quality
+        self.prefilter = prefilter
+        self.name = name
+        self._device = None
 
     def process(self, frame: Frame) -> np.ndarray:
         # OIDN wants (H, W, 3); HDR colour must be non-negative, albedo in [0, 1] and
-        # normals in [-1, 1]. The G-buffer comes from noise-free primary hits: clean_aux.
-        # Directly seen emission is noise-free too and OIDN, not told which pixels are
-        # lights, smears them (measured on testdata/seq: 99.8 % of its squared error sat on
-        # the light). Like SVGF, it denoises the rest and gets the emission added back.
+        # normals in [-1, 1]. Directly seen emission is noise-free and OIDN, not told which
+        # pixels are lights, smears them (measured on testdata/seq: 99.8 % of its squared
+        # error sat on the light). Like SVGF, it denoises the rest and gets the emission
+        # added back.
         radiance = noisy_radiance(frame)
         if frame.emission is not None:
             radiance = radiance - frame.emission
-        color = np.ascontiguousarray(np.moveaxis(np.maximum(radiance, 0.0), 0, -1))
-        albedo = np.ascontiguousarray(np.moveaxis(np.clip(frame.albedo, 0.0, 1.0), 0, -1))
-        normal = np.ascontiguousarray(np.moveaxis(np.clip(frame.normal, -1.0, 1.0), 0, -1))
+        color = _hwc(np.maximum(radiance, 0.0))
+        albedo = _hwc(np.clip(frame.albedo, 0.0, 1.0))
+        normal = _hwc(np.clip(frame.normal, -1.0, 1.0))
+        if self.prefilter:
+            albedo = np.clip(self._aux_filter("albedo", albedo), 0.0, 1.0)
+            normal = np.clip(self._aux_filter("normal", normal), -1.0, 1.0)
         out = self._pyoidn.denoise(
             color, albedo, normal, hdr=True, clean_aux=True, quality=self.quality
         )
@@ -109,6 +129,36 @@ class OidnMethod:
         if frame.emission is not None:
             result = result + frame.emission
         return np.ascontiguousarray(result, dtype=np.float32)
+
+    def _aux_filter(self, slot: str, image: np.ndarray) -> np.ndarray:
+        """OIDN's prefilter: an RT filter given only the ``slot`` image (albedo or normal)
+        writes its denoised version (OIDN README, "Denoising with prefiltering")."""
+        oidn = self._pyoidn
+        if self._device is None:
+            self._device = oidn.Device(oidn.OIDN_DEVICE_TYPE_CPU)
+            self._device.commit()
+        output = np.zeros_like(image)
+        flt = oidn.Filter(self._device, oidn.OIDN_FILTER_TYPE_RT)
+        try:
+            flt.set_image(slot, image, oidn.OIDN_FORMAT_FLOAT3)
+            flt.set_image(oidn.OIDN_IMAGE_OUTPUT, output, oidn.OIDN_FORMAT_FLOAT3)
+            flt.set_int("quality", _QUALITY[self.quality])
+            flt.commit()
+            flt.execute()
+        finally:
+            flt.release()
+        error = self._device.get_error()
+        if error:
+            raise RuntimeError(f"OIDN {slot} prefilter failed: {error}")
+        return output
+
+
+_QUALITY = {"default": 0, "fast": 4, "balanced": 5, "high": 6}
+
+
+def _hwc(planes: np.ndarray) -> np.ndarray:
+    """(3, H, W) -> contiguous float32 (H, W, 3), the layout OIDN reads."""
+    return np.ascontiguousarray(np.moveaxis(planes, 0, -1), dtype=np.float32)
 
 
 def import_pyoidn():  # noqa: ANN201 - returns the optional module
@@ -178,7 +228,9 @@ def make_method(name: str, params: SVGFParams,
     """A fresh method instance for one pass over a sequence (``inputs``, the frames it is
     fed with their files, and the AOV preset ``layers``: for ``bidirectional``)."""
     if name == "oidn":
-        return OidnMethod()
+        return OidnMethod(prefilter=oidn_prefilters(layers))
+    if name == "oidn-noprefilter":
+        return OidnMethod(prefilter=False, name=name)
     if name in ("accumulate", "atrous", "forward"):
         return DenoiserMethod(name, baseline_params(name, params))
     if name == "bidirectional":

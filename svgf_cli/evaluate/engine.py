@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 
 SVGF = "svgf"
 INPUT = "input"
+REFERENCE = "reference"  # the key of the reference's kept display frames
 
 Log = Callable[[str], None]
 
@@ -50,6 +51,13 @@ class EvaluationRequest:
     contact_frames: Sequence[int] = ()
     # More denoised sequences scored from files like ``output``: (method name, pattern).
     compare: Sequence[tuple[str, str]] = ()
+    # ColorVideoVDP (svgf_cli.evaluate.perceptual): video and still JOD of these methods
+    # (None: every method; empty: none), and the svgf output's heat map frames (jod_map).
+    jod: Sequence[str] | None = ()
+    jod_map: bool = False
+    # Methods whose display frames the report keeps (``report.displays``; "reference" for
+    # the reference's), e.g. for an animation.
+    keep_displays: Sequence[str] = ()
 
 
 @dataclass
@@ -107,6 +115,8 @@ def _check_shape(image: np.ndarray, reference: np.ndarray, path: Path, ref_path:
 def _settings(
     request: EvaluationRequest, oidn_version: str | None, signals: str | None = None
 ) -> dict[str, object]:
+    from svgf_cli.evaluate.baselines import oidn_prefilters
+
     settings: dict[str, object] = {
         "svgf_version": __version__,
         "tone_map": metrics.TONE_MAP_DESCRIPTION,
@@ -135,6 +145,10 @@ def _settings(
             "clean_aux": True,
             "quality": "high",
         }
+        if oidn_prefilters(request.layers):
+            settings["oidn"]["prefilter"] = (  # type: ignore[index]
+                "oidn: albedo and normal denoised first by their own RT filters (noisy "
+                "1-spp aux); oidn-noprefilter: aux as given")
     return settings
 
 
@@ -155,8 +169,14 @@ def _source(name: str, request: EvaluationRequest) -> str:
     if name == INPUT:
         assert request.input is not None
         return SequencePattern.parse(request.input).display
+    from svgf_cli.evaluate.baselines import oidn_prefilters
+
+    aux = "prefiltered albedo + normal" if oidn_prefilters(request.layers) else (
+        "clean albedo + normal")
     return {
-        "oidn": "baseline: Intel OIDN per frame (RT, HDR, clean albedo + normal)",
+        "oidn": f"baseline: Intel OIDN per frame (RT, HDR, {aux})",
+        "oidn-noprefilter": "baseline: Intel OIDN per frame (RT, HDR, albedo + normal as "
+        "given, taken as clean)",
         "accumulate": "baseline: SVGF temporal accumulation only (atrous_iterations=0)",
         "atrous": "baseline: SVGF a-trous without temporal reuse (temporal=False)",
         "forward": "baseline: SVGF, causal (bidirectional=False)",
@@ -227,7 +247,7 @@ def _tracks(
         method = make_method(name, request.params, [(f, in_pattern.path(f)) for f in seqs.fed],
                              request.layers)
         tracks.append(_Track(MethodResult(name, _source(name, request)), method))
-        if name == "oidn":
+        if name in ("oidn", "oidn-noprefilter"):
             from importlib.metadata import version
 
             oidn_version = version("pyoidn")
@@ -264,6 +284,9 @@ class _Scorer:
     contacts: list[ContactFrame] = field(default_factory=list)
     ref_previous: np.ndarray | None = None
     ref_previous_frame: int | None = None
+    # Display images kept for the video metrics: the reference's and, per method, its own.
+    keep: set[str] = field(default_factory=set)
+    kept: dict[str, list[np.ndarray]] = field(default_factory=dict)
 
     def advance(self, input_frame: Frame | None) -> None:
         """A frame that is not scored: only advance the stateful baselines through the gap."""
@@ -304,6 +327,8 @@ class _Scorer:
             )
             score.file = file
             track.result.frames.append(score)
+            if track.result.name in self.keep and display is not None:
+                self.kept.setdefault(track.result.name, []).append(display)
             track.previous = display
             track.previous_frame = frame if display is not None else None
             if contact is not None:
@@ -313,6 +338,8 @@ class _Scorer:
                 if track.result.name == SVGF:
                     contact.error_map = flip_map
         self.ref_previous, self.ref_previous_frame = ref_display, frame
+        if self.keep:
+            self.kept.setdefault(REFERENCE, []).append(ref_display)
         if contact is not None:
             self.contacts.append(contact)
 
@@ -353,6 +380,13 @@ def run_evaluation(
 
     mapping = _input_mapping(request, seqs, say)
     scorer = _Scorer(seqs, tracks, mapping, set(request.contact_frames))
+    jod_names = _jod_names(request, tracks)
+    metric = None
+    if jod_names:
+        from svgf_cli.evaluate.perceptual import load_metric
+
+        metric = load_metric()  # fails before the work when cvvdp/torch are missing
+    scorer.keep = set(jod_names) | set(request.keep_displays)
     scored = set(seqs.frames)
     for index, frame in enumerate(seqs.fed):
         input_frame: Frame | None = None
@@ -374,7 +408,42 @@ def run_evaluation(
         },
         settings=_settings(request, oidn_version, mapping.signals if seqs.input else None),
     )
+    if metric is not None:
+        _score_jod(report, scorer, jod_names, metric, request.jod_map, say)
+    report.displays = {n: f for n, f in scorer.kept.items()
+                       if n in request.keep_displays or n == REFERENCE}  # fmt: skip
     return report, scorer.contacts
+
+
+def _jod_names(request: EvaluationRequest, tracks: Sequence[_Track]) -> list[str]:
+    """The methods whose JOD is measured, in report order."""
+    names = [t.result.name for t in tracks]
+    if request.jod is None:
+        return names
+    unknown = [n for n in request.jod if n not in names]
+    if unknown:
+        raise UsageError(f"--jod-methods: no method {unknown[0]!r} (have {', '.join(names)})")
+    return [n for n in names if n in request.jod]
+
+
+def _score_jod(report: EvaluationReport, scorer: _Scorer, names: Sequence[str], metric: object,
+               heat: bool, say: Log) -> None:
+    """Video and still JOD of every named, unflagged method (and svgf's heat map)."""
+    from svgf_cli.evaluate.perceptual import JOD_DESCRIPTION, jod_scores, load_metric
+
+    reference = scorer.kept.get(REFERENCE, [])
+    report.settings["jod"] = JOD_DESCRIPTION
+    for name in names:
+        frames = scorer.kept.get(name, [])
+        if report.method(name).flagged or len(frames) != len(reference):
+            continue
+        say(f"ColorVideoVDP: {name}")
+        score = jod_scores(frames, reference, metric)  # type: ignore[arg-type]
+        report.jod[name] = score
+    if heat and SVGF in report.jod:
+        map_metric = load_metric(heatmap=True)
+        report.jod[SVGF].heatmap = jod_scores(scorer.kept[SVGF], reference, map_metric,
+                                              stills=False).heatmap  # fmt: skip
 
 
 def score_frame(

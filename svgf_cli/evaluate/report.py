@@ -97,6 +97,10 @@ class EvaluationReport:
     methods: list[MethodResult]
     inputs: dict[str, str | None]
     settings: dict[str, Any]
+    # ColorVideoVDP per method (svgf_cli.evaluate.perceptual.JodScore), when measured.
+    jod: dict[str, Any] = field(default_factory=dict)
+    # Display frames kept on request (EvaluationRequest.keep_displays); not in the JSON.
+    displays: dict[str, list[Any]] = field(default_factory=dict)
 
     def method(self, name: str) -> MethodResult:
         for m in self.methods:
@@ -180,7 +184,22 @@ class EvaluationReport:
             ],
             "ranking": {key: _ordered(self.ranks(key)) for key in METRIC_KEYS}
             | {"overall": _ordered(overall)},
+        } | ({"jod": self._jod_dict()} if self.jod else {})
+
+    def _jod_dict(self) -> dict[str, Any]:
+        return {
+            name: {"video": s.video, "still": s.still, "still_frames": list(s.still_frames)}
+            for name, s in self.jod.items()
         }
+
+    def format_jod(self) -> list[str]:
+        """Lines of the ColorVideoVDP table (best video JOD first); none when not measured."""
+        if not self.jod:
+            return []
+        order = sorted(self.jod.items(), key=lambda item: -item[1].video)
+        rows = [[name, f"{s.video:.3f}", f"{s.still:.3f}"] for name, s in order]
+        return ["", "ColorVideoVDP (JOD, 10 = no visible difference)",
+                *_grid(["method", "video JOD ^", "still JOD ^"], rows)]  # fmt: skip
 
     def to_json(self) -> str:
         """Deterministic JSON text (stable key order, no timestamps), newline-terminated."""
@@ -224,6 +243,7 @@ class EvaluationReport:
                     for f in m.frames
                 ]
                 lines.extend(_grid(["frame", *(_header(i) for i in METRICS), ""], frame_rows))
+        lines.extend(self.format_jod())
         for name, f in self.flagged:
             where = f.file or f"frame {f.frame}"
             lines.append(

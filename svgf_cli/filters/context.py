@@ -47,6 +47,9 @@ class Setup:
     squarings: int
     colour_counts: np.ndarray
     moment_counts: np.ndarray
+    # Return each signal's own remodulated radiance as the layers ``<signal>.R/G/B`` (the
+    # light layers are composed from them: ``filters.composable``); implied by debug_layers.
+    signal_outputs: bool = False
 
     @classmethod
     def of(cls, params: SVGFParams, debug_layers: bool) -> Setup:

@@ -362,6 +362,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
     "paper": (),
     # The recommended set: it wins overall on every bundled sequence (docs/results.md).
     "default": (
+        Departure("feedback_iteration", -1, "a history filtered by the a-trous feeds its"
+                  " blotches back frame after frame (still pixels too): docs/stability.md"
+                  "#the-default-since-2026-11-27"),
         Departure("antilag", True, "moving lights and shadows, lights switched or dimmed"
                   f" and moving reflections lag otherwise: {_GLOSSY}"),
         Departure("history_clamp", 3.0, "a loose clamp of the history against outliers:"

@@ -14,6 +14,7 @@ from typing import Any
 
 from svgf_cli.results.checks import all_checks
 from svgf_cli.results.page import page, write_images
+from svgf_cli.results.perceptual import jod_line
 from svgf_cli.results.run import DenoiseRunner, SequenceRun, SubprocessDenoise, run_sequence
 from svgf_cli.results.run import skipped_methods as find_skipped
 from svgf_cli.results.table import METHODS, SEQUENCES, SVGF, MethodSpec, SequenceSpec
@@ -79,7 +80,9 @@ def generate(
     for stale in sorted(images.iterdir()):
         if stale.is_file() and stale.name not in written:
             stale.unlink()
-    checks = all_checks(runs)
+    from svgf_cli.results.perceptual import jod_checks
+
+    checks = all_checks(runs) + jod_checks(runs)
     (docs / "results.md").write_text(page(runs, methods, skipped, checks), encoding="utf-8")
     return runs, checks
 
@@ -124,6 +127,9 @@ def main(argv: list[str] | None = None) -> int:
         f"results: {wall:.0f} s wall, {cpu:.0f} s CPU (user + sys, this process and its "
         f"children) on {os.cpu_count()} logical cores"
     )
+    print("ColorVideoVDP (JOD) and relMSE against OIDN, per sequence:")
+    for run in runs:
+        print("  " + jod_line(run))
     print("Issue targets:")
     for check in checks:
         print("  " + check.line())

@@ -18,6 +18,7 @@ from svgf_cli.evaluate.plot import write_curves
 from svgf_cli.evaluate.report import EvaluationReport
 from svgf_cli.results.checks import RELMSE, Check, cold_start, frames_text, recovery
 from svgf_cli.results.machine import machine_description, package_versions
+from svgf_cli.results.perceptual import jod_table
 from svgf_cli.results.run import MethodNote, SequenceRun, identical_methods
 from svgf_cli.results.table import BIDIRECTIONAL, INPUT, PAPER, SPATIAL, SVGF, MethodSpec
 
@@ -280,6 +281,11 @@ def write_images(run: SequenceRun, methods: Sequence[MethodSpec], images: Path) 
         )
         palette_png(sheet, 256)
         written.append(sheet.name)
+    from svgf_cli.results.perceptual import write_animation
+
+    animation = write_animation(run, images)
+    if animation is not None:
+        written.append(animation)
     report_json = images / f"{name}.json"
     report_json.write_text(run.report.to_json(), encoding="utf-8")
     written.append(report_json.name)
@@ -310,6 +316,14 @@ def sequence_section(run: SequenceRun, images_dir: str) -> str:
         f"({images_dir}/{name}_curves.png)",
         "",
     ]
+    if run.report.displays:
+        lines += [
+            "Animation, every evaluated frame at 8 fps (input | svgf | OIDN | reference, "
+            "tone-mapped as the stills; flicker shows here, not in the stills):",
+            "",
+            f"![input, svgf, OIDN and reference as an animation]({images_dir}/{name}_anim.webp)",
+            "",
+        ]
     if run.contacts:
         frames = ", ".join(str(c.frame) for c in run.contacts)
         lines += [
@@ -405,6 +419,12 @@ def page(
         checks_table(checks),
         "",
         "## All sequences",
+        "",
+        "ColorVideoVDP, JOD (10 = no visible difference; video: the sequence as one 24 fps "
+        "video, still: mean over frames of each frame alone; [evaluate.md](evaluate.md#"
+        "colorvideovdp-jod)):",
+        "",
+        jod_table(runs),
         "",
         "relMSE (trimmed), mean over frames:",
         "",

@@ -22,7 +22,16 @@ from svgf_cli.evaluate.metrics import METRIC_KEYS
 from svgf_cli.evaluate.report import EvaluationReport
 from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS
 from svgf_cli.io.patterns import SequencePattern
-from svgf_cli.results.table import INPUT, SVGF, MethodSpec, SequenceSpec
+from svgf_cli.results.table import (
+    ANIMATION,
+    INPUT,
+    JOD_METHODS,
+    OIDN,
+    OIDN_NOPREFILTER,
+    SVGF,
+    MethodSpec,
+    SequenceSpec,
+)
 
 
 @dataclass
@@ -127,9 +136,26 @@ def skipped_methods(methods: Sequence[MethodSpec], runner: DenoiseRunner) -> dic
                 reasons[method.name] = (
                     f"`svgf denoise` has no {', '.join(f'`{m}`' for m in missing)} option yet"
                 )
-        elif method.baseline == "oidn" and importlib.util.find_spec("pyoidn") is None:
+        elif method.baseline in (OIDN, OIDN_NOPREFILTER) and not _has("pyoidn"):
             reasons[method.name] = "pyoidn is not installed (pip install 'svgf[oidn]')"
     return reasons
+
+
+def _has(module: str) -> bool:
+    return importlib.util.find_spec(module) is not None
+
+
+def jod_available() -> bool:
+    """Whether cvvdp and torch can be imported (the ``perceptual`` extra is installed)."""
+    try:
+        return all(importlib.util.find_spec(m) is not None for m in ("torch", "pycvvdp"))
+    except (ImportError, ValueError, AttributeError):  # a module set to None in sys.modules
+        return False
+
+
+def jod_request(names: Sequence[str]) -> list[str]:
+    """The JOD methods among ``names`` (empty when the extra is missing)."""
+    return [n for n in JOD_METHODS if n in names] if jod_available() else []
 
 
 def run_sequence(
@@ -157,6 +183,7 @@ def run_sequence(
         if m.baseline is not None and m.name not in skipped and m.applies_to(spec)
     ]
     contact_frames = [f for f in spec.contact_frames if frames is None or f in frames]
+    scored = [SVGF, *[n for n in outputs if n != SVGF], *(b for b in baselines if b)]
     request = EvaluationRequest(
         output=outputs[SVGF],
         reference=references,
@@ -168,6 +195,8 @@ def run_sequence(
         layers=spec.aovs,
         contact_frames=contact_frames,
         compare=[(name, path) for name, path in outputs.items() if name != SVGF],
+        jod=jod_request(scored),
+        keep_displays=tuple(key for key, _ in ANIMATION),
     )
     start = time.perf_counter()
     report, contacts = run_evaluation(request)

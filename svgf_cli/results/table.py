@@ -27,6 +27,18 @@ LOBES = "svgf-lobes"
 COMBINED = "svgf-combined"
 BIDIRECTIONAL = "svgf-bidirectional"
 INPUT = "input"
+OIDN = "oidn"
+OIDN_NOPREFILTER = "oidn-noprefilter"
+# Scored with ColorVideoVDP when the `perceptual` extra is installed (about 20 s each per
+# 16-frame sequence on 2 cores; issue 29).
+JOD_METHODS: tuple[str, ...] = (SVGF, BIDIRECTIONAL, OIDN, OIDN_NOPREFILTER)
+# Columns of each sequence's animation, left to right: (method or "reference", label).
+ANIMATION: tuple[tuple[str, str], ...] = (
+    (INPUT, "input (1 spp)"),
+    (SVGF, "svgf"),
+    (OIDN, "OIDN"),
+    ("reference", "reference"),
+)
 
 
 @dataclass(frozen=True)
@@ -91,9 +103,11 @@ def denoised(
     return MethodSpec(name, about, tuple(shlex.split(options)), needs=needs, contact=contact)
 
 
-def baseline(name: str, about: str, *, contact: bool = False) -> MethodSpec:
+def baseline(
+    name: str, about: str, *, contact: bool = False, needs: str | None = None
+) -> MethodSpec:
     """A baseline ``svgf evaluate`` produces in memory (``--baseline NAME``)."""
-    return MethodSpec(name, about, baseline=name, contact=contact)
+    return MethodSpec(name, about, baseline=name, contact=contact, needs=needs)
 
 
 # The first entry is the product (scored as `svgf`); every other method is compared with it.
@@ -117,7 +131,17 @@ METHODS: tuple[MethodSpec, ...] = (
     ),
     denoised(COMBINED, "--signals combined", "one signal: the combined colour", contact=False),
     denoised(BIDIRECTIONAL, "--bidirectional", "forward and time-reversed passes combined"),
-    baseline("oidn", "Intel OIDN per frame (RT, HDR, clean albedo + normal)", contact=True),
+    baseline(
+        "oidn",
+        "Intel OIDN per frame (RT, HDR, quality high; albedo + normal as clean guides on svgf "
+        "trace inputs, prefiltered by OIDN first on Cycles' noisy 1-spp ones)",
+        contact=True,
+    ),
+    baseline(
+        "oidn-noprefilter",
+        "Intel OIDN per frame with Cycles' noisy albedo + normal taken as clean (no prefilter)",
+        needs="cycles",
+    ),
     baseline("accumulate", "temporal accumulation only (default preset, no a-trous)"),
     baseline("atrous", "a-trous without temporal reuse (default preset), in memory"),
 )

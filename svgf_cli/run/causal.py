@@ -19,6 +19,7 @@ from svgf_cli.frame import DenoisedFrame, Frame
 from svgf_cli.progress import Progress
 from svgf_cli.run.filter import FrameFilter, PassFilter
 from svgf_cli.run.history import HistoryFile
+from svgf_cli.run.light import LightLayerReader
 from svgf_cli.run.stop import StopFlag, interrupted
 from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats, WarmupCount
 from svgf_cli.run.workers import (
@@ -46,6 +47,12 @@ def default_denoiser(params: SVGFParams, debug_layers: bool) -> CausalFilter:
     return Denoiser(params, debug_layers=debug_layers)
 
 
+def layered_denoiser(params: SVGFParams, debug_layers: bool) -> CausalFilter:
+    from svgf_cli.filters.composable import LayeredDenoiser
+
+    return LayeredDenoiser(params, debug_layers=debug_layers)
+
+
 def run_causal(
     tasks: Sequence[FrameTask],
     config: RunConfig,
@@ -65,6 +72,9 @@ def run_causal(
     if not tasks:
         return stats
     started = time.perf_counter()
+    light = LightLayerReader(config, progress)
+    if light.enabled and make_denoiser is default_denoiser:
+        make_denoiser = layered_denoiser
     frames = FrameFilter(
         config, progress, stats, make_denoiser, history=history, on_first_frame=on_first_frame
     )
@@ -78,6 +88,7 @@ def run_causal(
         frame_started = time.perf_counter()
         for task, result, read_seconds in reads:
             frames.admit(task, result)
+            light.attach(task, result)
             writes.poll()  # report a finished write now rather than a frame later
             denoised, compute_seconds = frames.process(task, result, frames.filter.process)
             if task.output is None:

@@ -24,6 +24,19 @@ if TYPE_CHECKING:
     from svgf_cli.io.exr import ReadResult
 
 
+def stage_line(pass_filter: object) -> str:
+    """The wall milliseconds of each stage of the last frame (a pipeline filter's
+    ``stage_seconds``, in pipeline order) as ``name ms, ...``; a filter made of pipeline
+    filters (its attributes) as ``attribute: name ms, ...; ...``; empty for other filters."""
+    seconds = getattr(pass_filter, "stage_seconds", None)
+    if isinstance(seconds, dict):
+        return ", ".join(f"{name} {1000 * value:.0f}" for name, value in seconds.items())
+    parts = [f"{name}: {line}" for name, inner in getattr(pass_filter, "__dict__", {}).items()
+             if isinstance(getattr(inner, "stage_seconds", None), dict)
+             and (line := stage_line(inner))]
+    return "; ".join(parts)
+
+
 class PassFilter(Protocol):
     """What `FrameFilter` needs of a pass's filter; each pass's own ``process`` is called
     by its driver through :meth:`FrameFilter.process`."""
@@ -137,6 +150,9 @@ class FrameFilter(Generic[F]):
         if isinstance(output, DenoisedFrame):
             for message in output.warnings():
                 self._progress.warning(f"{task.input}: {message}")
+        line = stage_line(self.filter)
+        if line:
+            self._progress.detail(f"frame {task.frame} stages (ms): {line}")
         return output, seconds
 
     def save_history(self, path: Path, last_input: Path) -> None:

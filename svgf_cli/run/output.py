@@ -120,6 +120,13 @@ def build_output(
             "+-65504 (--float keeps them)"
         )
     channels = dict(zip(names, prepared.planes, strict=True))
+    if denoised.light:
+        from svgf_cli.run.light import light_channels
+
+        light, fixed = light_channels(part, denoised.light)
+        channels.update(light)
+        if fixed:
+            warnings.append(f"{fixed} non-finite light-layer value(s) set to 0")
     if config.debug_aovs:
         for name, plane in denoised.layers.items():
             channels[f"{DEBUG_PREFIX}{name}"] = np.ascontiguousarray(plane, dtype=np.float32)

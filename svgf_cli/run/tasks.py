@@ -42,6 +42,9 @@ class RunConfig:
     threads: int | None = None
     colour_only: bool = False  # --colour-only: only the colour layer and its alpha
     scratch_dir: Path | None = None  # --scratch-dir (bidirectional); None: the system's
+    # --light-layers: "denoised" writes the light passes and groups denoised (run.light);
+    # "as-read" passes them through. The CLI's default is "denoised".
+    light_layers: str = "as-read"
 
 
 @dataclass

@@ -38,7 +38,14 @@ REF_SPP = 1024
 PASS_INDEX = {
     "roll": {"floor": 1, "ball": 2, "box": 3, "bust": 4, "panel": 5},
     "metal": {"floor": 1, "mirror_ball": 2, "strip": 3, "cube": 4, "pillar": 5},
+    "production": {"floor": 1, "glass": 2, "wires": 3, "box": 4, "fog": 5},
 }
+
+# Light groups of the production scene (View Layer -> Light Groups): every light and the world
+# is in one, so the groups add up to Combined.
+LIGHT_GROUPS = {"production": ("key", "fill", "env")}
+# Frames per scene (the production shot is shorter: it is the biggest file per frame).
+SCENE_FRAMES = {"production": (1, 8)}
 
 
 # --------------------------------------------------------------------------- building blocks
@@ -347,20 +354,112 @@ def build_metal(scene) -> dict:
     return {"mirror_ball_radius": radius, "point_light_on_from_frame": half}
 
 
-SCENES = {"roll": build_roll, "metal": build_metal}
+def glass_material(name: str) -> bpy.types.Material:
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.95, 0.97, 1.0, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.02
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["IOR"].default_value = 1.45
+    return mat
+
+
+def fog_material(name: str, density: float) -> bpy.types.Material:
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    volume = nodes.new("ShaderNodeVolumePrincipled")
+    volume.inputs["Density"].default_value = density
+    volume.inputs["Color"].default_value = (0.9, 0.9, 0.95, 1.0)
+    links.new(volume.outputs["Volume"], nodes["Material Output"].inputs["Volume"])
+    return mat
+
+
+def build_production(scene) -> dict:
+    """A production-like shot: three light groups (key, fill switching on, env), glass, a fog
+    volume box, thin metal wires, Cryptomatte, a camera move."""
+    index = PASS_INDEX["production"]
+    layer = scene.view_layers[0]
+    for group in LIGHT_GROUPS["production"]:
+        layer.lightgroups.add(name=group)
+    gradient_world(scene, horizon=(0.5, 0.5, 0.55), zenith=(0.1, 0.2, 0.5), strength=0.5)
+    scene.world.lightgroup = "env"
+
+    floor = add_plane(30.0, (0.0, 0.0, 0.0))
+    attach(
+        floor,
+        principled("floor", roughness=0.6, checker=((0.7, 0.7, 0.68), (0.1, 0.1, 0.12), 20.0)),
+        "floor",
+        index["floor"],
+    )
+    glass = add_sphere(0.6, (-0.6, 0.3, 0.6))
+    attach(glass, glass_material("glass"), "glass", index["glass"])
+
+    bpy.ops.mesh.primitive_cube_add(size=0.8, location=(1.3, 0.9, 0.4), rotation=(0, 0, 0.6))
+    attach(
+        bpy.context.active_object,
+        principled("box_diffuse", base=(0.7, 0.35, 0.15), roughness=1.0),
+        "box",
+        index["box"],
+    )
+    wire_mat = principled("wire_metal", base=(0.9, 0.9, 0.92), roughness=0.2, metallic=1.0)
+    for i in range(4):  # thin vertical wires, 1.5 cm thick: under a pixel wide
+        bpy.ops.mesh.primitive_cylinder_add(
+            radius=0.0075, depth=2.4, location=(0.2 + 0.35 * i, -0.4, 1.2), vertices=8
+        )
+        attach(bpy.context.active_object, wire_mat, f"wire_{i}", index["wires"])
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-1.7, 1.0, 0.8))
+    fog = bpy.context.active_object
+    fog.scale = (0.8, 0.8, 0.8)
+    attach(fog, fog_material("fog", density=1.5), "fog", index["fog"])
+
+    first, last = SCENE_FRAMES["production"]
+    bpy.ops.object.light_add(type="AREA", location=(-2.2, -1.8, 4.0))
+    key = bpy.context.active_object
+    key.name = "key_light"
+    key.data.energy = 700.0
+    key.data.size = 1.5
+    key.rotation_euler = (math.radians(30), math.radians(-25), 0.0)
+    key.lightgroup = "key"
+
+    bpy.ops.object.light_add(type="POINT", location=(2.2, -1.2, 1.8))
+    fill = bpy.context.active_object
+    fill.name = "fill_light"
+    fill.data.shadow_soft_size = 0.15
+    fill.data.color = (0.55, 0.7, 1.0)
+    fill.lightgroup = "fill"
+    on_from = (first + last + 1) // 2  # the fill switches on mid-shot: a per-group change
+    fill.data.energy = 0.0
+    fill.data.keyframe_insert("energy", frame=first - 1)
+    fill.data.energy = 250.0
+    fill.data.keyframe_insert("energy", frame=on_from)
+    hold_keys(fill.data)
+
+    camera, target = add_camera(scene, "camera_target", lens_mm=32.0)
+    target.location = (-0.2, 0.6, 0.7)
+    key_location(camera, first - 5, (-2.0, -6.0, 2.4))
+    key_location(camera, last + 5, (1.2, -5.6, 2.1))
+    return {"light_groups": list(LIGHT_GROUPS["production"]), "fill_on_from_frame": on_from}
+
+
+SCENES = {"roll": build_roll, "metal": build_metal, "production": build_production}
 
 
 # --------------------------------------------------------------------------- render settings
 
 
-def common_settings(scene, resolution: tuple[int, int]) -> None:
+def common_settings(
+    scene, resolution: tuple[int, int], frames: tuple[int, int] = FRAMES
+) -> None:
     render = scene.render
     render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     render.resolution_x, render.resolution_y = resolution
     render.resolution_percentage = 100
     render.fps = 24
-    scene.frame_start, scene.frame_end = FRAMES
+    scene.frame_start, scene.frame_end = frames
     render.use_motion_blur = False  # the Vector pass is only written without motion blur
     render.use_compositing = False
     render.use_sequencer = False
@@ -398,6 +497,10 @@ def input_settings(
     ):  # fmt: skip
         setattr(layer, f"use_pass_{name}", True)
     layer.cycles.denoising_store_passes = True  # Denoising Albedo / Normal / Depth
+    if len(layer.lightgroups):  # the production shot: volumes and Cryptomatte too
+        layer.cycles.use_pass_volume_direct = True
+        layer.cycles.use_pass_volume_indirect = True
+        layer.use_pass_cryptomatte_object = True
     image = scene.render.image_settings
     image.file_format = "OPEN_EXR_MULTILAYER"
     image.color_depth = depth
@@ -413,10 +516,25 @@ def reference_settings(scene, spp: int) -> None:
             setattr(layer, prop, False)
     layer.cycles.denoising_store_passes = False
     image = scene.render.image_settings
-    image.file_format = "OPEN_EXR"
     image.color_mode = "RGBA"
-    image.color_depth = "32"
     image.exr_codec = "ZIP"
+    if len(layer.lightgroups):
+        # The production shot's references carry the same light groups and light passes (so
+        # each layer is scored against its own reference), multilayer, half (size).
+        for name in (
+            "emit", "environment", "diffuse_direct", "diffuse_indirect", "diffuse_color",
+            "glossy_direct", "glossy_indirect", "glossy_color",
+            "transmission_direct", "transmission_indirect", "transmission_color",
+        ):  # fmt: skip
+            setattr(layer, f"use_pass_{name}", True)
+        layer.use_pass_cryptomatte_object = False
+        layer.cycles.use_pass_volume_direct = True
+        layer.cycles.use_pass_volume_indirect = True
+        image.file_format = "OPEN_EXR_MULTILAYER"
+        image.color_depth = "16"
+        return
+    image.file_format = "OPEN_EXR"
+    image.color_depth = "32"
 
 
 def frame_record(scene, moving: list[str]) -> dict:
@@ -460,15 +578,19 @@ def run(args) -> None:
         out.mkdir(parents=True, exist_ok=True)
         scene = reset_scene()
         extra = SCENES[name](scene)
-        common_settings(scene, tuple(args.resolution))
+        scene_frames = SCENE_FRAMES.get(name, FRAMES)
+        common_settings(scene, tuple(args.resolution), scene_frames)
         frames = range(args.frames[0], args.frames[1] + 1)
+        if args.frames == list(FRAMES):
+            frames = range(scene_frames[0], scene_frames[1] + 1)
         moving = {"roll": ["ball", "Camera", "camera_target"],
-                  "metal": ["Camera", "moving_area_light"]}[name]  # fmt: skip
+                  "metal": ["Camera", "moving_area_light"],
+                  "production": ["Camera"]}[name]  # fmt: skip
         info = {
             "scene": name,
             "blender": bpy.app.version_string,
             "resolution": list(args.resolution),
-            "frames": [FRAMES[0], FRAMES[1]],
+            "frames": list(scene_frames),
             "input_seed": args.input_seed,
             "input_sample_offset": args.sample_offset,
             "reference_seed": REF_SEED,
@@ -477,7 +599,7 @@ def run(args) -> None:
             **extra,
             "per_frame": {},
         }
-        for frame in range(FRAMES[0], FRAMES[1] + 1):
+        for frame in range(scene_frames[0], scene_frames[1] + 1):
             scene.frame_set(frame)
             info["per_frame"][str(frame)] = frame_record(scene, moving)
         if args.what in ("scene", "inputs", "all"):
@@ -502,7 +624,9 @@ def run(args) -> None:
 
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scene", nargs="+", choices=sorted(SCENES), default=["roll", "metal"])
+    parser.add_argument("--scene", nargs="+", choices=sorted(SCENES), default=["roll", "metal"],
+                        help="scenes to render (production: light groups, glass, fog, "
+                        "Cryptomatte; rendered only when named)")
     parser.add_argument(
         "--what", choices=["all", "inputs", "refs", "scene", "preview"], default="all"
     )

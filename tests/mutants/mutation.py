@@ -116,6 +116,7 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
     "svgf_cli/filters/params.py": ("tests/test_filters_params.py", *FILTER_TESTS),
     "svgf_cli/filters/bidirectional.py": _BIDIRECTIONAL_TESTS,
     "svgf_cli/filters/two_pass.py": _BIDIRECTIONAL_TESTS,
+    "svgf_cli/filters/warm_start.py": ("tests/test_filters_warm_start.py",),
     "svgf_cli/filters/invert_motion.py": ("tests/test_filters_bidirectional.py",
                                           "tests/test_motion_next.py", *FILTER_TESTS[:-1]),
     "svgf_cli/io/colour.py": ("tests/test_io_colour.py", "tests/test_io_exr.py",
@@ -131,6 +132,9 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
     "svgf_cli/io/spill.py": ("tests/test_bidir_runs.py",),
     "svgf_cli/io/output.py": _READ_TESTS,
     "svgf_cli/io/atomic.py": _WRITE_TESTS,
+    "svgf_cli/io/lightlayers.py": ("tests/test_light_layers.py",),
+    "svgf_cli/filters/composable.py": ("tests/test_light_layers.py",),
+    "svgf_cli/run/light.py": ("tests/test_light_layers.py",),
 }
 # The file driver (svgf_cli/run/, every module): its tests, fastest first.
 _RUN_TESTS = ("tests/test_runner_tasks.py", "tests/test_runner_output.py",

@@ -43,7 +43,28 @@ class Remodulate(StageBase):
                 add_count(counts, "extreme", "emission", int(total[1]))
             if ctx.setup.debug_layers:
                 debug_layers(ctx, index, emission_plane, rows)
+            elif ctx.setup.signal_outputs:
+                signal_output(ctx, index, emission_plane, rows, albedo=True)
         ctx.output = radiance
+
+
+def signal_output(ctx: FrameContext, index: int, emission_plane: np.ndarray,
+                  rows: np.ndarray, albedo: bool = False) -> np.ndarray:
+    """Signal ``index``'s own remodulated radiance (no emission), also as the layers
+    ``<signal>.R/G/B``; with ``albedo`` also the colour it was remodulated by (the temporal
+    albedo's running mean when that stage runs) as ``<signal>.albedo.R/G/B``."""
+    spatial, signal = ctx.spatial, ctx.frame.signals[index]
+    assert spatial is not None
+    height, width = ctx.depth.shape
+    alone = np.zeros((3, height, width), dtype=F32)
+    modulate.remodulate_add(spatial.illumination[index], signal.radiance, signal.albedo,
+                            ctx.depth, emission_plane, False,
+                            *ctx.setup.rules[signal.guide_albedo], alone, rows)
+    for c, channel in enumerate("RGB"):
+        ctx.layers[f"{signal.name}.{channel}"] = alone[c]
+        if albedo:
+            ctx.layers[f"{signal.name}.albedo.{channel}"] = signal.albedo[c]
+    return alone
 
 
 def debug_layers(ctx: FrameContext, index: int, emission_plane: np.ndarray,
@@ -54,12 +75,7 @@ def debug_layers(ctx: FrameContext, index: int, emission_plane: np.ndarray,
     assert spatial is not None
     height, width = ctx.depth.shape
     name, layers = signal.name, ctx.layers
-    alone = np.zeros((3, height, width), dtype=F32)
-    modulate.remodulate_add(spatial.illumination[index], signal.radiance, signal.albedo,
-                            ctx.depth, emission_plane, False,
-                            *ctx.setup.rules[signal.guide_albedo], alone, rows)
-    for c, channel in enumerate("RGB"):
-        layers[f"{name}.{channel}"] = alone[c]
+    signal_output(ctx, index, emission_plane, rows, albedo=ctx.setup.signal_outputs)
     layers[f"variance.{name}"] = spatial.variance[index].copy()
     layers[f"history_length.{name}"] = spatial.history_length[index].copy()
     layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)

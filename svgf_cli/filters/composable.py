@@ -1,0 +1,266 @@
+"""Composable light layers: every light pass and light group of a frame denoised, adding up
+to the denoised colour by construction (docs/output.md#light-layers).
+
+Two decompositions of one colour (the light passes, the light groups) must not give two
+colours, so neither is filtered into a colour of its own: the colour is the Denoiser's (its
+signals filtered as always, bit-identical), and each decomposition is that colour split per
+pixel and channel by shares, the same weights for every layer of the set (as Arnold's noice
+applies one set of weights to every AOV):
+
+* **light groups**: each group is filtered as a signal of a second Denoiser (its own
+  history, variance and anti-lag: a group switching on is a lighting change of that group
+  alone), and the filtered groups ``f_k`` give the shares: ``g_k = C * f_k / sum_j f_j``.
+* **light passes**: each pass belongs to the filtered signal built from it (Cycles' ``DiffDir``
+  to ``diffuse_direct``...); a signal holding several passes (``specular``: glossy and
+  transmission, direct and indirect) is split by the passes' light box-filtered over 7x7
+  pixels times the pixel's own colour pass; the passes are then scaled together so that they
+  add up to ``C - emission`` (the pixel filter and despike stages act on the colour after
+  the signals are summed), and a pass stored divided by its colour is divided back.
+
+Where the shares' denominator is (near) 0 while the colour is not, the input layers'
+box-filtered shares are used, and where those are 0 too, equal shares.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.shares import box_mean, split_shares
+from svgf_cli.frame import DenoisedFrame, Frame, LightLayer, LightLayers, Signal
+
+F32 = np.float32
+# Box radius of the shares splitting one filtered signal among its passes, and of the
+# fallback shares (pixels): 7x7. Measured on testdata/cycles/production (bench/
+# light_layers.py): radius 2 leaves GlossInd's temporal error above the input's (0.063 against
+# 0.057), radius 4 GlossDir's relMSE at 0.30x the input's; radius 3: 0.28x and 0.0565.
+SHARE_RADIUS = 3
+# A share's denominator at or below this (absolute, per channel) is "no light": fallback.
+SHARE_FLOOR = 1e-8
+
+
+def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS) -> np.ndarray:
+    """The (C, H, W) planes' mean over a (2 radius + 1)^2 window, clipped at the borders
+    (``filters.shares.box_mean``)."""
+    out = np.empty(planes.shape, dtype=F32)
+    box_mean(np.ascontiguousarray(planes, dtype=F32), int(radius), out)
+    return out
+
+
+def split_by_shares(total: np.ndarray, weights: list[np.ndarray],
+                    fallback: list[np.ndarray] | None = None) -> list[np.ndarray]:
+    """``total`` split per pixel and channel in proportion to ``weights`` (negative weights
+    count as 0): the parts add up to ``total`` (to float32 rounding). Where the weights sum
+    to at most SHARE_FLOOR, ``fallback``'s proportions, and where those too, equal parts
+    (``filters.shares.split_shares``)."""
+    if len(weights) == 1:
+        return [total.astype(F32, copy=True)]
+    stacked = np.ascontiguousarray(np.stack(weights), dtype=F32)
+    backup = (np.ascontiguousarray(np.stack(fallback), dtype=F32) if fallback is not None
+              else stacked)
+    out = np.empty_like(stacked)
+    split_shares(np.ascontiguousarray(total, dtype=F32), stacked, backup,
+                 fallback is not None, SHARE_FLOOR, out)
+    return list(out)
+
+
+def compose_groups(colour: np.ndarray, filtered: list[np.ndarray],
+                   groups: list[LightLayer]) -> list[np.ndarray]:
+    """The denoised light groups: ``colour`` split by the filtered groups' shares (the
+    input groups' box-filtered shares where the filtered ones are 0)."""
+    total = np.sum(np.maximum(np.stack(filtered), F32(0.0)), axis=0)
+    # The fallback's box filters only when some pixel needs them (most frames: none).
+    needed = bool(np.any((total <= SHARE_FLOOR) & (colour != 0.0)))
+    fallback = [box_filter(g.radiance) for g in groups] if needed else None
+    return split_by_shares(colour, filtered, fallback)
+
+
+def compose_passes(colour: np.ndarray, emission: np.ndarray | None,
+                   signal_outputs: dict[str, np.ndarray],
+                   passes: list[LightLayer]) -> list[np.ndarray]:
+    """The denoised light passes, in the colour's units (light x colour pass), adding up
+    to ``colour - emission``."""
+    light = colour if emission is None else colour - emission
+    estimates: list[np.ndarray | None] = [None] * len(passes)
+    members: dict[str, list[int]] = {}
+    for index, layer in enumerate(passes):
+        owner = layer.signal if layer.signal in signal_outputs else ""
+        members.setdefault(owner, []).append(index)
+    for owner, indexes in members.items():
+        filtered = signal_outputs[owner] if owner else light
+        if len(indexes) == 1:  # the signal is this pass's light alone
+            estimates[indexes[0]] = filtered
+            continue
+        weights = []
+        for i in indexes:
+            smooth = box_filter(passes[i].stored)
+            colour_pass = passes[i].colour
+            weights.append(smooth if colour_pass is None else smooth * colour_pass)
+        parts = split_by_shares(filtered, weights, [passes[i].radiance for i in indexes])
+        for i, part in zip(indexes, parts, strict=True):
+            estimates[i] = part
+    done = [e for e in estimates if e is not None]
+    return split_by_shares(light, done, [p.radiance for p in passes])
+
+
+def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
+                        ) -> dict[tuple[str, str, str], np.ndarray]:
+    """The colour passes as the filter remodulated by, per colour pass (its channels): the
+    owning signal's colour (the temporal albedo's running mean when that stage runs), split
+    among the signal's colour passes in proportion to their own values (``specular``:
+    ``GlossCol`` and ``TransCol``). Passes of no signal keep their colour as read."""
+    by_signal: dict[str, dict[tuple[str, str, str], np.ndarray]] = {}
+    for layer in passes:
+        if layer.colour is None or layer.colour_channels is None:
+            continue
+        if layer.signal in albedos:
+            by_signal.setdefault(layer.signal, {})[layer.colour_channels] = layer.colour
+    colours: dict[tuple[str, str, str], np.ndarray] = {}
+    for signal, own in by_signal.items():
+        total = np.sum(list(own.values()), axis=0, dtype=F32)
+        for key, colour in own.items():
+            if key in colours:
+                continue
+            if len(own) == 1:
+                colours[key] = albedos[signal].astype(F32, copy=True)
+                continue
+            share = np.divide(colour, total, out=np.zeros_like(colour), where=total > 0)
+            colours[key] = (albedos[signal] * share).astype(F32)
+    return colours
+
+
+def stored_values(layer: LightLayer, radiance: np.ndarray,
+                  colour: np.ndarray | None) -> np.ndarray:
+    """A denoised pass in its stored units: divided by its (written) colour pass where that
+    is not 0 (elsewhere the pass adds nothing to the colour: its stored light as read)."""
+    if colour is None:
+        return radiance
+    out = layer.stored.copy()
+    np.divide(radiance, colour, out=out, where=colour > 0)
+    return out
+
+
+def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
+                 outputs: dict[str, np.ndarray], albedos: dict[str, np.ndarray],
+                 light: LightLayers) -> None:
+    """The denoised light passes and their colour passes into ``denoised.light``; the light
+    they cannot carry (where their colour passes are 0: the pixel filter's spill onto the
+    background, emitters' edges) goes to the emission passes, split by their shares."""
+    parts = compose_passes(denoised.color, emission, outputs, light.passes)
+    colours = remodulated_colours(light.passes, albedos)
+    residual = denoised.color.copy() if emission is None else denoised.color - emission
+    for layer, part in zip(light.passes, parts, strict=True):
+        colour = layer.colour
+        if layer.colour_channels is not None and layer.colour_channels in colours:
+            colour = colours[layer.colour_channels]
+        stored = stored_values(layer, part, colour)
+        _write(layer.channels, stored, denoised.light)
+        residual -= stored if colour is None else stored * colour
+    for channels, colour in colours.items():
+        _write(channels, colour, denoised.light)
+    if not light.emission:
+        return
+    # Emit and Env are noise-free: their own values are the shares.
+    extra = split_by_shares(residual, [e.radiance for e in light.emission], None)
+    for layer, part in zip(light.emission, extra, strict=True):
+        _write(layer.channels, layer.radiance + part, denoised.light)
+
+
+def _write(channels: tuple[str, str, str], planes: np.ndarray,
+           into: dict[str, np.ndarray]) -> None:
+    for name, plane in zip(channels, planes, strict=True):
+        into[name] = np.ascontiguousarray(plane, dtype=F32)
+
+
+def _planes(layers: dict[str, np.ndarray], names: tuple[str, ...], suffix: str = ""
+            ) -> dict[str, np.ndarray]:
+    """``<name><suffix>.R/G/B`` of each signal ``name`` as (3, H, W) planes."""
+    return {name: np.stack([layers[f"{name}{suffix}.{c}"] for c in "RGB"])
+            for name in names if f"{name}{suffix}.R" in layers}
+
+
+# The light groups' filter only gives shares of the colour, whose detail is the colour's own
+# filter's: cheaper settings (bench/light_layers.py and bench/light_layers_cost.py; docs/
+# cycles.md#light-groups-and-light-passes-come-out-denoised).
+GROUP_SETTINGS: dict[str, object] = {
+    "atrous_iterations": 3, "temporal_albedo": False, "pixel_filter": 0.0, "despike": 0.0,
+}
+
+
+def group_params(params: SVGFParams) -> SVGFParams:
+    """The light groups' filter settings: the colour's with :data:`GROUP_SETTINGS`."""
+    return dataclasses.replace(params, **GROUP_SETTINGS)  # type: ignore[arg-type]
+
+
+def group_frame(frame: Frame, groups: list[LightLayer]) -> Frame:
+    """The frame whose signals are the light groups (each filtered like a combined colour:
+    demodulated by the G-buffer albedo, direct and indirect light together), same guides."""
+    signals = [Signal(f"group{k}", np.ascontiguousarray(g.radiance, dtype=F32), frame.albedo,
+                      guide_albedo=True, mixed=True) for k, g in enumerate(groups)]
+    return dataclasses.replace(frame, signals=signals, emission=None, light=None)
+
+
+class LayeredDenoiser:
+    """The causal Denoiser plus the light layers of its frames (`Frame.light`): the colour as
+    the Denoiser alone gives it, and every light pass and light group denoised, adding up to
+    it (`DenoisedFrame.light`). The light groups' filter keeps its own history; ``state()``
+    is the colour's (a history file resumes the colour; the groups then start cold)."""
+
+    def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
+        from svgf_cli.filters.denoiser import Denoiser
+
+        self.params = params
+        self.debug_layers = debug_layers
+        self.colour = Denoiser(params, debug_layers=debug_layers)
+        self.colour.setup = dataclasses.replace(self.colour.setup, signal_outputs=True)
+        self.groups = Denoiser(group_params(params))
+        self.groups.setup = dataclasses.replace(self.groups.setup, signal_outputs=True)
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        return self.colour.stages
+
+    @property
+    def frames_processed(self) -> int:
+        return self.colour.frames_processed
+
+    def held_bytes(self) -> int:
+        return self.colour.held_bytes() + self.groups.held_bytes()
+
+    def reset(self) -> None:
+        self.colour.reset()
+        self.groups.reset()
+
+    def state(self) -> dict[str, np.ndarray]:
+        return self.colour.state()
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        self.colour.load_state(state)
+
+    def process(self, frame: Frame) -> DenoisedFrame:
+        """Denoise the next frame and its light layers."""
+        light = frame.light or LightLayers()
+        groups = group_frame(frame, light.groups) if light.groups else None
+        emission = frame.emission
+        denoised = self.colour.process(frame)
+        names = self.colour.signal_names or ()
+        outputs = _planes(denoised.layers, names)
+        # The colours the diffuse-like signals were remodulated by (their temporal means);
+        # glossy signals keep this frame's colour, except where a reflected light's colour
+        # stands in (filters.stages.reflected_lights): their colour passes stay as read.
+        albedos = _planes(denoised.layers, tuple(s.name for s in frame.signals
+                                                 if not s.glossy), ".albedo")
+        denoised.layers = ({k: v for k, v in denoised.layers.items() if ".albedo." not in k}
+                           if self.debug_layers else {})
+        if light.passes:
+            write_passes(denoised, emission, outputs, albedos, light)
+        if groups is not None:
+            filtered = self.groups.process(groups)
+            planes = [np.stack([filtered.layers[f"{s.name}.{c}"] for c in "RGB"])
+                      for s in groups.signals]
+            for layer, part in zip(light.groups, compose_groups(denoised.color, planes,
+                                                                light.groups), strict=True):
+                _write(layer.channels, part, denoised.light)
+        return denoised

@@ -1,0 +1,76 @@
+"""Kernels of the composable light layers (``filters.composable``): a clipped box mean and
+the split of a total by per-pixel shares. Float64 references: ``tests/test_light_layers.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import FASTMATH
+
+_JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, parallel=True,
+            error_model="numpy")
+
+
+@njit(**_JIT)
+def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """``out`` = the (C, H, W) planes' mean over a (2 radius + 1)^2 window clipped at the
+    borders (each window divided by the pixels it covers), summed in float64."""
+    channels, height, width = planes.shape
+    rows = np.empty((channels, height, width), dtype=np.float64)
+    for job in prange(channels * height):
+        c, y = job // height, job % height
+        running = 0.0
+        for x in range(min(radius, width)):
+            running += planes[c, y, x]
+        for x in range(width):
+            if x + radius < width:
+                running += planes[c, y, x + radius]
+            if x - radius - 1 >= 0:
+                running -= planes[c, y, x - radius - 1]
+            rows[c, y, x] = running
+    for job in prange(channels * width):
+        c, x = job // width, job % width
+        left, right = max(x - radius, 0), min(x + radius + 1, width)
+        running = 0.0
+        for y in range(min(radius, height)):
+            running += rows[c, y, x]
+        for y in range(height):
+            if y + radius < height:
+                running += rows[c, y + radius, x]
+            if y - radius - 1 >= 0:
+                running -= rows[c, y - radius - 1, x]
+            top, bottom = max(y - radius, 0), min(y + radius + 1, height)
+            out[c, y, x] = running / ((bottom - top) * (right - left))
+
+
+@njit(**_JIT)
+def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
+                 use_fallback: bool, floor: float, out: np.ndarray) -> None:
+    """``out[k]`` = ``total`` x ``weights[k] / sum_j weights[j]`` per pixel and channel
+    (negative weights count as 0); where that sum is at most ``floor``, the same with
+    ``fallback`` (when ``use_fallback``), and where that is too, equal parts."""
+    count, channels, height, width = weights.shape
+    for job in prange(channels * height):
+        c, y = job // height, job % height
+        for x in range(width):
+            s = 0.0
+            for k in range(count):
+                s += max(weights[k, c, y, x], 0.0)
+            source = 0
+            if s <= floor and use_fallback:
+                s = 0.0
+                for k in range(count):
+                    s += max(fallback[k, c, y, x], 0.0)
+                source = 1
+            t = total[c, y, x]
+            if s <= floor:
+                for k in range(count):
+                    out[k, c, y, x] = t / count
+            elif source == 0:
+                for k in range(count):
+                    out[k, c, y, x] = t * (max(weights[k, c, y, x], 0.0) / s)
+            else:
+                for k in range(count):
+                    out[k, c, y, x] = t * (max(fallback[k, c, y, x], 0.0) / s)

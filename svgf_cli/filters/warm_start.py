@@ -1,0 +1,53 @@
+"""A shot's first frames warmed from the frames after them (look-ahead warm-up; off unless
+called; docs/stability.md).
+
+A causal run starts every shot cold: its first frames have one, two, three samples of
+history, and on the bundled 10-16-frame sequences that cold start is the largest single
+part of svgf's loss in video JOD against per-frame OIDN (docs/stability.md#summary). Here
+the first ``warm`` output frames come from a bidirectional run (``two_pass``) over the first
+``lookahead`` frames held in memory, where every frame has the history of the frames after
+it too; the causal ``Denoiser`` still filters every frame from the first (its outputs of
+the warmed frames are dropped), so from frame ``warm`` on the output is the causal run's,
+bit for bit. Cost: one bidirectional run over ``lookahead`` frames per shot (about twice
+that many causal frames), memory: ``lookahead`` input frames and their forward histories.
+
+The file driver (``svgf_cli.run``) does not call this yet: it belongs at a shot's first
+frame, where a chunk has no earlier frames for ``--warmup``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from itertools import islice
+
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.two_pass import denoise_bidirectional
+from svgf_cli.frame import DenoisedFrame, Frame
+
+# Measured best on the bundled sequences (docs/stability.md#cold-start-variants): the first
+# 4 output frames from a bidirectional run over the first 8.
+WARM_FRAMES = 4
+LOOKAHEAD_FRAMES = 8
+
+
+def denoise_warm_start(
+    frames: Iterable[Frame], params: SVGFParams, *, warm: int = WARM_FRAMES,
+    lookahead: int = LOOKAHEAD_FRAMES,
+) -> Iterator[DenoisedFrame]:
+    """The outputs of ``frames`` in order: the first ``warm`` from a bidirectional run over
+    the first ``lookahead`` frames, the rest from a causal ``Denoiser`` over every frame.
+
+    ``warm`` 0 is the causal run itself. A sequence shorter than ``lookahead`` is looked
+    ahead over whole."""
+    if not 0 <= warm <= lookahead:
+        raise ValueError(f"warm ({warm}) must be in 0 .. lookahead ({lookahead})")
+    remaining = iter(frames)
+    head = list(islice(remaining, lookahead))
+    warmed = denoise_bidirectional(head, params)[:warm] if warm and head else []
+    causal = Denoiser(params)
+    for index, frame in enumerate(head):
+        output = causal.process(frame)
+        yield warmed[index] if index < len(warmed) else output
+    for frame in remaining:
+        yield causal.process(frame)

@@ -1,0 +1,84 @@
+"""The light layers of each frame read (`--light-layers denoised`, the default): the light
+passes and light groups handed to the filter with the frame (`Frame.light`), and the denoised
+planes converted to each channel's stored type for the writer.
+
+The light groups are checked on the sequence's first frame read (like the signal set): where
+they do not add up to the colour, every frame's groups are written as read, with one warning.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from svgf_cli.progress import Progress
+from svgf_cli.run.tasks import FrameTask, RunConfig
+
+if TYPE_CHECKING:
+    from svgf_cli.io.exr import ReadResult
+    from svgf_cli.io.source import SourcePart
+
+LIGHT_LAYER_MODES = ("denoised", "as-read")
+
+
+def light_layers_wanted(config: RunConfig) -> bool:
+    """Whether this run writes the light layers denoised (not with --colour-only)."""
+    return (getattr(config, "light_layers", "as-read") == "denoised"
+            and not getattr(config, "colour_only", False))
+
+
+class LightLayerReader:
+    """Attaches each read frame's light layers (`Frame.light`), deciding on the first frame
+    whether its light groups add up to the colour."""
+
+    def __init__(self, config: RunConfig, progress: Progress) -> None:
+        self.enabled = light_layers_wanted(config)
+        self._preset = config.mapping.preset if self.enabled else ""
+        self._progress = progress
+        self.groups_ok: bool | None = None
+
+    def attach(self, task: FrameTask, result: ReadResult) -> None:
+        if not self.enabled or getattr(result, "frame", None) is None:
+            return
+        from svgf_cli.io.lightlayers import check_groups, read_light_layers
+
+        light = read_light_layers(result, self._preset)
+        if light.groups and self.groups_ok is None:
+            check = check_groups(light.groups, result.frame)
+            self.groups_ok = check.passed
+            if not check.passed:
+                self._progress.warning(
+                    f"{task.input}: the light groups do not add up to the colour on "
+                    f"{check.share:.2%} of pixels (a light or the world in no group?); "
+                    "writing the light groups as read for the whole run"
+                )
+        if not self.groups_ok:
+            light.groups = []
+        if light.passes or light.groups:
+            result.frame.light = light
+
+
+def light_channels(part: SourcePart, planes: dict[str, np.ndarray]
+                   ) -> tuple[dict[str, np.ndarray], int]:
+    """The denoised light channels of ``part`` in their stored pixel types (half clamped to
+    +-65504, non-finite -> 0) and how many values were fixed. Channels of other parts stay
+    as read."""
+    from svgf_cli.io.output import HALF_MAX
+
+    out: dict[str, np.ndarray] = {}
+    fixed = 0
+    for name, plane in planes.items():
+        channel = part.channels.get(name)
+        if channel is None:
+            continue
+        plane = np.array(plane, dtype=np.float32)
+        bad = ~np.isfinite(plane)
+        fixed += int(np.count_nonzero(bad))
+        plane[bad] = 0.0
+        if channel.type_name == "half":
+            np.clip(plane, -HALF_MAX, HALF_MAX, out=plane)
+            out[name] = plane.astype(np.float16)
+        else:
+            out[name] = plane
+    return out, fixed

@@ -1,0 +1,56 @@
+"""The look-ahead warm-up of a shot's first frames (filters.warm_start, docs/stability.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from moving_scene import scene_frame, scene_sequence
+
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.params import resolve_params
+from svgf_cli.filters.two_pass import denoise_bidirectional
+from svgf_cli.filters.warm_start import denoise_warm_start
+
+PARAMS = resolve_params("default")
+
+
+def _causal(frames: list) -> list[np.ndarray]:
+    denoiser = Denoiser(PARAMS)
+    return [denoiser.process(frame).color for frame in frames]
+
+
+def test_warm_frames_are_the_bidirectional_run_the_rest_the_causal_run() -> None:
+    frames = scene_sequence(7)
+    got = [o.color for o in denoise_warm_start(iter(frames), PARAMS, warm=2, lookahead=4)]
+    bidirectional = denoise_bidirectional(frames[:4], PARAMS)
+    causal = _causal(frames)
+    assert len(got) == len(frames)
+    for t in range(2):  # the handover is at frame ``warm``, not ``lookahead``
+        np.testing.assert_array_equal(got[t], bidirectional[t].color, err_msg=f"frame {t}")
+    for t in range(2, 7):  # the causal run saw every frame from the first: its own history
+        np.testing.assert_array_equal(got[t], causal[t], err_msg=f"frame {t}")
+
+
+def test_the_first_frames_are_closer_to_the_truth_than_a_cold_start() -> None:
+    frames = scene_sequence(6)
+    truth = [scene_frame(t, noise=False).total_radiance() for t in range(2)]
+    warmed = list(denoise_warm_start(frames, PARAMS, warm=2, lookahead=6))
+    cold = _causal(frames)
+    for t in range(2):
+        warm_error = np.mean((warmed[t].color - truth[t]) ** 2)
+        cold_error = np.mean((cold[t] - truth[t]) ** 2)
+        assert warm_error < 0.9 * cold_error, (t, warm_error, cold_error)
+
+
+def test_no_warm_frames_is_the_causal_run_and_short_shots_are_looked_ahead_whole() -> None:
+    frames = scene_sequence(3)
+    causal = _causal(frames)
+    plain = [o.color for o in denoise_warm_start(frames, PARAMS, warm=0)]
+    short = [o.color for o in denoise_warm_start(frames, PARAMS, warm=2, lookahead=8)]
+    bidirectional = denoise_bidirectional(frames, PARAMS)
+    for t in range(3):
+        np.testing.assert_array_equal(plain[t], causal[t])
+    np.testing.assert_array_equal(short[0], bidirectional[0].color)
+    np.testing.assert_array_equal(short[2], causal[2])
+    with pytest.raises(ValueError, match="warm"):
+        next(denoise_warm_start(frames, PARAMS, warm=5, lookahead=4))

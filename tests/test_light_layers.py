@@ -1,0 +1,222 @@
+"""Composable light layers (issue 31): light groups recognised and checked on read, every
+light pass and light group written denoised, adding up to the denoised colour; data layers
+and the colour itself as without them; `--light-layers as-read` as before.
+
+The end-to-end tests denoise the committed `testdata/cycles/production` shot (Blender 4.5:
+three light groups key, fill, env; glass, a fog box, thin wires, Cryptomatte; the fill light
+switches on at frame 5) once per module.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+from test_cli_support import exit_code
+
+from svgf_cli.evaluate.metrics import relmse_trimmed
+from svgf_cli.filters.composable import box_filter, split_by_shares
+from svgf_cli.io.layers import build_mapping
+from svgf_cli.io.lightlayers import file_additivity, find_light_groups
+
+ROOT = Path(__file__).resolve().parents[1]
+SHOT = ROOT / "testdata/cycles/production"
+FRAMES = range(1, 9)
+GROUPS = ("Combined_env", "Combined_fill", "Combined_key")
+PASSES = ("DiffDir", "DiffInd", "GlossDir", "GlossInd", "TransDir", "TransInd", "VolumeDir",
+          "VolumeInd")
+DATA = ("Depth", "Normal", "Vector", "IndexOB", "CryptoObject00", "CryptoObject01",
+        "CryptoObject02", "Denoising Normal", "Denoising Depth", "Denoising Albedo")
+
+
+def channels(path: Path) -> dict[str, np.ndarray]:
+    return {n: c.pixels for n, c in
+            OpenEXR.File(str(path), separate_channels=True).parts[0].channels.items()}
+
+
+def layer(chans: dict[str, np.ndarray], name: str) -> np.ndarray:
+    return np.stack([chans[f"ViewLayer.{name}.{c}"].astype(np.float64) for c in "RGB"])
+
+
+# ------------------------------------------------------------------------------ unit tests
+
+
+def test_light_groups_are_found_next_to_the_colour_layer() -> None:
+    cycles = [f"ViewLayer.{layer}.{c}" for layer in ("Combined", "Combined_key",
+              "Combined_fill rim", "DiffDir", "Combined_half") for c in "RGB"]
+    cycles.remove("ViewLayer.Combined_half.B")  # not a whole RGB layer
+    colour = ("ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B")
+    found = find_light_groups([*cycles, "Other.Combined_x.R"], colour)
+    assert [g for g, _ in found] == ["fill rim", "key"]
+    assert found[1][1] == ("ViewLayer.Combined_key.R", "ViewLayer.Combined_key.G",
+                           "ViewLayer.Combined_key.B")
+    arnold = ["R", "G", "B", "RGBA_sun.R", "RGBA_sun.G", "RGBA_sun.B"]
+    assert [g for g, _ in find_light_groups(arnold, ("R", "G", "B"))] == ["sun"]
+    assert find_light_groups(arnold, None) == []
+
+
+@pytest.mark.parametrize(("radius", "shape"), [(2, (9, 13)), (3, (3, 4)), (0, (2, 5))])
+def test_box_filter_matches_float64_reference(radius: int, shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(3)
+    planes = rng.random((3, *shape)).astype(np.float32)
+    got = box_filter(planes, radius)
+    want = np.zeros((3, *shape))
+    for y in range(shape[0]):
+        for x in range(shape[1]):
+            window = planes[:, max(y - radius, 0):y + radius + 1,
+                            max(x - radius, 0):x + radius + 1].astype(np.float64)
+            want[:, y, x] = window.mean(axis=(1, 2))
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+
+
+def test_split_by_shares_matches_float64_reference() -> None:
+    rng = np.random.default_rng(5)
+    total = rng.random((3, 6, 7)).astype(np.float32) * 4
+    weights = [rng.random((3, 6, 7)).astype(np.float32) - 0.2 for _ in range(3)]
+    got = split_by_shares(total, weights)
+    kept = [np.maximum(w.astype(np.float64), 0.0) for w in weights]
+    denominator = sum(kept)
+    for part, k in zip(got, kept, strict=True):
+        want = np.where(denominator > 1e-8, total * k / np.where(denominator > 0, denominator,
+                                                                   1), total / 3)
+        np.testing.assert_allclose(part, want, rtol=1e-5, atol=1e-7)
+
+
+def test_split_by_shares_adds_up_with_fallbacks() -> None:
+    total = np.full((3, 2, 2), 2.0, np.float32)
+    a = np.array([[1, 0], [0, -1]], np.float32)[None].repeat(3, 0)
+    b = np.array([[3, 0], [0, 0]], np.float32)[None].repeat(3, 0)
+    fa = np.array([[9, 1], [0, 0]], np.float32)[None].repeat(3, 0)
+    fb = np.array([[9, 3], [0, 0]], np.float32)[None].repeat(3, 0)
+    pa, pb = split_by_shares(total, [a, b], [fa, fb])
+    np.testing.assert_allclose(pa + pb, total, rtol=1e-6)
+    assert pa[0, 0, 0] == pytest.approx(0.5)  # the weights' shares
+    assert pa[0, 0, 1] == pytest.approx(0.5)  # no weight: the fallback's shares (1:3)
+    assert pb[0, 0, 1] == pytest.approx(1.5)
+    assert pa[0, 1, 0] == pytest.approx(1.0)  # neither: equal shares
+    assert pa[0, 1, 1] == pytest.approx(1.0)  # negative weights count as 0
+
+
+# ------------------------------------------------------------------------- the real shot
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("light")
+    result = {}
+    for mode in ("denoised", "as-read"):
+        out = folder / mode
+        code = exit_code(["denoise", "--preset-aovs", "cycles", "-q", SHOT / "in.####.exr",
+                          "-o", f"{out}/", "--light-layers", mode])
+        assert code == 0
+        result[mode] = out
+    return result
+
+
+def test_groups_and_passes_add_up_to_the_denoised_colour(outputs: dict[str, Path]) -> None:
+    mapping = build_mapping("cycles")
+    for frame in FRAMES:
+        checks = file_additivity(str(outputs["denoised"] / f"in.{frame:04d}.exr"), mapping)
+        assert {c.what for c in checks} == {"3 light groups", "the light passes"}
+        for check in checks:
+            assert check.passed, check.describe()
+            assert check.worst_relative < 1.5e-3  # half storage of every term; float32: 1e-6
+
+
+def test_colour_and_data_layers_as_without_light_layers(outputs: dict[str, Path]) -> None:
+    for frame in FRAMES:
+        name = f"in.{frame:04d}.exr"
+        den, plain, source = (channels(outputs["denoised"] / name),
+                              channels(outputs["as-read"] / name), channels(SHOT / name))
+        assert den.keys() == plain.keys() == source.keys()
+        for channel, pixels in den.items():
+            assert pixels.dtype == source[channel].dtype, channel
+            layer_name = channel.split(".")[1]
+            if layer_name == "Combined" or layer_name in DATA:
+                assert np.array_equal(pixels, plain[channel], equal_nan=True), channel
+            if layer_name != "Combined":  # --light-layers as-read passes everything through
+                assert np.array_equal(plain[channel], source[channel], equal_nan=True), channel
+            if layer_name in DATA:
+                assert np.array_equal(pixels.view(np.uint8), source[channel].view(np.uint8))
+        changed = {c.split(".")[1] for c in den
+                   if not np.array_equal(den[c], source[c], equal_nan=True)}
+        assert {"Combined_key", "Combined_env", "DiffDir", "DiffInd"} <= changed
+
+
+def test_a_group_switching_on_is_not_lagged(outputs: dict[str, Path]) -> None:
+    """The fill light is off on frames 1-4 and on from frame 5: its group's own history and
+    anti-lag bring it up at once. Its output/reference brightness on frame 5 is within 15% of
+    the steady ratio of frames 6-8 (a lagging history would start near 0 and climb)."""
+
+    def ratio(frame: int) -> float:
+        name = f"in.{frame:04d}.exr"
+        out = layer(channels(outputs["denoised"] / name), "Combined_fill").mean()
+        ref = layer(channels(SHOT / name.replace("in.", "ref.")), "Combined_fill").mean()
+        return float(out / ref) if ref else float(out)
+
+    assert ratio(4) < 1e-3  # off: no light leaks in from the groups' shares
+    steady = np.mean([ratio(f) for f in (6, 7, 8)])
+    assert ratio(5) == pytest.approx(steady, rel=0.15)
+
+
+@pytest.mark.parametrize("name", ["Combined_key", "Combined_fill", "DiffInd", "GlossDir",
+                                  "GlossInd"])
+def test_denoised_layer_relmse_at_most_a_third_of_the_input(outputs: dict[str, Path],
+                                                             name: str) -> None:
+    out, noisy = [], []
+    for frame in FRAMES:
+        file = f"in.{frame:04d}.exr"
+        ref = layer(channels(SHOT / file.replace("in.", "ref.")), name)
+        out.append(relmse_trimmed(layer(channels(outputs["denoised"] / file), name), ref))
+        noisy.append(relmse_trimmed(layer(channels(SHOT / file), name), ref))
+    assert np.mean(out) <= 0.3 * np.mean(noisy)
+
+
+def test_groups_that_do_not_add_up_are_written_as_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without the key group the other two miss most of the light: one warning, and every
+    frame's groups pass through as read (the light passes are still denoised)."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    for frame in (1, 2):
+        exr = OpenEXR.File(str(SHOT / f"in.{frame:04d}.exr"), separate_channels=True)
+        part = exr.parts[0]
+        kept = {n: c for n, c in part.channels.items() if "Combined_key" not in n}
+        OpenEXR.File(dict(part.header), kept).write(str(inputs / f"in.{frame:04d}.exr"))
+    code = exit_code(["denoise", "--preset-aovs", "cycles", inputs / "in.####.exr",
+                      "-o", f"{tmp_path / 'out'}/"])
+    err = capsys.readouterr().err
+    assert code == 0
+    warnings = [line for line in err.splitlines() if "light groups do not add up" in line]
+    assert len(warnings) == 1, err
+    for frame in (1, 2):
+        name = f"in.{frame:04d}.exr"
+        out, source = channels(tmp_path / "out" / name), channels(inputs / name)
+        for group in ("Combined_env", "Combined_fill"):
+            for c in "RGB":
+                key = f"ViewLayer.{group}.{c}"
+                assert np.array_equal(out[key], source[key])
+        assert not np.array_equal(out["ViewLayer.DiffInd.R"], source["ViewLayer.DiffInd.R"])
+
+
+def test_inspect_check_reports_the_additivity_of_an_output(
+    outputs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    output = outputs["denoised"] / "in.0005.exr"
+    assert exit_code(["inspect", "--check", "--preset-aovs", "cycles", output]) == 0
+    text = capsys.readouterr().out
+    assert "light groups: env, fill, key" in text
+    assert "light-layer check: 3 light groups add up to the colour (passed)" in text
+    assert "light-layer check: the light passes add up to the colour (passed)" in text
+    # A denoised output whose groups no longer add up fails the check (exit 3).
+    exr = OpenEXR.File(str(output), separate_channels=True)
+    part = exr.parts[0]
+    channels_ = {n: c.pixels for n, c in part.channels.items()}
+    channels_["ViewLayer.Combined_key.G"] = channels_["ViewLayer.Combined_key.G"] * 2
+    broken = tmp_path / "broken.exr"
+    OpenEXR.File(dict(part.header), channels_).write(str(broken))
+    assert exit_code(["inspect", "--check", "--preset-aovs", "cycles", broken]) == 3
+    assert "3 light groups add up to the colour (FAILED)" in capsys.readouterr().out
