@@ -114,7 +114,7 @@ def baseline(
 METHODS: tuple[MethodSpec, ...] = (
     denoised(SVGF, "--preset default", "the default preset: the paper's filter with anti-lag"),
     denoised(PAPER, "--preset paper", "the paper's parameters, as published (no anti-lag)"),
-    denoised(SPATIAL, "--preset default --no-temporal", "spatial only: every frame cold"),
+    denoised(SPATIAL, "--preset default --set temporal=off", "spatial only: every frame cold"),
     denoised(LOBES, "--signals lobes", "one signal per lobe (diffuse, glossy, ...)", needs="lobes"),
     denoised(
         "svgf-lobes-split",
