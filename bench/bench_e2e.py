@@ -134,6 +134,17 @@ def run_cli(pattern: Path, out: Path, frames: int, *extra: str) -> dict[str, flo
     }
 
 
+def _warm_start_cost(folder: Path, out: Path, n: int, cpu_default: float,
+                     per_frame: float) -> None:
+    """The default's look-ahead warm start (docs/stability.md#warm-start) is paid once per
+    cold start, so the per-frame difference above cancels it: print it per shot, from the
+    same N frames run with ``--warm-start 0``."""
+    cold = run_cli(folder / "in.####.exr", out, n, "--warm-start", "0")
+    extra = cpu_default - cold["cpu"]
+    print(f"  warm start: {extra:+.1f} CPU seconds per shot ({extra / per_frame:.1f} causal "
+          f"frames' work; {cold['cpu']:.1f} with --warm-start 0 over {n} frames)", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=6, help="frames per run (N)")
@@ -186,6 +197,9 @@ def main(argv: list[str] | None = None) -> int:
                     " s/frame",
                     flush=True,
                 )
+                if mode == "causal":
+                    _warm_start_cost(folder, root / f"out_{width}x{height}", n, cpu[n],
+                                     per_frame)
             if len(per_mode) == 2:
                 ratio = per_mode["bidirectional"] / per_mode["causal"]
                 print(f"  bidirectional / causal CPU seconds per frame: {ratio:.2f}", flush=True)

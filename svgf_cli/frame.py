@@ -148,6 +148,14 @@ class Frame:
     # Light passes and light groups to be written denoised (None: none; the Denoiser itself
     # ignores them, `filters.composable.LayeredDenoiser` composes them).
     light: LightLayers | None = None
+    # The output colour, (3, H, W), decided by another pass (the look-ahead warm start of a
+    # shot's first frames, ``run.warm_start``): the filter still runs on the frame to build
+    # its history, and returns this colour (its light layers add up to it).
+    final_colour: np.ndarray | None = None
+    # The light of participating media, (3, H, W) (a renderer's volume passes; None: none):
+    # where it lights a pixel with no surface, the pixel's sample scattered in the medium
+    # (`filters.medium`). The same array as the volume signal's radiance.
+    medium: np.ndarray | None = None
 
     # ----------------------------------------------------------------- constructors
     @classmethod
@@ -244,6 +252,10 @@ class Frame:
             _check_plane("emission", self.emission, (3, h, w), f32)
         if self.motion_next is not None:
             _check_plane("motion_next", self.motion_next, (2, h, w), f32)
+        if self.medium is not None:
+            _check_plane("medium", self.medium, (3, h, w), f32)
+        if self.final_colour is not None:
+            _check_plane("final_colour", self.final_colour, (3, h, w), f32)
         if not self.signals:
             raise ValueError("frame has no signals")
         seen: set[str] = set()
@@ -302,6 +314,11 @@ class DenoisedFrame:
     counts: dict[str, int] = field(default_factory=dict)
     # Denoised light layers, (H, W) float32 per channel name (`Frame.light`'s labels).
     light: dict[str, np.ndarray] = field(default_factory=dict)
+    # The emission added back to ``color``: the frame's, less what a stage took into a
+    # signal to be filtered (the medium pixels' emission: filters.stages.fill_medium).
+    emission: np.ndarray | None = None
+    # (H, W) bool: the pixels whose G-buffer was a medium's (filters.stages.fill_medium).
+    medium: np.ndarray | None = None
 
     def warnings(self) -> list[str]:
         """One message per problem counted in this frame (empty when there is none)."""

@@ -36,7 +36,8 @@ HEADER = "| parameter | group | values | paper | falcor | meaning |"
 
 # Each preset's resolved values as they were before the presets became the paper's values
 # plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
-# every output stores them in svgf/params.
+# every output stores them in svgf/params. Added since: warm_start (2026-11-27, issue 29),
+# medium_fill_radius (2026-11-27, issue 30).
 PINNED: dict[str, dict[str, object]] = {
     "paper": {
         "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -51,7 +52,8 @@ PINNED: dict[str, dict[str, object]] = {
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.0, "temporal_albedo": False, "albedo_catmull_rom": False,
         "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
-        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5,
+        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
+        "medium_fill_radius": 0,
     },
     "default": {
         "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -66,7 +68,8 @@ PINNED: dict[str, dict[str, object]] = {
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.1, "temporal_albedo": True, "albedo_catmull_rom": True,
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
-        "pixel_filter": -1.0, "taa": False, "taa_alpha": 0.5,
+        "pixel_filter": -1.0, "taa": False, "taa_alpha": 0.5, "warm_start": 4,
+        "medium_fill_radius": 4,
     },
     "falcor": {
         "alpha": 0.05, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -81,7 +84,8 @@ PINNED: dict[str, dict[str, object]] = {
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.0, "temporal_albedo": False, "albedo_catmull_rom": False,
         "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
-        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5,
+        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
+        "medium_fill_radius": 0,
     },
 }
 

@@ -18,8 +18,8 @@ from svgf_cli.frame import Frame, Signal
 ROOT = Path(__file__).resolve().parents[1]
 
 TEMPORAL = ["values", "gradients", "demodulate", "reproject"]
-DEFAULT_TEMPORAL = ["values", "gradients", "reflected_lights", "demodulate", "reproject",
-                    "history_clamp", "antilag", "spread_fireflies"]
+DEFAULT_TEMPORAL = ["values", "fill_medium", "gradients", "reflected_lights", "demodulate",
+                    "reproject", "history_clamp", "antilag", "spread_fireflies"]
 
 
 @pytest.mark.parametrize(("preset", "kind", "expected"), [

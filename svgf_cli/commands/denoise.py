@@ -69,8 +69,8 @@ SECTIONS = [
     ("Presets and layers", ["preset", "preset_aovs", "signals", "aovs", "motion_convention"]),
     (
         "Run and progress",
-        ["bidirectional", "threads", "scratch_dir", "progress_mode", "quiet", "verbose",
-         "dry_run", "check_only"],
+        ["bidirectional", "warm_start", "threads", "scratch_dir", "progress_mode", "quiet",
+         "verbose", "dry_run", "check_only"],
     ),
     ("Farm chunks and Dask", ["chunk_size", "workers", "scheduler"]),
 ]
@@ -298,6 +298,7 @@ def _start(options: dict[str, Any]) -> _Run:
         chunk_size=options["chunk_size"],
         history_last_frame=history.last_frame if history is not None else None,
         bidirectional=params.bidirectional,
+        warm_start=params.warm_start,
     )
     progress = Progress(
         options["progress_mode"],

@@ -164,7 +164,7 @@ def _list_params_callback(ctx: click.Context, param: click.Parameter, value: boo
 
 
 # Parameters that choose a run mode rather than tune the filter: their flag stays in --help.
-SHOWN_PARAMETERS = ("bidirectional",)
+SHOWN_PARAMETERS = ("bidirectional", "warm_start")
 
 
 def _hidden_param_option(f: dataclasses.Field[Any]) -> Callable[[F], F]:

@@ -8,6 +8,7 @@ import json
 import shlex
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -21,6 +22,7 @@ from svgf_cli.farm.submit import (
     openjd_job_parameters,
     write_key_values,
 )
+from svgf_cli.filters.params import DEFAULT_PRESET, PRESETS
 from svgf_cli.io.patterns import format_frame_spec, parse_frame_spec
 
 # Options `plan` sets on every chunk's command line; passing them after `--` would conflict.
@@ -86,7 +88,8 @@ def command(
 
     Each chunk reads [first - W, last] and writes [first, last] ([first - W, last + W] with
     --bidirectional among the denoise arguments: its reverse pass warms up after the
-    chunk). The arguments after `--`
+    chunk; a chunk that starts cold also reads 2N frames from its start for the warm start
+    N of the denoise arguments or their preset). The arguments after `--`
     (inputs, -o, options) go into every chunk's `svgf denoise` command (--format commands,
     deadline) or into the OpenJD template's job parameters (--format openjd).
     """
@@ -108,7 +111,7 @@ def command(
     # The timeline is every frame of the sequence; the plan does not look at disk.
     timeline = list(range(start, end + 1))
     chunks = plan_chunks(frames, timeline, chunk_size=chunk_size, warmup=warmup_frames,
-                         bidirectional=bidirectional)
+                         bidirectional=bidirectional, warm_start=_warm_start(denoise_args))
     if output_format == "json":
         click.echo(json.dumps([c.to_json() for c in chunks], indent=None))
         return
@@ -140,21 +143,46 @@ def command(
         click.echo(shlex.join(words))
 
 
-def _bidirectional(denoise_args: Sequence[str]) -> bool:
-    """Whether the denoise arguments ask for a bidirectional run: the last of
-    --bidirectional, --no-bidirectional and --set bidirectional=BOOL wins."""
-    wanted = False
+def _denoise_setting(denoise_args: Sequence[str], name: str, convert: click.ParamType
+                     ) -> Any:
+    """The value the denoise arguments give parameter ``name`` (``--NAME V``, ``--NAME=V``,
+    ``--set NAME=V``, and ``--NAME``/``--no-NAME`` for a flag), the last one winning; None
+    when they give none. A value `denoise` would refuse is ignored (it refuses it itself)."""
+    flag = "--" + name.replace("_", "-")
+    found = None
     for i, arg in enumerate(denoise_args):
-        if arg in ("--bidirectional", "--no-bidirectional"):
-            wanted = arg == "--bidirectional"
+        text = None
+        if convert is click.BOOL and arg in (flag, "--no-" + flag[2:]):
+            found = arg == flag
+        elif arg == flag and i + 1 < len(denoise_args):
+            text = denoise_args[i + 1]
+        elif arg.startswith(flag + "="):
+            text = arg.removeprefix(flag + "=")
         setting = arg.removeprefix("--set=") if arg.startswith("--set=") else None
         if arg == "--set" and i + 1 < len(denoise_args):
             setting = denoise_args[i + 1]
-        name, sep, value = (setting or "").partition("=")
-        if sep and name.strip().replace("-", "_") == "bidirectional":
-            with contextlib.suppress(click.BadParameter):  # `denoise` refuses it itself
-                wanted = click.BOOL.convert(value, None, None)
-    return wanted
+        key, sep, value = (setting or "").partition("=")
+        if sep and key.strip().replace("-", "_") == name:
+            text = value
+        if text is not None:
+            with contextlib.suppress(click.BadParameter):
+                found = convert.convert(text, None, None)
+    return found
+
+
+def _bidirectional(denoise_args: Sequence[str]) -> bool:
+    """Whether the denoise arguments ask for a bidirectional run."""
+    return bool(_denoise_setting(denoise_args, "bidirectional", click.BOOL))
+
+
+def _warm_start(denoise_args: Sequence[str]) -> int:
+    """The look-ahead warm start the denoise arguments run with: theirs, else their
+    preset's (``--preset``, else the default one)."""
+    given = _denoise_setting(denoise_args, "warm_start", click.INT)
+    if given is not None:
+        return int(given)
+    preset = _denoise_setting(denoise_args, "preset", click.STRING) or DEFAULT_PRESET
+    return PRESETS[preset].warm_start if preset in PRESETS else 0
 
 
 # The denoise options the OpenJD template has a job parameter for (the rest must be added to

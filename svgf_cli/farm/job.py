@@ -43,12 +43,15 @@ class DenoiseJob:
         """Human-readable plan, one line per chunk (for --dry-run and -v)."""
         lines = []
         for chunk, tasks in zip(self.chunks, self.chunk_tasks, strict=True):
-            history = [t.frame for t in tasks if t.output is None]
+            history = [t.frame for t in tasks if t.output is None and not t.lookahead_only]
             first, last = tasks[0], tasks[-1]
+            look = (f"; warm start looks ahead to {chunk.lookahead_end}"
+                    if chunk.lookahead_end is not None else "")
             lines.append(
                 f"chunk {chunk.index}: process {chunk.read_start}-{chunk.read_end} "
-                f"({len(tasks)} frames, {len(history)} history-only), "
-                f"write {format_frame_spec(chunk.write)} ({len(chunk.write)} frames)"
+                f"({len(tasks) - sum(t.lookahead_only for t in tasks)} frames, "
+                f"{len(history)} history-only), "
+                f"write {format_frame_spec(chunk.write)} ({len(chunk.write)} frames){look}"
             )
             lines.append(f"  read  {first.input} .. {last.input}")
             outs = [t.output for t in tasks if t.output is not None]
@@ -161,7 +164,8 @@ def _chunk_tasks(
     """One chunk's frame tasks in order; a gap in a contiguous sequence is an InputError, or
     resets the history with a warning under ``allow_gaps``."""
     write = set(chunk.write)
-    frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]
+    last_read = max(chunk.read_end, chunk.lookahead_end or chunk.read_end)
+    frames = [(f, p) for f, p in usable if chunk.read_start <= f <= last_read]
     expected_previous = (
         history_last_frame if history_last_frame is not None and chunk.index == 0 else None
     )
@@ -179,7 +183,8 @@ def _chunk_tasks(
                 )
             reset = True
             warnings.append(f"frame(s) {gap} missing on disk: history reset at frame {f}")
-        tasks.append(FrameTask(f, p, outputs[f] if f in write else None, reset))
+        tasks.append(FrameTask(f, p, outputs[f] if f in write else None, reset,
+                               lookahead_only=f > chunk.read_end))
         previous = f
     return tasks
 
@@ -196,12 +201,15 @@ def build_job(
     chunk_size: int | None = None,
     history_last_frame: int | None = None,
     bidirectional: bool = False,
+    warm_start: int = 0,
 ) -> DenoiseJob:
     """Resolve inputs, outputs, frames, warm-up and chunks; raise before anything is written.
 
     ``warmup`` None means "all" (replay from the first frame of the sequence, or from the
     frame after ``history_last_frame`` when a history file is loaded); ``bidirectional``
-    adds the same warm-up after each chunk (the reverse pass's).
+    adds the same warm-up after each chunk (the reverse pass's); ``warm_start`` the
+    look-ahead frames of a chunk that starts cold (`plan.plan_chunks`; none with a loaded
+    history, which is not a cold start).
     """
     if skip_existing and overwrite:
         raise UsageError("--skip-existing and --overwrite contradict each other")
@@ -228,7 +236,8 @@ def build_job(
     write_frames = [f for f in selected if not (skip_existing and f in existing)]
 
     chunks = plan_chunks(write_frames, [f for f, _ in usable], chunk_size=chunk_size,
-                         warmup=warmup, bidirectional=bidirectional)
+                         warmup=warmup, bidirectional=bidirectional,
+                         warm_start=0 if history_last_frame is not None else warm_start)
     chunk_tasks = [
         _chunk_tasks(chunk, usable, outputs, contiguous=contiguous, allow_gaps=allow_gaps,
                      history_last_frame=history_last_frame, pattern=pattern,

@@ -35,6 +35,9 @@ class Chunk:
     read_start: int
     read_end: int
     write: tuple[int, ...]
+    # The last frame read only for the look-ahead warm start of the chunk's first outputs
+    # (``--warm-start``: a bidirectional run over the frames from ``read_start``); None: none.
+    lookahead_end: int | None = None
 
     @property
     def write_start(self) -> int:
@@ -47,7 +50,7 @@ class Chunk:
     def to_json(self) -> dict[str, object]:
         return {
             "chunk": self.index,
-            "read": [self.read_start, self.read_end],
+            "read": [self.read_start, max(self.read_end, self.lookahead_end or self.read_end)],
             "write": [self.write_start, self.write_end],
             "frames": format_frame_spec(self.write),
         }
@@ -60,6 +63,7 @@ def plan_chunks(
     chunk_size: int | None,
     warmup: int | None,
     bidirectional: bool = False,
+    warm_start: int = 0,
 ) -> list[Chunk]:
     """Split ``write_frames`` into chunks of at most ``chunk_size`` output frames.
 
@@ -68,7 +72,9 @@ def plan_chunks(
     output (clamped at the timeline start); None means "all": replay from the first frame of
     the timeline, which reproduces the sequential run exactly. ``bidirectional``: the
     reverse pass needs the same warm-up after the chunk's last output (clamped at the
-    timeline end; "all": to the last frame of the timeline).
+    timeline end; "all": to the last frame of the timeline). ``warm_start`` N (causal runs):
+    a chunk that writes any of its first N frames (it starts cold) also reads up to its
+    ``2 N``-th frame, for the look-ahead warm start of those outputs (``lookahead_end``).
     """
     if chunk_size is not None and chunk_size < 1:
         raise ValueError(f"chunk size must be at least 1, got {chunk_size}")
@@ -90,5 +96,8 @@ def plan_chunks(
         end = last
         if bidirectional:
             end = len(timeline) - 1 if warmup is None else min(len(timeline) - 1, last + warmup)
-        chunks.append(Chunk(index, timeline[start], timeline[end], group))
+        look = None
+        if warm_start and not bidirectional and first - start < warm_start:
+            look = timeline[min(len(timeline) - 1, start + 2 * warm_start - 1)]
+        chunks.append(Chunk(index, timeline[start], timeline[end], group, look))
     return chunks

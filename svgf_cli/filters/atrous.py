@@ -215,6 +215,35 @@ def _guide_row(
             out_inverse_scale[s, uy, x] = _ONE / max(scale, _MIN_SCALE)
 
 
+def zero_signals(illumination: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """Per signal of (S, 3, H, W) ``illumination`` and (S, H, W) ``variance``: whether both
+    are +0.0 on every pixel (every bit 0; -0.0 does not count).
+
+    Such a signal needs no a-trous: its weights are non-negative and finite (wherever the
+    geometry is, as every other signal's output needs), so each sum of eqs. 1-2 is +0 and
+    so is every iteration's output. The scan stops at the first row that is not zero (a
+    lit signal costs its leading black rows).
+    """
+    width = illumination.shape[-1]
+    zero = np.zeros(illumination.shape[0], dtype=bool)
+    for s in range(illumination.shape[0]):
+        zero[s] = (_zero_bits(illumination[s].view(np.uint32).reshape(-1, width))
+                   and _zero_bits(variance[s].view(np.uint32).reshape(-1, width)))
+    return zero
+
+
+@njit(**_JIT)
+def _zero_bits(rows: np.ndarray) -> bool:
+    """True where every element of the (R, W) uint32 ``rows`` is 0, row by row."""
+    for r in range(rows.shape[0]):
+        bits = np.uint32(0)
+        for x in range(rows.shape[1]):
+            bits |= rows[r, x]
+        if bits != 0:
+            return False
+    return True
+
+
 def atrous_iteration(
     illumination: np.ndarray,
     variance: np.ndarray,

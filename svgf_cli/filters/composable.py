@@ -131,6 +131,19 @@ def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
     return colours
 
 
+def medium_colours(colours: dict[tuple[str, str, str], np.ndarray],
+                   passes: list[LightLayer], medium: np.ndarray) -> None:
+    """In place: on the medium pixels, each colour pass as read, box-filtered. The filter
+    demodulated them by the colour of the surface behind the medium, but a renderer's
+    converged colour pass there is that colour on the samples that reach the surface and 0
+    on the others (Cycles), which the mean over the neighbours estimates."""
+    read = {layer.colour_channels: layer.colour for layer in passes
+            if layer.colour_channels is not None and layer.colour is not None}
+    for key, colour in colours.items():
+        if key in read:
+            colour[:, medium] = box_filter(read[key])[:, medium]
+
+
 def stored_values(layer: LightLayer, radiance: np.ndarray,
                   colour: np.ndarray | None) -> np.ndarray:
     """A denoised pass in its stored units: divided by its (written) colour pass where that
@@ -150,6 +163,8 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     background, emitters' edges) goes to the emission passes, split by their shares."""
     parts = compose_passes(denoised.color, emission, outputs, light.passes)
     colours = remodulated_colours(light.passes, albedos)
+    if denoised.medium is not None:
+        medium_colours(colours, light.passes, denoised.medium)
     residual = denoised.color.copy() if emission is None else denoised.color - emission
     for layer, part in zip(light.passes, parts, strict=True):
         colour = layer.colour
@@ -162,10 +177,14 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
         _write(channels, colour, denoised.light)
     if not light.emission:
         return
-    # Emit and Env are noise-free: their own values are the shares.
-    extra = split_by_shares(residual, [e.radiance for e in light.emission], None)
-    for layer, part in zip(light.emission, extra, strict=True):
-        _write(layer.channels, layer.radiance + part, denoised.light)
+    # Emit and Env are noise-free: their own values are the shares. Where the filter took
+    # the emission into a signal (medium pixels: filters.stages.fill_medium) it is 0 in
+    # ``emission`` and in the passes as written, which the residual then fills.
+    kept = [e.radiance if emission is None else np.where(emission != 0.0, e.radiance, F32(0.0))
+            for e in light.emission]
+    extra = split_by_shares(residual, kept, None)
+    for layer, own, part in zip(light.emission, kept, extra, strict=True):
+        _write(layer.channels, own + part, denoised.light)
 
 
 def _write(channels: tuple[str, str, str], planes: np.ndarray,
@@ -199,7 +218,8 @@ def group_frame(frame: Frame, groups: list[LightLayer]) -> Frame:
     demodulated by the G-buffer albedo, direct and indirect light together), same guides."""
     signals = [Signal(f"group{k}", np.ascontiguousarray(g.radiance, dtype=F32), frame.albedo,
                       guide_albedo=True, mixed=True) for k, g in enumerate(groups)]
-    return dataclasses.replace(frame, signals=signals, emission=None, light=None)
+    return dataclasses.replace(frame, signals=signals, emission=None, light=None,
+                               final_colour=None)
 
 
 class LayeredDenoiser:
@@ -243,8 +263,8 @@ class LayeredDenoiser:
         """Denoise the next frame and its light layers."""
         light = frame.light or LightLayers()
         groups = group_frame(frame, light.groups) if light.groups else None
-        emission = frame.emission
         denoised = self.colour.process(frame)
+        emission = denoised.emission  # the frame's, less what the filter took into a signal
         names = self.colour.signal_names or ()
         outputs = _planes(denoised.layers, names)
         # The colours the diffuse-like signals were remodulated by (their temporal means);

@@ -135,6 +135,8 @@ class FrameContext:
     depth_slope: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
     normal_width: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
     marked: dict[str, int] = field(default_factory=dict)  # reflected lights per signal
+    # The pixels given a medium's G-buffer (filters.stages.fill_medium); None: none.
+    medium_pixels: np.ndarray | None = None
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
     temporal: TemporalState | None = None
     reprojected: bool = False  # there was a history to reproject

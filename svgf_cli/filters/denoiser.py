@@ -58,4 +58,6 @@ class Denoiser(PipelineFilter):
         """Denoise the next frame of the sequence."""
         ctx = self._run(frame)
         assert ctx.output is not None
-        return DenoisedFrame(color=ctx.output, layers=ctx.layers, counts=ctx.counts)
+        colour = ctx.output if frame.final_colour is None else frame.final_colour
+        return DenoisedFrame(color=colour, layers=ctx.layers, counts=ctx.counts,
+                             emission=ctx.frame.emission, medium=ctx.medium_pixels)

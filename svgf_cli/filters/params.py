@@ -134,6 +134,21 @@ class SVGFParams:
         " about twice the work; docs/bidirectional.md).",
         group="temporal",
     )
+    warm_start: int = _p(
+        0,
+        "The first N output frames of a cold start (a shot's first frames) from a"
+        " bidirectional run over its first 2N frames, not noisy (default preset: 4; 0: off;"
+        " later frames unchanged; docs/stability.md#warm-start).",
+        group="temporal", valid=Range(0, 16),
+    )
+    medium_fill_radius: int = _p(
+        0,
+        "Pixels whose sample scattered in fog or smoke (no surface, volume light around)"
+        " take the G-buffer of the nearest surface within this many pixels, or become a"
+        " medium surface, and are filtered, not passed through (0: off;"
+        " docs/algorithm.md#volumes-medium-pixels).",
+        group="temporal", valid=Range(0, 16),
+    )
     # Variance estimation (paper section 4.2).
     variance_history_threshold: int = _p(
         4, "Below this history length the variance is estimated spatially (7x7 bilateral).",
@@ -395,6 +410,12 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   "#sharper-history-resampling-catmull-rom"),
         Departure("moving_feedback_share", 0.0, "where pixels move the feedback blur compounds"
                   f" with the resampling: {_ALG}#feedback-where-pixels-move"),
+        Departure("warm_start", 4, "a causal run starts every shot with 1, 2, 3 frames of"
+                  " history, the largest part of its loss in video quality: docs/stability.md"
+                  "#warm-start"),
+        Departure("medium_fill_radius", 4, "a renderer's G-buffer holds no surface where"
+                  " its one sample scattered in a medium: fog comes out as raw speckle"
+                  " otherwise: docs/algorithm.md#volumes-medium-pixels"),
         Departure("atrous_iterations", AUTO_ITERATIONS, "the filter's reach grows with the"
                   f" image (atrous_iterations_for): {_ALG}#the-filters-reach-grows-with-the-image"),
         Departure("pixel_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres lack the"

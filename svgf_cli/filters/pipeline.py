@@ -23,6 +23,7 @@ from svgf_cli.filters.stages.combine_albedo import CombineAlbedo
 from svgf_cli.filters.stages.demodulate import Demodulate
 from svgf_cli.filters.stages.despike import Despike
 from svgf_cli.filters.stages.despike_lone import DespikeLone
+from svgf_cli.filters.stages.fill_medium import FillMedium
 from svgf_cli.filters.stages.firefly_clamp import FireflyClamp
 from svgf_cli.filters.stages.gradients import Gradients
 from svgf_cli.filters.stages.history_clamp import HistoryClamp
@@ -46,6 +47,7 @@ def temporal() -> list[Stage]:
     """Values to the reprojected history, before the blend (every pipeline)."""
     return [
         CleanGeometry(),
+        FillMedium(),  # medium_fill_radius, frames with volume passes
         Gradients(),
         MarkReflectedLights(),  # glossy_emitter_radiance
         Demodulate(),

@@ -11,8 +11,9 @@ the warmed frames are dropped), so from frame ``warm`` on the output is the caus
 bit for bit. Cost: one bidirectional run over ``lookahead`` frames per shot (about twice
 that many causal frames), memory: ``lookahead`` input frames and their forward histories.
 
-The file driver (``svgf_cli.run``) does not call this yet: it belongs at a shot's first
-frame, where a chunk has no earlier frames for ``--warmup``.
+The file driver does the same over files (``svgf_cli.run.warm_start``, ``--warm-start``),
+spilling the forward histories instead of holding the frames: this one is for tests and
+evaluation over frames in memory.
 """
 
 from __future__ import annotations

@@ -910,6 +910,8 @@ def _assemble_frame(
         # The filter's luminance is the file's own (its chromaticities), never negative.
         luminance_weights=info.luminance_weights.for_filter(),
         centre_sampled=centre_sampled(info.attributes),
+        # The volume lobe's signal (sets of lobe passes) marks the medium's pixels.
+        medium=next((s.radiance for s in composed.signals if s.name == "volume"), None),
     )
     if "motion_next" in values:
         frame.motion_next = to_next_pixels(values["motion_next"], convention)

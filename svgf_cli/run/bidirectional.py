@@ -44,6 +44,7 @@ from svgf_cli.run.workers import (
     ReadAhead,
     Reader,
     WriteBehind,
+    Writer,
     default_reader,
     frame_reader,
     frame_writer,
@@ -64,6 +65,7 @@ class _Pass:
     warmup: WarmupCount
     stop: StopFlag | None
     read: Reader
+    write: Writer
 
 
 def reverse_tasks(tasks: Sequence[FrameTask], first_output: int) -> list[FrameTask]:
@@ -84,9 +86,11 @@ def run_bidirectional(
     stop: StopFlag | None = None,
     on_first_frame: Callable[[ReadResult], None] | None = None,
     read: Reader = default_reader,
+    write: Writer | None = None,
 ) -> RunStats:
     """Both passes over one chunk's ``tasks`` (frames in time order; history-only frames
-    before the first output are the forward warm-up, after the last the reverse one)."""
+    before the first output are the forward warm-up, after the last the reverse one).
+    ``write``: where the output frames go (default: their files, `workers.frame_writer`)."""
     stats = RunStats()
     outputs = [i for i, t in enumerate(tasks) if t.output is not None]
     if not outputs:
@@ -98,7 +102,8 @@ def run_bidirectional(
                          + (len(backward) - len(outputs)))
     progress.passes = 2
     with ScratchFolder(config.scratch_dir) as scratch:
-        run = _Pass(config, progress, stats, scratch, warmup, stop, read)
+        run = _Pass(config, progress, stats, scratch, warmup, stop, read,
+                    write or frame_writer(config))
         _forward_pass(run, forward_tasks, on_first_frame)
         _reverse_pass(run, backward)
         progress.detail(f"scratch: {scratch.bytes_written / 2**20:.0f} MB written to "
@@ -136,7 +141,7 @@ def _reverse_pass(run: _Pass, tasks: Sequence[FrameTask]) -> None:
     writes_to = [t.frame for t in tasks if t.output is not None]
     frames = FrameFilter(config, run.progress, stats, ReversePass)
     with (
-        WriteBehind(frame_writer(config), run.progress, stats) as writes,
+        WriteBehind(run.write, run.progress, stats) as writes,
         StateReads(run.scratch, writes_to) as states,
         # Frame t - 1 is read once the write of t + 1 is done: with its passthrough
         # layers a frame is the largest thing in flight, and three of them beside the

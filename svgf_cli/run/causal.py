@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
 
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame, Frame
@@ -65,9 +68,12 @@ def run_causal(
     on_first_frame: Callable[[ReadResult], None] | None = None,
     make_denoiser: Callable[[SVGFParams, bool], CausalFilter] = default_denoiser,
     read: Reader = default_reader,
+    warm_colours: dict[int, np.ndarray] | None = None,
 ) -> RunStats:
     """Run the filter over ``tasks`` in order, writing the frames that have an output (see
-    `chunk.run_sequence`)."""
+    `chunk.run_sequence`); an output frame in ``warm_colours`` (taken out as it is used)
+    gets that colour (`warm_start`)."""
+    warm_colours = warm_colours if warm_colours is not None else {}
     stats = RunStats()
     if not tasks:
         return stats
@@ -89,6 +95,8 @@ def run_causal(
         for task, result, read_seconds in reads:
             frames.admit(task, result)
             light.attach(task, result)
+            if task.output is not None and task.frame in warm_colours:
+                result.frame = replace(result.frame, final_colour=warm_colours.pop(task.frame))
             writes.poll()  # report a finished write now rather than a frame later
             denoised, compute_seconds = frames.process(task, result, frames.filter.process)
             if task.output is None:

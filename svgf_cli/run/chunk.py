@@ -1,6 +1,6 @@
-"""The entry point of a chunk (`run_sequence`): the causal driver (`causal`), or both
-passes of a bidirectional run (`bidirectional`, imported only then: it brings the
-two-pass filter in).
+"""The entry point of a chunk (`run_sequence`): the causal driver (`causal`), after the
+look-ahead warm start of a chunk that starts cold (`warm_start`), or both passes of a
+bidirectional run (`bidirectional`, imported only then: it brings the two-pass filter in).
 """
 
 from __future__ import annotations
@@ -8,6 +8,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.heap import map_large_blocks
@@ -17,6 +19,7 @@ from svgf_cli.run.history import HistoryFile
 from svgf_cli.run.stages import describe_stages
 from svgf_cli.run.stop import StopFlag
 from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats
+from svgf_cli.run.warm_start import warm_head
 from svgf_cli.run.workers import Reader, default_reader
 
 if TYPE_CHECKING:
@@ -54,8 +57,23 @@ def run_sequence(
 
         return run_bidirectional(tasks, config, progress, stop=stop,
                                  on_first_frame=on_first_frame, read=read)
-    return run_causal(
-        tasks, config, progress, stop=stop, history=history, save_history_to=save_history_to,
-        warmup_total=warmup_total, on_first_frame=on_first_frame,
-        make_denoiser=make_denoiser, read=read,
+    head = [] if history is not None else warm_head(tasks, config.params.warm_start)
+    warm: dict[int, np.ndarray] = {}
+    head_stats = RunStats()
+    if head:
+        from svgf_cli.run.warm_start import warm_colours
+
+        written = [t.frame for t in head if t.output is not None]
+        progress.detail(f"warm start: frame(s) {written[0]}-{written[-1]} from a "
+                        f"bidirectional run over frames {head[0].frame}-{head[-1].frame}")
+        warm, head_stats = warm_colours(head, config, stop=stop, read=read)
+    stats = run_causal(
+        [t for t in tasks if not t.lookahead_only], config, progress, stop=stop,
+        history=history, save_history_to=save_history_to, warmup_total=warmup_total,
+        on_first_frame=on_first_frame, make_denoiser=make_denoiser, read=read,
+        warm_colours=warm,
     )
+    stats.read_seconds += head_stats.read_seconds
+    stats.compute_seconds += head_stats.compute_seconds
+    stats.wall_seconds += head_stats.wall_seconds
+    return stats

@@ -80,8 +80,14 @@ def save_history(
         raise SvgfError(f"cannot write history file: {exc.strerror or exc}", str(path)) from None
 
 
+# Settings of the run, not of the filter whose state a history file holds: the look-ahead
+# warm start of a cold start (a run that loads a history does not start cold).
+NOT_IN_STATE = ("warm_start",)
+
+
 def check_history_params(history: HistoryFile, params: SVGFParams) -> None:
-    """Refuse a state computed with other parameters (exit 2), naming what differs."""
+    """Refuse a state computed with other parameters (exit 2), naming what differs (not
+    the run-driver settings of :data:`NOT_IN_STATE`)."""
     if history.params_json == params.to_json():
         return
     try:
@@ -89,11 +95,16 @@ def check_history_params(history: HistoryFile, params: SVGFParams) -> None:
     except ValueError:
         saved = {}
     current = json.loads(params.to_json())
+    for name in NOT_IN_STATE:
+        saved.pop(name, None)
+        current.pop(name, None)
     diffs = [
         f"{k} {saved.get(k)!r} (saved) != {current.get(k)!r}"
         for k in sorted(set(saved) | set(current))
         if saved.get(k) != current.get(k)
     ]
+    if not diffs:
+        return
     raise UsageError(
         "history was saved with different parameters: " + ("; ".join(diffs) or "unknown"),
         str(history.path),

@@ -7,7 +7,7 @@ Everything here is plain data (picklable: shipped to Dask workers), no I/O.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,6 +26,8 @@ class FrameTask:
     input: Path
     output: Path | None
     reset_history: bool = False  # --allow-gaps: a frame before this one is missing
+    # Read only by the look-ahead warm start (after the chunk's last output; run.warm_start).
+    lookahead_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,14 +91,16 @@ def pending_tasks(tasks: Sequence[FrameTask], overwrite: bool) -> list[FrameTask
     return [
         t
         if t.output is None or not t.output.exists()
-        else FrameTask(t.frame, t.input, None, t.reset_history)
+        else replace(t, output=None)
         for t in tasks
     ]
 
 
 def trim_tail(tasks: Sequence[FrameTask]) -> list[FrameTask]:
-    """Drop history-only frames after the last written one (nothing depends on them)."""
-    last = max((i for i, t in enumerate(tasks) if t.output is not None), default=-1)
+    """Drop history-only frames after the last written one (nothing depends on them; the
+    look-ahead frames of a warm start are kept: its outputs depend on them)."""
+    last = max((i for i, t in enumerate(tasks) if t.output is not None or t.lookahead_only),
+               default=-1)
     return list(tasks[: last + 1])
 
 

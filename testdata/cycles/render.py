@@ -4,7 +4,7 @@ Runs in its own virtual environment with Blender as a Python module (`bpy` 4.5 L
 
     .venv-blender/bin/python testdata/cycles/render.py [--scene roll metal] [--what all]
 
-Both scenes are built in code from the factory-empty file (no .blend is stored), animated with
+Every scene is built in code from the factory-empty file (no .blend is stored), animated with
 keyframes (so Cycles can evaluate the neighbouring frames for the Vector pass), and rendered on
 the CPU with fixed seeds. For every frame it writes
 
@@ -39,13 +39,27 @@ PASS_INDEX = {
     "roll": {"floor": 1, "ball": 2, "box": 3, "bust": 4, "panel": 5},
     "metal": {"floor": 1, "mirror_ball": 2, "strip": 3, "cube": 4, "pillar": 5},
     "production": {"floor": 1, "glass": 2, "wires": 3, "box": 4, "fog": 5},
+    "dof": {"floor": 1, "ball": 2, "box": 3, "bust": 4, "panel": 5},
+    "smoke": {"floor": 1, "smoke": 2, "sphere": 3, "box": 4},
 }
 
 # Light groups of the production scene (View Layer -> Light Groups): every light and the world
 # is in one, so the groups add up to Combined.
-LIGHT_GROUPS = {"production": ("key", "fill", "env")}
-# Frames per scene (the production shot is shorter: it is the biggest file per frame).
-SCENE_FRAMES = {"production": (1, 8)}
+# The dof and smoke shots carry the same three group names (and so the same passes).
+LIGHT_GROUPS = {
+    "production": ("key", "fill", "env"),
+    "dof": ("key", "fill", "env"),
+    "smoke": ("key", "fill", "env"),
+}
+# Frames per scene (the production-like shots are shorter: they are the biggest files per frame).
+SCENE_FRAMES = {"production": (1, 8), "dof": (1, 8), "smoke": (1, 8)}
+# Depth of field of the dof shot: f-number at the roll camera's 35 mm lens (aperture diameter
+# 35 mm / 0.03 = 1.17 m), focused on the ball. Circles of confusion at 128x72: the emissive
+# panel behind the objects about 7 px, the floor at the bottom edge 6-7 px, box and bust 3-5 px,
+# the far floor up to about 20 px; the ball's centre is in focus.
+DOF_FSTOP = 0.03
+# Peak density (1/m) of the smoke shot's medium where the noise is over its threshold.
+SMOKE_DENSITY = 8.0
 
 
 # --------------------------------------------------------------------------- building blocks
@@ -444,7 +458,150 @@ def build_production(scene) -> dict:
     return {"light_groups": list(LIGHT_GROUPS["production"]), "fill_on_from_frame": on_from}
 
 
-SCENES = {"roll": build_roll, "metal": build_metal, "production": build_production}
+def add_light_groups(scene, name: str) -> None:
+    layer = scene.view_layers[0]
+    for group in LIGHT_GROUPS[name]:
+        layer.lightgroups.add(name=group)
+
+
+def build_dof(scene) -> dict:
+    """The roll shot (same objects, ball and camera animation) through a wide-open lens focused
+    on the ball: the background, the box and the bust and the near floor are out of focus.
+    Light groups (key: the area light, fill: the emissive panel, env: the world) and the
+    production shot's passes."""
+    extra = build_roll(scene)
+    add_light_groups(scene, "dof")
+    bpy.data.objects["key_light"].lightgroup = "key"
+    bpy.data.objects["panel"].lightgroup = "fill"
+    scene.world.lightgroup = "env"
+    dof = scene.camera.data.dof
+    dof.use_dof = True
+    dof.focus_object = bpy.data.objects["ball"]
+    dof.aperture_fstop = DOF_FSTOP
+    return {
+        **extra,
+        "light_groups": list(LIGHT_GROUPS["dof"]),
+        "dof": {
+            "focus_object": "ball",
+            "aperture_fstop": DOF_FSTOP,
+            "aperture_diameter_m": scene.camera.data.lens * 1e-3 / DOF_FSTOP,
+            "aperture_blades": 0,
+        },
+    }
+
+
+def smoke_material(name: str, density: float) -> bpy.types.Material:
+    """A patchy, smoke-like medium for a 2 m cube (object coordinates -1..1): a Principled
+    Volume whose density is a thresholded Noise Texture (object space), faded to zero towards
+    a sphere of radius 1 so the cube's faces do not show."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    coords = nodes.new("ShaderNodeTexCoord")
+    noise = nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 2.2
+    noise.inputs["Detail"].default_value = 4.0
+    noise.inputs["Roughness"].default_value = 0.55
+    links.new(coords.outputs["Object"], noise.inputs["Vector"])
+    patches = nodes.new("ShaderNodeMapRange")  # noise 0.45 .. 0.68 -> 0 .. 1, clamped
+    patches.inputs["From Min"].default_value = 0.45
+    patches.inputs["From Max"].default_value = 0.68
+    links.new(noise.outputs["Fac"], patches.inputs["Value"])
+    sphere = nodes.new("ShaderNodeTexGradient")  # 1 - |p|, 0 outside the unit sphere
+    sphere.gradient_type = "SPHERICAL"
+    links.new(coords.outputs["Object"], sphere.inputs["Vector"])
+    fade = nodes.new("ShaderNodeMapRange")  # full density inside radius 0.65
+    fade.inputs["From Min"].default_value = 0.0
+    fade.inputs["From Max"].default_value = 0.35
+    links.new(sphere.outputs["Fac"], fade.inputs["Value"])
+    product = nodes.new("ShaderNodeMath")
+    product.operation = "MULTIPLY"
+    links.new(patches.outputs["Result"], product.inputs[0])
+    links.new(fade.outputs["Result"], product.inputs[1])
+    scaled = nodes.new("ShaderNodeMath")
+    scaled.operation = "MULTIPLY"
+    scaled.inputs[1].default_value = density
+    links.new(product.outputs["Value"], scaled.inputs[0])
+    volume = nodes.new("ShaderNodeVolumePrincipled")
+    volume.inputs["Color"].default_value = (0.85, 0.85, 0.88, 1.0)
+    links.new(scaled.outputs["Value"], volume.inputs["Density"])
+    links.new(volume.outputs["Volume"], nodes["Material Output"].inputs["Volume"])
+    return mat
+
+
+def build_smoke(scene) -> dict:
+    """A heterogeneous smoke cloud (noise-driven density) standing on a checker floor, its
+    lower part in front of the floor and a diffuse sphere, its upper part against the sky; a
+    sun (key), a bluish area fill and the world (env) in three light groups; slow camera move."""
+    index = PASS_INDEX["smoke"]
+    add_light_groups(scene, "smoke")
+    gradient_world(scene, horizon=(0.6, 0.62, 0.65), zenith=(0.2, 0.35, 0.7), strength=0.6)
+    scene.world.lightgroup = "env"
+
+    floor = add_plane(30.0, (0.0, 0.0, 0.0))
+    attach(
+        floor,
+        principled("floor", roughness=0.8, checker=((0.7, 0.7, 0.68), (0.12, 0.12, 0.14), 20.0)),
+        "floor",
+        index["floor"],
+    )
+    bpy.ops.mesh.primitive_cube_add(size=2.0, location=(0.0, 0.6, 1.15))
+    cloud = bpy.context.active_object
+    cloud.scale = (1.6, 1.1, 1.15)
+    attach(cloud, smoke_material("smoke", density=SMOKE_DENSITY), "smoke", index["smoke"])
+
+    sphere = add_sphere(0.6, (1.3, 2.2, 0.6))  # partly hidden behind the smoke
+    attach(
+        sphere,
+        principled("sphere_diffuse", base=(0.8, 0.4, 0.12), roughness=1.0),
+        "sphere",
+        index["sphere"],
+    )
+    bpy.ops.mesh.primitive_cube_add(size=0.8, location=(-2.3, 1.0, 0.4), rotation=(0, 0, 0.5))
+    attach(
+        bpy.context.active_object,
+        principled("box_diffuse", base=(0.25, 0.5, 0.75), roughness=1.0),
+        "box",
+        index["box"],
+    )
+
+    bpy.ops.object.light_add(type="SUN", location=(0.0, 0.0, 6.0))
+    sun = bpy.context.active_object
+    sun.name = "sun"
+    sun.data.energy = 3.5
+    sun.data.angle = math.radians(3.0)
+    sun.data.color = (1.0, 0.95, 0.85)
+    sun.rotation_euler = (math.radians(50), 0.0, math.radians(-140))  # from behind right
+    sun.lightgroup = "key"
+
+    bpy.ops.object.light_add(type="AREA", location=(-3.0, -3.0, 2.5))
+    fill = bpy.context.active_object
+    fill.name = "fill_light"
+    fill.data.energy = 200.0
+    fill.data.size = 1.5
+    fill.data.color = (0.6, 0.72, 1.0)
+    track = fill.constraints.new("TRACK_TO")
+    track.target = cloud
+    track.track_axis = "TRACK_NEGATIVE_Z"
+    track.up_axis = "UP_Y"
+    fill.lightgroup = "fill"
+
+    first, last = SCENE_FRAMES["smoke"]
+    camera, target = add_camera(scene, "camera_target", lens_mm=35.0)
+    target.location = (0.1, 0.6, 1.2)
+    key_location(camera, first - 5, (-1.8, -5.8, 1.0))
+    key_location(camera, last + 5, (1.0, -5.5, 1.2))
+    return {"light_groups": list(LIGHT_GROUPS["smoke"]), "smoke_density": SMOKE_DENSITY}
+
+
+SCENES = {
+    "roll": build_roll,
+    "metal": build_metal,
+    "production": build_production,
+    "dof": build_dof,
+    "smoke": build_smoke,
+}
 
 
 # --------------------------------------------------------------------------- render settings
@@ -558,6 +715,10 @@ def frame_record(scene, moving: list[str]) -> dict:
             if light.type == "LIGHT"
         },
     }
+    if camera.data.dof.use_dof:  # the dof shot: focus distance along the view axis
+        record["focus_distance"] = -(
+            camera.matrix_world.inverted() @ camera.data.dof.focus_object.matrix_world.translation
+        ).z
     return record
 
 
@@ -585,7 +746,9 @@ def run(args) -> None:
             frames = range(scene_frames[0], scene_frames[1] + 1)
         moving = {"roll": ["ball", "Camera", "camera_target"],
                   "metal": ["Camera", "moving_area_light"],
-                  "production": ["Camera"]}[name]  # fmt: skip
+                  "production": ["Camera"],
+                  "dof": ["ball", "Camera", "camera_target"],
+                  "smoke": ["Camera"]}[name]  # fmt: skip
         info = {
             "scene": name,
             "blender": bpy.app.version_string,
@@ -626,7 +789,8 @@ def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", nargs="+", choices=sorted(SCENES), default=["roll", "metal"],
                         help="scenes to render (production: light groups, glass, fog, "
-                        "Cryptomatte; rendered only when named)")
+                        "Cryptomatte; dof: roll with depth of field; smoke: a heterogeneous "
+                        "volume; these three are rendered only when named)")
     parser.add_argument(
         "--what", choices=["all", "inputs", "refs", "scene", "preview"], default="all"
     )

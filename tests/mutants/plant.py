@@ -218,7 +218,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "skip-existing-no-replay", "farm", "--skip-existing (and chunks) not replaying history",
         "svgf_cli/farm/job.py",
-        (("frames = [(f, p) for f, p in usable if chunk.read_start <= f <= chunk.read_end]",
+        (("frames = [(f, p) for f, p in usable if chunk.read_start <= f <= last_read]",
           "frames = [(f, p) for f, p in usable if f in write]"),),
         ("tests/test_farm_resume.py", "tests/test_farm_chunks.py"),
     ),
@@ -718,6 +718,35 @@ MUTANTS: tuple[Mutant, ...] = (
           "                return False\n",
           "            if not kept[qy, qx]:\n                return False\n"),),
         ("tests/test_filters_albedo_history.py",),
+    ),
+    Mutant(
+        "medium-not-filled", "filters",
+        "medium pixels (a sample scattered in fog) keep their no-surface G-buffer",
+        "svgf_cli/filters/medium.py",
+        (("            out[y, x] = best\n",
+          "            out[y, x] = NO_FILL if best >= 0 else best\n"),),
+        ("tests/test_filters_medium.py",),
+    ),
+    Mutant(
+        "medium-emission-raw", "filters",
+        "the emission of medium pixels (the sky seen through smoke) added back raw",
+        "svgf_cli/filters/stages/fill_medium.py",
+        (("        if emission is not None and medium is not None:\n",
+          "        if False:\n"),),
+        ("tests/test_filters_medium.py",),
+    ),
+    Mutant(
+        "warm-start-ignored", "farm", "the look-ahead warm start never runs",
+        "svgf_cli/run/chunk.py",
+        (("warm_head(tasks, config.params.warm_start)", "warm_head(tasks, 0)"),),
+        ("tests/test_run_warm_start.py",),
+    ),
+    Mutant(
+        "warm-start-short-look-ahead", "farm",
+        "a cold chunk does not read the warm start's look-ahead frames",
+        "svgf_cli/farm/plan.py",
+        (("start + 2 * warm_start - 1", "start + warm_start - 1"),),
+        ("tests/test_run_warm_start.py",),
     ),
 )
 

@@ -20,3 +20,11 @@ def clean_outputs(clean_sequence: Path, tmp_path_factory: pytest.TempPathFactory
     """Output file name -> bytes of an undisturbed run over `clean_sequence`."""
     outputs = reference_run(tmp_path_factory, clean_sequence)
     return {p.name: p.read_bytes() for p in outputs.values()}
+
+
+@pytest.fixture(scope="session")
+def cold_outputs(clean_sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """As `clean_outputs`, without the warm start (``--warm-start 0``): what the frames
+    before a bad one within the warm start's look-ahead are (run.warm_start)."""
+    outputs = reference_run(tmp_path_factory, clean_sequence, "--warm-start", 0)
+    return {p.name: p.read_bytes() for p in outputs.values()}

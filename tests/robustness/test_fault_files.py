@@ -70,7 +70,7 @@ def cut_points(size: int, header_end: int, table_end: int) -> dict[str, int]:
 def test_truncated_frame_stops_cleanly(
     where: str,
     clean_sequence: Path,
-    clean_outputs: dict,
+    cold_outputs: dict,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
@@ -79,11 +79,14 @@ def test_truncated_frame_stops_cleanly(
     data = bad.read_bytes()
     bad.write_bytes(data[: cut_points(len(data), *exr_layout(data))[where]])
     out = tmp_path / "out"
-    code, _, err = denoise([seq / "in.####.exr", "-o", out / "o.####.exr", "-q"], capsys)
+    # Without the warm start, which would read the bad frame first (its own test:
+    # tests/test_run_warm_start.py).
+    code, _, err = denoise([seq / "in.####.exr", "-o", out / "o.####.exr", "-q",
+                            "--warm-start", "0"], capsys)
     assert code == 3, err
     line = assert_one_error_line(err, bad)
     assert "cannot" in line or "not an OpenEXR" in line or "missing" in line
-    assert_outputs_intact(out, clean_outputs, ["o.0001.exr"])
+    assert_outputs_intact(out, cold_outputs, ["o.0001.exr"])
 
 
 @pytest.mark.parametrize(
@@ -96,7 +99,7 @@ def test_not_an_exr(
     content: bytes,
     fragment: str,
     clean_sequence: Path,
-    clean_outputs: dict,
+    cold_outputs: dict,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
@@ -104,10 +107,11 @@ def test_not_an_exr(
     bad = seq / "in.0003.exr"
     bad.write_bytes(content)
     out = tmp_path / "out"
-    code, _, err = denoise([seq / "in.####.exr", "-o", out / "o.####.exr", "-q"], capsys)
+    code, _, err = denoise([seq / "in.####.exr", "-o", out / "o.####.exr", "-q",
+                            "--warm-start", "0"], capsys)
     assert code == 3, err
     assert_one_error_line(err, bad, fragment)
-    assert_outputs_intact(out, clean_outputs, ["o.0001.exr", "o.0002.exr"])
+    assert_outputs_intact(out, cold_outputs, ["o.0001.exr", "o.0002.exr"])
 
 
 @pytest.mark.parametrize("where", ["attribute", "channel name"])

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides
+from svgf_cli.filters.atrous import atrous_iteration, luminance_stop_guides, zero_signals
 from svgf_cli.filters.bidirectional import STATIC_MOTION
 from svgf_cli.filters.buffers import free_scratch
 from svgf_cli.filters.context import FrameContext, Spatial, StageBase
@@ -41,7 +43,9 @@ def iterate(ctx: FrameContext, spatial: Spatial) -> None:
     entering the a-trous) is recorded as ``spatial.history_name`` and never overwritten, nor
     are the ``protected`` buffers; without ``feeds_back`` nothing is kept (a combined
     accumulation, which is no pass's history, or a pass history: ``filters.stages.
-    pass_history``). The last iteration's propagated variance is never read: not computed."""
+    pass_history``). The last iteration's propagated variance is never read: not computed.
+    A signal whose colour and variance entering the a-trous are +0 on every pixel is not
+    filtered: every iteration's output of it is +0 (``filters.atrous.zero_signals``)."""
     p, iterations = ctx.params, spatial.iterations
     feedback = min(p.feedback_iteration, ctx.iterations - 1) if spatial.feeds_back else -1
     # Where pixels move the history keeps only a share of the feedback output: the blend
@@ -54,6 +58,7 @@ def iterate(ctx: FrameContext, spatial: Spatial) -> None:
     variance_names = ("variance_a", "variance_b")
     if not ctx.setup.debug_layers:
         variance_names = ("variance_a", "variance", "variance_b")
+    zero = zero_signals(filtered, filtered_variance)
     for iteration in range(iterations):
         out_name = free_scratch(spatial.protected, filtered_name,
                                 history_name if spatial.feeds_back else "",
@@ -68,7 +73,7 @@ def iterate(ctx: FrameContext, spatial: Spatial) -> None:
             )
         out_illumination = ctx.plane(out_name)
         atrous_step(ctx, filtered, filtered_variance, iteration, propagate, out_illumination,
-                    out_variance)
+                    out_variance, zero)
         if iteration == feedback and keep_unfiltered:
             blend_history(ctx.plane(unfiltered_name), out_illumination, ctx.motion,
                           F32(STATIC_MOTION), F32(1.0), F32(p.moving_feedback_share))
@@ -82,19 +87,21 @@ def iterate(ctx: FrameContext, spatial: Spatial) -> None:
 
 def atrous_step(ctx: FrameContext, filtered: np.ndarray, filtered_variance: np.ndarray,
                 iteration: int, propagate: bool, out_illumination: np.ndarray,
-                out_variance: np.ndarray) -> None:
+                out_variance: np.ndarray, zero: Sequence[bool]) -> None:
     """One a-trous iteration over every signal. Signals in groups of two or three: the
     kernel is register-blocked for them, sharing the geometric weights (each signal keeps
-    its own sigma_l)."""
+    its own sigma_l). ``zero`` signals (colour and variance +0 everywhere) before the first
+    and after the last other one are not filtered: their output, +0, is written as such."""
     p, work, mode, depth = ctx.params, ctx.work, ctx.mode, ctx.depth
     guide_luminance = ctx.plane("guide_luminance")
     guide_inverse_scale = ctx.plane("guide_inverse_scale")
     sigmas = [signal_sigma_luminance(p, signal) for signal in ctx.frame.signals]
-    for group in signal_groups(len(ctx.names)):
+    span = filtered_span(zero)
+    for part_of_span in signal_groups(span.stop - span.start):
+        group = slice(span.start + part_of_span.start, span.start + part_of_span.stop)
         luminance_stop_guides(
             filtered[group], filtered_variance[group], mode, group.start, depth,
-            sigmas[group], ctx.weights, guide_luminance[group],
-            guide_inverse_scale[group],
+            sigmas[group], ctx.weights, guide_luminance[group], guide_inverse_scale[group],
         )
         atrous_iteration(
             filtered[group], filtered_variance[group], guide_luminance[group],
@@ -102,6 +109,10 @@ def atrous_step(ctx: FrameContext, filtered: np.ndarray, filtered_variance: np.n
             1 << iteration, p.sigma_depth, p.sigma_normal, propagate,
             out_illumination[group], out_variance[group],
         )
+    for skipped in (slice(0, span.start), slice(span.stop, len(ctx.names))):
+        out_illumination[skipped] = 0.0
+        if propagate:
+            out_variance[skipped] = 0.0
 
 
 def signal_sigma_luminance(params: SVGFParams, signal: Signal) -> float:
@@ -126,3 +137,10 @@ def signal_groups(num_signals: int) -> list[slice]:
     starts = np.cumsum([0, *sizes])
     return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
+
+def filtered_span(zero: Sequence[bool]) -> slice:
+    """The signals from the first to the last one that is not ``zero`` (empty if all are).
+    A zero signal between two others is filtered with them (its output is +0 either way):
+    splitting the group would cost more than it saves (a lone signal costs nearly a pair)."""
+    kept = [s for s, z in enumerate(zero) if not z]
+    return slice(kept[0], kept[-1] + 1) if kept else slice(0, 0)

@@ -1,0 +1,88 @@
+"""A G-buffer for the pixels whose one sample scattered in a participating medium.
+
+A renderer writes its G-buffer from one sample per pixel at 1 spp: inside fog or smoke
+that sample either scatters in the medium (Cycles then writes depth 1e10, normal 0 and
+object index 0: "no surface") or reaches the surface behind it. Both are samples of the
+same pixel's light, but a filter steered by that G-buffer sees every other pixel as
+background: it passes them through unfiltered (salt-and-pepper fog) and rejects their
+history. Here each such *medium pixel* (no surface, and medium light in its 3x3
+neighbourhood) takes the G-buffer of the nearest surface pixel within ``radius`` (the
+surface the medium is in front of, as far as one frame can tell): its surface light (0 on
+this sample, the surface's on its neighbours') and its medium light are then filtered with
+its neighbours', whose mean is the pixel's expectation. Where no surface is that near
+(smoke against the sky) it becomes a *medium surface* of its own: depth
+:data:`MEDIUM_DEPTH`, object id :data:`MEDIUM_ID`, normal +Z, so the filter joins medium
+pixels with each other and never with a surface. Surface pixels and background without
+medium light are unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from svgf_cli.filters.fastmath import FASTMATH
+
+F32 = np.float32
+NO_FILL = -1  # not a medium pixel: keeps its own G-buffer
+MEDIUM_SURFACE = -2  # a medium pixel with no surface within the radius
+# The medium surface's depth: far behind any scene a renderer writes (below the readers'
+# 1e9 "background" limit) and the same on every such pixel, so the reprojection and edge
+# stops join medium pixels with each other and never with a surface.
+MEDIUM_DEPTH = F32(1e8)
+MEDIUM_ID = np.int32(-2)
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
+def fill_sources(depth: np.ndarray, medium: np.ndarray, radius: int, out: np.ndarray) -> int:
+    """Per pixel of ``out`` (H, W) int32: the flat index of the surface pixel whose G-buffer
+    it takes (the nearest in Euclidean distance within the (2 radius + 1)^2 window, ties to
+    the smaller depth), :data:`MEDIUM_SURFACE` for a medium pixel with none, or
+    :data:`NO_FILL`. A medium pixel has depth <= 0 and medium light (``medium`` (3, H, W),
+    any channel > 0) on itself or a 3x3 neighbour. Returns the medium pixels' count."""
+    height, width = depth.shape
+    counts = np.zeros(height, np.int64)
+    for y in prange(height):
+        for x in range(width):
+            out[y, x] = NO_FILL
+            if depth[y, x] > 0.0:
+                continue
+            lit = False
+            for yy in range(max(y - 1, 0), min(y + 2, height)):
+                for xx in range(max(x - 1, 0), min(x + 2, width)):
+                    if medium[0, yy, xx] > 0.0 or medium[1, yy, xx] > 0.0 or \
+                            medium[2, yy, xx] > 0.0:
+                        lit = True
+            if not lit:
+                continue
+            counts[y] += 1
+            best = MEDIUM_SURFACE
+            best_distance = radius * radius * 2 + 1
+            best_depth = np.inf
+            for yy in range(max(y - radius, 0), min(y + radius + 1, height)):
+                for xx in range(max(x - radius, 0), min(x + radius + 1, width)):
+                    z = depth[yy, xx]
+                    if z <= 0.0:
+                        continue
+                    distance = (yy - y) * (yy - y) + (xx - x) * (xx - x)
+                    if distance < best_distance or (distance == best_distance
+                                                    and z < best_depth):
+                        best, best_distance, best_depth = yy * width + xx, distance, z
+            out[y, x] = best
+    return int(counts.sum())
+
+
+def filled(plane: np.ndarray, sources: np.ndarray, medium_value: float | None = None
+           ) -> np.ndarray:
+    """A copy of ``plane`` ((H, W) or (C, H, W)) where each pixel with a source (``sources``
+    from :func:`fill_sources`) takes the source pixel's values, and medium-surface pixels
+    ``medium_value`` (every channel; None: their own)."""
+    out = plane.copy()
+    flat_sources = sources.ravel()
+    flat_out = out.reshape(-1, sources.size)
+    flat_in = plane.reshape(-1, sources.size)
+    targets = np.flatnonzero(flat_sources >= 0)
+    flat_out[:, targets] = flat_in[:, flat_sources[targets]]
+    if medium_value is not None:
+        flat_out[:, flat_sources == MEDIUM_SURFACE] = medium_value
+    return out

@@ -1,0 +1,186 @@
+"""Medium pixels (issue 30): a pixel whose one sample scattered in fog has no surface in the
+G-buffer; it takes the nearest surface's G-buffer (filters.medium, stage fill_medium) and is
+filtered, not passed through."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.medium import (
+    MEDIUM_SURFACE,
+    NO_FILL,
+    fill_sources,
+    filled,
+)
+from svgf_cli.filters.params import PRESETS
+from svgf_cli.frame import Frame, Signal
+from svgf_cli.io.exr import read_frame
+from svgf_cli.io.layers import build_mapping
+
+ROOT = Path(__file__).resolve().parents[1]
+F32 = np.float32
+
+
+def reference_sources(depth: np.ndarray, medium: np.ndarray, radius: int) -> np.ndarray:
+    """fill_sources in plain Python, float64."""
+    height, width = depth.shape
+    lit = (medium > 0).any(axis=0)
+    out = np.full((height, width), NO_FILL, np.int64)
+    for y in range(height):
+        for x in range(width):
+            if depth[y, x] > 0 or not lit[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].any():
+                continue
+            candidates = [((yy - y) ** 2 + (xx - x) ** 2, float(depth[yy, xx]), yy * width + xx)
+                          for yy in range(max(y - radius, 0), min(y + radius + 1, height))
+                          for xx in range(max(x - radius, 0), min(x + radius + 1, width))
+                          if depth[yy, xx] > 0]
+            out[y, x] = min(candidates)[2] if candidates else MEDIUM_SURFACE
+    return out
+
+
+@pytest.mark.parametrize("radius", [1, 2, 4])
+def test_fill_sources_matches_the_reference(radius: int) -> None:
+    rng = np.random.default_rng(radius)
+    depth = np.where(rng.random((23, 31)) < 0.6, 0.0, rng.uniform(1, 5, (23, 31))).astype(F32)
+    depth[:, :6] = 0.0  # a strip with no surface within reach of its left edge
+    medium = np.where(rng.random((3, 23, 31)) < 0.3, rng.random((3, 23, 31)), 0.0).astype(F32)
+    medium[:, 15:, 20:] = 0.0  # background far from the medium: not a medium pixel
+    got = np.empty(depth.shape, np.int32)
+    count = fill_sources(depth, medium, radius, got)
+    want = reference_sources(depth, medium, radius)
+    assert np.array_equal(got, want)
+    assert count == int(np.count_nonzero(want != NO_FILL))
+    assert (got == MEDIUM_SURFACE).any() and (got >= 0).any() and (got == NO_FILL).any()
+
+
+def test_filled_copies_the_sources_and_leaves_the_input() -> None:
+    plane = np.arange(2 * 3 * 4, dtype=F32).reshape(2, 3, 4)
+    sources = np.full((3, 4), NO_FILL, np.int32)
+    sources[0, 0] = 5  # (1, 1)
+    sources[2, 3] = MEDIUM_SURFACE
+    out = filled(plane, sources, 7.0)
+    assert out[0, 0, 0] == plane[0, 1, 1] and out[1, 0, 0] == plane[1, 1, 1]
+    assert out[0, 2, 3] == 7.0 and out[1, 2, 3] == 7.0
+    assert np.array_equal(np.delete(out.reshape(2, -1), [0, 11], axis=1),
+                          np.delete(plane.reshape(2, -1), [0, 11], axis=1))
+    assert plane[0, 0, 0] == 0.0  # the input is not written
+
+
+def fog_frame(rng: np.random.Generator, *, with_medium: bool, size: int = 48) -> Frame:
+    """A lit floor (albedo 0.5, light 1) under fog on its left half: there, each pixel's one
+    sample scattered in the fog (no surface; fog light, exponential noise, mean 0.4) with
+    probability 0.6, else reached the floor (floor light, halved by the fog). The right half
+    is clear floor; the top rows are sky (no surface, no light)."""
+    h = w = size
+    fog = np.zeros((h, w), bool)
+    fog[8:, : w // 2] = True
+    scattered = fog & (rng.random((h, w)) < 0.6)
+    depth = np.full((h, w), 4.0, F32)
+    depth[:8] = 0.0
+    depth[scattered] = 0.0
+    albedo = np.full((3, h, w), 0.5, F32)
+    albedo[:, depth == 0] = 0.0
+    floor = np.where(fog, 0.5, 1.0) * np.where(depth > 0, 1.0, 0.0)
+    diffuse = (albedo * floor * rng.exponential(1.0, (h, w))).astype(F32)
+    volume = np.where(scattered, 0.4 / 0.6 * rng.exponential(1.0, (h, w)), 0.0)
+    volume = np.broadcast_to(volume, (3, h, w)).astype(F32).copy()
+    normal = np.zeros((3, h, w), F32)
+    normal[2] = 1.0
+    normal[:, depth == 0] = 0.0
+    mesh = np.where(depth > 0, 1, 0).astype(np.int32)
+    return Frame(
+        signals=[Signal("diffuse", diffuse, albedo.copy()),
+                 Signal("volume", volume, np.ones((3, h, w), F32))],
+        normal=normal, depth=depth, motion=np.zeros((2, h, w), F32), mesh_id=mesh,
+        albedo=albedo, medium=volume if with_medium else None,
+    )
+
+
+def expected_fog_light() -> float:
+    """Per channel inside the fog (fog_frame): the fog light's mean 0.4, plus the floor's
+    light (1 x 0.5 through the fog, x albedo 0.5) on the 40 % of samples that reach it."""
+    return 0.4 + 0.4 * 0.5 * 0.5
+
+
+@pytest.mark.parametrize("radius", [0, 4])
+def test_fog_is_filtered_where_its_samples_have_no_surface(radius: int) -> None:
+    params = PRESETS["default"].replace(medium_fill_radius=radius, pixel_filter=0.0)
+    denoiser = Denoiser(params)
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        frame = fog_frame(rng, with_medium=True)
+        out = denoiser.process(frame).color
+    inside = out[:, 16:-4, 4:20]
+    error = float(np.sqrt(np.mean((inside - expected_fog_light()) ** 2)))
+    # Without the fill the scattered pixels pass through raw (exponential noise); with it
+    # the fog region converges to its expectation.
+    # Measured: 0.54 without, 0.050 with (of which 0.045 is a bias low that the default's
+    # loose history clamp gives exponential noise, on clear floor too).
+    if radius == 0:
+        assert error > 0.3
+    else:
+        assert error < 0.1
+        assert abs(float(inside.mean()) / expected_fog_light() - 1) < 0.15
+    sky = out[:, :6, :]
+    assert np.array_equal(sky, np.zeros_like(sky))  # no medium light near: background
+
+
+def test_frames_without_medium_light_are_unchanged() -> None:
+    rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
+    on = Denoiser(PRESETS["default"])
+    off = Denoiser(PRESETS["default"].replace(medium_fill_radius=0))
+    assert "fill_medium" in on.stages and "fill_medium" not in off.stages
+    for _ in range(3):
+        a = on.process(fog_frame(rng_a, with_medium=False)).color
+        b = off.process(fog_frame(rng_b, with_medium=False)).color
+        assert np.array_equal(a, b)
+
+
+def test_the_reader_marks_the_medium_with_the_volume_lobe() -> None:
+    mapping = build_mapping("cycles")
+    fog = read_frame(ROOT / "testdata/cycles/production/in.0001.exr", mapping).frame
+    volume = next(s for s in fog.signals if s.name == "volume")
+    assert fog.medium is volume.radiance
+    clear = read_frame(ROOT / "testdata/cycles/roll/in.0001.exr", mapping).frame
+    assert clear.medium is None
+
+
+def test_the_emission_of_medium_pixels_joins_the_medium_signal() -> None:
+    from svgf_cli.filters.stages.fill_medium import emission_into_medium
+
+    medium = np.ones((3, 2, 3), F32)
+    emission = np.full((3, 2, 3), 2.0, F32)
+    pixels = np.array([[True, False, False], [False, False, True]])
+    light, rest = emission_into_medium(medium, emission, pixels)
+    assert np.array_equal(light + rest, medium + emission)  # nothing lost or added
+    assert np.all(light[:, pixels] == 3.0) and np.all(rest[:, pixels] == 0.0)
+    assert np.all(light[:, ~pixels] == 1.0) and np.all(rest[:, ~pixels] == 2.0)
+    assert np.all(medium == 1.0) and np.all(emission == 2.0)  # copies
+
+
+def test_sky_seen_through_smoke_is_filtered_not_added_back_raw() -> None:
+    """Smoke against the sky: the pixels whose sample passed through carry the sky as
+    emission (Cycles' Env), those whose sample scattered carry medium light: the output
+    is smooth where the input alternates, and adds up to the same total light."""
+    h, w = 24, 32
+    rng = np.random.default_rng(9)
+    scattered = rng.random((h, w)) < 0.5
+    depth = np.zeros((h, w), F32)  # no surface anywhere: medium surfaces
+    volume = np.broadcast_to(np.where(scattered, 0.6, 0.0), (3, h, w)).astype(F32).copy()
+    sky = np.broadcast_to(np.where(scattered, 0.0, 1.0), (3, h, w)).astype(F32).copy()
+    frame = Frame(signals=[Signal("volume", volume, np.ones((3, h, w), F32))],
+                  normal=np.zeros((3, h, w), F32), depth=depth,
+                  motion=np.zeros((2, h, w), F32), mesh_id=np.full((h, w), -1, np.int32),
+                  albedo=np.zeros((3, h, w), F32), emission=sky, medium=volume)
+    params = PRESETS["default"].replace(pixel_filter=0.0)
+    out = Denoiser(params).process(frame)
+    inside = out.color[:, 4:-4, 4:-4]
+    assert inside.std() < 0.25 * (volume + sky)[:, 4:-4, 4:-4].std()
+    assert abs(float(inside.mean()) - 0.8) < 0.1  # 0.5 x 0.6 + 0.5 x 1.0
+    # A pixel is a medium pixel when it or a neighbour has medium light: all but ~0.5^9.
+    assert out.medium is not None and out.medium.mean() > 0.99
+    assert out.emission is not None and not out.emission[:, out.medium].any()
