@@ -59,15 +59,24 @@ def fill_sources(depth: np.ndarray, medium: np.ndarray, radius: int, out: np.nda
             best = MEDIUM_SURFACE
             best_distance = radius * radius * 2 + 1
             best_depth = np.inf
-            for yy in range(max(y - radius, 0), min(y + radius + 1, height)):
-                for xx in range(max(x - radius, 0), min(x + radius + 1, width)):
-                    z = depth[yy, xx]
-                    if z <= 0.0:
-                        continue
-                    distance = (yy - y) * (yy - y) + (xx - x) * (xx - x)
-                    if distance < best_distance or (distance == best_distance
-                                                    and z < best_depth):
-                        best, best_distance, best_depth = yy * width + xx, distance, z
+            # Ring by ring (Chebyshev distance r), until no pixel of a further ring can be
+            # nearer than the best found: the same answer as scanning the whole window.
+            for r in range(1, radius + 1):
+                if r * r > best_distance:
+                    break
+                for dy in range(-r, r + 1):
+                    step = 1 if dy == -r or dy == r else 2 * r
+                    for dx in range(-r, r + 1, step):
+                        yy, xx = y + dy, x + dx
+                        if yy < 0 or yy >= height or xx < 0 or xx >= width:
+                            continue
+                        z = depth[yy, xx]
+                        if z <= 0.0:
+                            continue
+                        distance = dy * dy + dx * dx
+                        if distance < best_distance or (distance == best_distance
+                                                        and z < best_depth):
+                            best, best_distance, best_depth = yy * width + xx, distance, z
             out[y, x] = best
     return int(counts.sum())
 
@@ -78,11 +87,28 @@ def filled(plane: np.ndarray, sources: np.ndarray, medium_value: float | None = 
     from :func:`fill_sources`) takes the source pixel's values, and medium-surface pixels
     ``medium_value`` (every channel; None: their own)."""
     out = plane.copy()
-    flat_sources = sources.ravel()
-    flat_out = out.reshape(-1, sources.size)
-    flat_in = plane.reshape(-1, sources.size)
-    targets = np.flatnonzero(flat_sources >= 0)
-    flat_out[:, targets] = flat_in[:, flat_sources[targets]]
-    if medium_value is not None:
-        flat_out[:, flat_sources == MEDIUM_SURFACE] = medium_value
+    channels = 1 if plane.ndim == 2 else plane.shape[0]
+    flat_in = plane.reshape(channels, -1)
+    flat_out = out.reshape(channels, -1)
+    own = medium_value is None
+    _gather(flat_in, sources.reshape(-1), own, flat_out.dtype.type(0 if own else medium_value),
+            flat_out)
     return out
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
+def _gather(plane: np.ndarray, sources: np.ndarray, own: bool, medium_value: float,
+            out: np.ndarray) -> None:
+    """``out[c, i] = plane[c, sources[i]]`` where ``sources[i] >= 0``; ``medium_value``
+    where it is MEDIUM_SURFACE, unless ``own``."""
+    channels, size = plane.shape
+    rows = (size + 4095) // 4096
+    for block in prange(rows):
+        for i in range(block * 4096, min(size, (block + 1) * 4096)):
+            source = sources[i]
+            if source >= 0:
+                for c in range(channels):
+                    out[c, i] = plane[c, source]
+            elif source == MEDIUM_SURFACE and not own:
+                for c in range(channels):
+                    out[c, i] = medium_value

@@ -215,4 +215,30 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         events=(Event(6, "point light on"),),
         contact_frames=(6,),
     ),
+    SequenceSpec(
+        "testdata/cycles/production",
+        "Blender Cycles: glass sphere, a fog box, thin metal wires, a box on a checker floor; "
+        "three light groups (key, fill, env), the fill light on from frame 5; moving camera "
+        "(8 frames).",
+        frozenset({"lag", "camera-motion", "cycles", "lobes", "volume"}),
+        aovs="cycles",
+        events=(Event(5, "fill light on"),),
+        contact_frames=(5,),
+    ),
+    SequenceSpec(
+        "testdata/cycles/dof",
+        "Blender Cycles: cycles/roll's shot with depth of field (f/0.03 at 35 mm, focused on "
+        "the ball: 4-20 px circles of confusion at 128x72; 8 frames).",
+        frozenset({"camera-motion", "moving-objects", "cycles", "lobes", "depth-of-field"}),
+        aovs="cycles",
+        contact_frames=(6,),
+    ),
+    SequenceSpec(
+        "testdata/cycles/smoke",
+        "Blender Cycles: a patchy smoke cloud, partly over the floor and a sphere, partly "
+        "against the sky; sun, area light and sky; slow camera (8 frames).",
+        frozenset({"camera-motion", "cycles", "lobes", "volume"}),
+        aovs="cycles",
+        contact_frames=(6,),
+    ),
 )

@@ -635,16 +635,18 @@ def common_settings(
 
 
 def input_settings(
-    scene, codec: str, depth: str, seed: int = INPUT_SEED, sample_offset: int = 0
+    scene, codec: str, depth: str, seed: int = INPUT_SEED, sample_offset: int = 0,
+    spp: int = 1,
 ) -> None:
     scene.cycles.seed = seed
     # Cycles traces sample 0 through the pixel centre (the filter is only sampled from sample
     # 1 on), so default 1-spp frames are point samples that no history anti-aliases; a
     # subset of one sample starting at 1 or later is one jittered sample of the pixel filter.
-    scene.cycles.samples = 1 + sample_offset
+    # ``spp`` > 1: that many samples from sample 0 (the pixel filter's footprint averaged).
+    scene.cycles.samples = spp + sample_offset
     scene.cycles.use_sample_subset = sample_offset > 0
     scene.cycles.sample_offset = sample_offset
-    scene.cycles.sample_subset_length = 1
+    scene.cycles.sample_subset_length = spp
     layer = scene.view_layers[0]
     for name in (
         "combined", "z", "normal", "vector", "object_index", "emit", "environment",
@@ -768,7 +770,8 @@ def run(args) -> None:
         if args.what in ("scene", "inputs", "all"):
             (out / "scene.json").write_text(json.dumps(info, indent=1) + "\n")
         if args.what in ("inputs", "all"):
-            input_settings(scene, args.codec, args.depth, args.input_seed, args.sample_offset)
+            input_settings(scene, args.codec, args.depth, args.input_seed, args.sample_offset,
+                           args.input_spp)
             for frame in frames:
                 scene.frame_set(frame)
                 render_frame(scene, out / f"{args.prefix}in.{frame:04d}.exr")
@@ -812,6 +815,8 @@ def main(argv: list[str]) -> None:
                         help="Cycles sample offset of the inputs: 0 (Blender's default) traces "
                         "the one sample through the pixel centre, 1 or more jitters it over the "
                         "pixel filter")
+    parser.add_argument("--input-spp", type=int, default=1,
+                        help="samples per pixel of the inputs (the committed fixtures: 1)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     run(args)
