@@ -24,11 +24,12 @@ box-filtered shares are used, and where those are 0 too, equal shares.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.filters.shares import box_mean, split_shares
+from svgf_cli.filters.shares import box_mean, fallback_pixels, split_shares
 from svgf_cli.frame import DenoisedFrame, Frame, LightLayer, LightLayers, Signal
 
 F32 = np.float32
@@ -49,20 +50,26 @@ def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS) -> np.ndarray:
     return out
 
 
+Fallback = list[np.ndarray] | Callable[[], list[np.ndarray]] | None
+
+
 def split_by_shares(total: np.ndarray, weights: list[np.ndarray],
-                    fallback: list[np.ndarray] | None = None) -> list[np.ndarray]:
+                    fallback: Fallback = None) -> list[np.ndarray]:
     """``total`` split per pixel and channel in proportion to ``weights`` (negative weights
     count as 0): the parts add up to ``total`` (to float32 rounding). Where the weights sum
-    to at most SHARE_FLOOR, ``fallback``'s proportions, and where those too, equal parts
-    (``filters.shares.split_shares``)."""
+    to at most SHARE_FLOOR, ``fallback``'s proportions (a list, or a function making it),
+    and where those too, equal parts (``filters.shares.split_shares``). The fallback is
+    made and stacked only when some value needs it (most frames: none)."""
     if len(weights) == 1:
         return [total.astype(F32, copy=True)]
     stacked = np.ascontiguousarray(np.stack(weights), dtype=F32)
-    backup = (np.ascontiguousarray(np.stack(fallback), dtype=F32) if fallback is not None
-              else stacked)
+    total = np.ascontiguousarray(total, dtype=F32)
+    backup = stacked
+    if fallback is not None and fallback_pixels(total, stacked, SHARE_FLOOR):
+        planes = fallback() if callable(fallback) else fallback
+        backup = np.ascontiguousarray(np.stack(planes), dtype=F32)
     out = np.empty_like(stacked)
-    split_shares(np.ascontiguousarray(total, dtype=F32), stacked, backup,
-                 fallback is not None, SHARE_FLOOR, out)
+    split_shares(total, stacked, backup, backup is not stacked, SHARE_FLOOR, out)
     return list(out)
 
 
@@ -70,11 +77,7 @@ def compose_groups(colour: np.ndarray, filtered: list[np.ndarray],
                    groups: list[LightLayer]) -> list[np.ndarray]:
     """The denoised light groups: ``colour`` split by the filtered groups' shares (the
     input groups' box-filtered shares where the filtered ones are 0)."""
-    total = np.sum(np.maximum(np.stack(filtered), F32(0.0)), axis=0)
-    # The fallback's box filters only when some pixel needs them (most frames: none).
-    needed = bool(np.any((total <= SHARE_FLOOR) & (colour != 0.0)))
-    fallback = [box_filter(g.radiance) for g in groups] if needed else None
-    return split_by_shares(colour, filtered, fallback)
+    return split_by_shares(colour, filtered, lambda: [box_filter(g.radiance) for g in groups])
 
 
 def compose_passes(colour: np.ndarray, emission: np.ndarray | None,

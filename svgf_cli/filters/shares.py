@@ -74,3 +74,21 @@ def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
             else:
                 for k in range(count):
                     out[k, c, y, x] = t * (max(fallback[k, c, y, x], 0.0) / s)
+
+
+@njit(**_JIT)
+def fallback_pixels(total: np.ndarray, weights: np.ndarray, floor: float) -> int:
+    """How many (pixel, channel) values :func:`split_shares` would take from its fallback:
+    ``total`` not 0 where the weights (negative as 0) sum to at most ``floor``; the same
+    sum as there, so 0 means the fallback changes nothing."""
+    count, channels, height, width = weights.shape
+    found = np.zeros(channels * height, np.int64)
+    for job in prange(channels * height):
+        c, y = job // height, job % height
+        for x in range(width):
+            s = 0.0
+            for k in range(count):
+                s += max(weights[k, c, y, x], 0.0)
+            if s <= floor and total[c, y, x] != 0.0:
+                found[job] += 1
+    return int(found.sum())
