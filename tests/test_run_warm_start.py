@@ -194,3 +194,15 @@ def test_a_bad_frame_in_the_look_ahead_leaves_the_frames_before_it_causal(
     assert sorted(p.name for p in out.iterdir()) == [f"o.{f:04d}.exr" for f in range(1, 5)]
     for f in range(1, 5):
         assert np.array_equal(colour(out / f"o.{f:04d}.exr"), colour(cold[f])), f
+
+
+def test_no_warm_start_with_taa(tmp_path: Path, sequence: Path) -> None:
+    """TAA's output filter is causal: the run is the causal one, frame for frame."""
+    out = {}
+    for warm in (0, 3):
+        folder = tmp_path / f"w{warm}"
+        assert exit_code(["denoise", sequence / "in.####.exr", "-o", folder / "o.####.exr",
+                          "-q", "--frames", "1-2", "--set", "taa=true", "--warm-start",
+                          warm]) == 0
+        out[warm] = [colour(folder / f"o.{f:04d}.exr") for f in (1, 2)]
+    assert all(np.array_equal(a, b) for a, b in zip(out[0], out[3], strict=True))

@@ -738,7 +738,7 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "warm-start-ignored", "farm", "the look-ahead warm start never runs",
         "svgf_cli/run/chunk.py",
-        (("warm_head(tasks, config.params.warm_start)", "warm_head(tasks, 0)"),),
+        (("head = warm_head(tasks, warm_start)", "head = warm_head(tasks, 0)"),),
         ("tests/test_run_warm_start.py",),
     ),
     Mutant(
