@@ -45,6 +45,16 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
             out[c, y, x] = running / ((bottom - top) * (right - left))
 
 
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _positive_sum(weights: np.ndarray, c: int, y: int, x: int) -> float:
+    """The weights of one pixel and channel summed, negative ones as 0."""
+    s = 0.0
+    for k in range(weights.shape[0]):
+        s += max(weights[k, c, y, x], 0.0)
+    return s
+
+
 @njit(**_JIT)
 def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
                  use_fallback: bool, floor: float, out: np.ndarray) -> None:
@@ -55,14 +65,10 @@ def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
     for job in prange(channels * height):
         c, y = job // height, job % height
         for x in range(width):
-            s = 0.0
-            for k in range(count):
-                s += max(weights[k, c, y, x], 0.0)
+            s = _positive_sum(weights, c, y, x)
             source = 0
             if s <= floor and use_fallback:
-                s = 0.0
-                for k in range(count):
-                    s += max(fallback[k, c, y, x], 0.0)
+                s = _positive_sum(fallback, c, y, x)
                 source = 1
             t = total[c, y, x]
             if s <= floor:
@@ -81,14 +87,11 @@ def fallback_pixels(total: np.ndarray, weights: np.ndarray, floor: float) -> int
     """How many (pixel, channel) values :func:`split_shares` would take from its fallback:
     ``total`` not 0 where the weights (negative as 0) sum to at most ``floor``; the same
     sum as there, so 0 means the fallback changes nothing."""
-    count, channels, height, width = weights.shape
+    _, channels, height, width = weights.shape
     found = np.zeros(channels * height, np.int64)
     for job in prange(channels * height):
         c, y = job // height, job % height
         for x in range(width):
-            s = 0.0
-            for k in range(count):
-                s += max(weights[k, c, y, x], 0.0)
-            if s <= floor and total[c, y, x] != 0.0:
+            if _positive_sum(weights, c, y, x) <= floor and total[c, y, x] != 0.0:
                 found[job] += 1
     return int(found.sum())

@@ -20,7 +20,7 @@ warning for the run.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -89,32 +89,47 @@ def _plane(source: SourceFile, names: Sequence[str]) -> np.ndarray | None:
     return plane
 
 
+def _lobe_passes(resolved, preset: str  # noqa: ANN001
+                 ) -> Iterator[tuple[str, Sequence[str], Sequence[str] | None]]:
+    """Each lobe light pass the layers resolve (three channels): its role
+    (``<lobe>_direct``, ``<lobe>_indirect``), its channels, and its colour pass's channels
+    when the preset stores the light divided by it."""
+    divided = LOBE_LIGHT_DIVIDED.get(preset, True)
+    for lobe in LOBES:
+        colour_names = resolved[f"{lobe}_color"] if divided else None
+        for part in ("direct", "indirect"):
+            names = resolved[f"{lobe}_{part}"]
+            if names and len(names) == 3:
+                yield f"{lobe}_{part}", names, colour_names or None
+
+
 def pass_layers(source: SourceFile, resolved, plan: SignalPlan | None,  # noqa: ANN001
                 preset: str) -> list[LightLayer]:
     """The lobe light passes the file holds (``<lobe>_direct``, ``<lobe>_indirect``), each
     with its colour pass when the preset stores the light divided by it, and the signal of
     ``plan`` built from it."""
-    divided = LOBE_LIGHT_DIVIDED.get(preset, True)
     owner: dict[str, str] = {}
     for recipe in (plan.signals if plan is not None else ()):
         for term in recipe.terms:
             for role in term.light:
                 owner.setdefault(role, recipe.name)
     layers = []
-    for lobe in LOBES:
-        colour_role = f"{lobe}_color"
-        colour_names = resolved[colour_role] if divided else None
-        colour = _plane(source, colour_names) if colour_names else None
-        for part in ("direct", "indirect"):
-            names = resolved[f"{lobe}_{part}"]
-            stored = _plane(source, names) if names and len(names) == 3 else None
-            if stored is None:
-                continue
-            radiance = stored * colour if colour is not None else stored
-            layers.append(LightLayer(
-                tuple(names), radiance, stored, colour,  # type: ignore[arg-type]
-                owner.get(f"{lobe}_{part}", ""),
-                tuple(colour_names) if colour is not None else None))  # type: ignore[arg-type]
+    colours: dict[tuple[str, ...], np.ndarray | None] = {}  # each colour pass read once
+    for role, names, colour_names in _lobe_passes(resolved, preset):
+        colour = None
+        if colour_names:
+            key = tuple(colour_names)
+            if key not in colours:
+                colours[key] = _plane(source, colour_names)
+            colour = colours[key]
+        stored = _plane(source, names)
+        if stored is None:
+            continue
+        radiance = stored * colour if colour is not None else stored
+        layers.append(LightLayer(
+            tuple(names), radiance, stored, colour,  # type: ignore[arg-type]
+            owner.get(role, ""),
+            tuple(colour_names) if colour is not None else None))  # type: ignore[arg-type]
     return layers
 
 
@@ -232,19 +247,15 @@ def check_additivity(source: SourceFile, resolved, colour_channels: Sequence[str
               if (t := _typed(source, rgb)) is not None]
     if groups:
         results.append(_additivity(f"{len(groups)} light groups", colour, groups))
-    divided = LOBE_LIGHT_DIVIDED.get(preset, True)
     terms = []
-    for lobe in LOBES:
-        col_names = resolved[f"{lobe}_color"] if divided else None
+    for _, names_, col_names in _lobe_passes(resolved, preset):
+        light = _typed(source, names_)
+        if light is None:
+            continue
         col = _typed(source, col_names) if col_names else None
-        for part in ("direct", "indirect"):
-            names_ = resolved[f"{lobe}_{part}"]
-            light = _typed(source, names_) if names_ and len(names_) == 3 else None
-            if light is None:
-                continue
-            if col is not None:
-                light = (light[0] * col[0], light[1] + col[1])
-            terms.append(light)
+        if col is not None:
+            light = (light[0] * col[0], light[1] + col[1])
+        terms.append(light)
     if terms:
         for role in ("emission", "environment"):
             names_ = resolved[role]
