@@ -81,12 +81,14 @@ def test_glossy_history_follows_the_reflection_not_the_surface():
 
 
 def test_default_preset_keeps_the_glossy_trail_fainter():
-    """With the default preset as it is the glossy rules still matter (measured 6x)."""
+    """With the default preset as it is the glossy rules still matter: measured 2.8x (6x
+    before the default's luminance stop went from 4 to 2 standard deviations, which shrinks
+    the surface's trail, 0.024 -> 0.0088, while the glossy one stays at 0.0032)."""
     truth = 0.09
     surface_error = _trail(glossy=False) - truth
     reflection_error = abs(_trail(glossy=True) - truth)
     assert surface_error > 0.005
-    assert reflection_error < surface_error / 4
+    assert reflection_error < surface_error / 2
 
 
 def test_paper_preset_has_no_glossy_rules():

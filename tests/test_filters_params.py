@@ -37,7 +37,9 @@ HEADER = "| parameter | group | values | paper | falcor | meaning |"
 # Each preset's resolved values as they were before the presets became the paper's values
 # plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
 # every output stores them in svgf/params. Added since: warm_start (2026-11-27, issue 29),
-# medium_fill_radius (2026-11-27, issue 30).
+# medium_fill_radius (2026-11-27, issue 30). Changed since: default's sigma_luminance 4 -> 2
+# and mixed_sigma_luminance 2.5 -> 1.5 (2026-11-27, issue 29:
+# docs/stability.md#a-tighter-luminance-stop).
 PINNED: dict[str, dict[str, object]] = {
     "paper": {
         "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -63,8 +65,8 @@ PINNED: dict[str, dict[str, object]] = {
         "spatial_variance_blur_color": False, "antilag": True, "antilag_radius": 2,
         "antilag_sigma": 3.5, "antilag_spatial_samples": 64.0, "antilag_tolerance": 0.02,
         "antilag_gradients": True, "glossy_history_clamp": 1.0, "glossy_sigma_luminance": 1.0,
-        "mixed_sigma_luminance": 2.5, "glossy_emitter_radiance": True, "atrous_iterations": -1,
-        "feedback_iteration": -1, "moving_feedback_share": 0.0, "sigma_luminance": 4.0,
+        "mixed_sigma_luminance": 1.5, "glossy_emitter_radiance": True, "atrous_iterations": -1,
+        "feedback_iteration": -1, "moving_feedback_share": 0.0, "sigma_luminance": 2.0,
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.1, "temporal_albedo": True, "albedo_catmull_rom": True,
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,

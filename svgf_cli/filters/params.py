@@ -386,13 +386,18 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   f" {_GLOSSY}"),
         Departure("glossy_history_clamp", 1.0, "reflections move with what they show, so"
                   f" their reprojected history is unreliable: {_GLOSSY}"),
+        Departure("sigma_luminance", 2.0, "with the unfiltered history and the warm start,"
+                  " the paper's 4 standard deviations blur lighting into low-frequency"
+                  " blotches that drift from frame to frame: docs/stability.md"
+                  "#a-tighter-luminance-stop"),
         Departure("glossy_sigma_luminance", 1.0, "reflections carry detail the spatial filter"
                   " must keep: docs/signals.md"),
         Departure("glossy_emitter_radiance", True, "a reflected light is filtered as radiance,"
                   " not blurred into the surface around it: docs/signals.md"),
-        Departure("mixed_sigma_luminance", 2.5, "a combined colour's variance is the indirect"
+        Departure("mixed_sigma_luminance", 1.5, "a combined colour's variance is the indirect"
                   f" light's, which would blur the direct light's detail: {_ALG}"
-                  "#4-à-trous-wavelet-filter-paper-43"),
+                  "#4-à-trous-wavelet-filter-paper-43 (2.5 before docs/stability.md"
+                  "#a-tighter-luminance-stop)"),
         Departure("spatial_variance_sigma_luminance", 0.5, "fireflies and lit/shadowed"
                   " neighbours no longer inflate the short-history variance into an"
                   f" over-blur: {_FIREFLIES}"),
