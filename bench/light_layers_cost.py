@@ -2,10 +2,14 @@
 shot's frames tiled 15 x 15 to 1920x1080 (every channel, 3 light groups), with
 `--light-layers denoised` against `as-read`, CPU seconds (user + system of the child).
 
-    nice -n 10 .venv/bin/python bench/light_layers_cost.py [--frames 4] [--tiled DIR]
+    nice -n 10 .venv/bin/python bench/light_layers_cost.py [--frames 4] [--tiled DIR] [--parts]
 
 Prints the CPU seconds per frame of each run and the difference per extra denoised layer
-(the light groups and the light passes written denoised).
+(the light groups and the light passes written denoised). With ``--parts``: in this process,
+`LayeredDenoiser.process` on the same frames, wall and CPU seconds per frame of its parts
+(the colour's filter, the groups' filter, `write_passes`, `compose_groups`, the rest; and
+within the filters, each one's ``fill_medium`` stage), the mean over the frames after the
+first, best of ``--repeat``. Running it from a baseline worktree times that tree.
 """
 
 from __future__ import annotations
@@ -16,13 +20,17 @@ import resource
 import subprocess
 import sys
 import tempfile
+import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenEXR
 
 ROOT = Path(__file__).resolve().parents[1]
 SHOT = ROOT / "testdata/cycles/production"
+sys.path.insert(0, str(ROOT))
 
 
 def tile(source: Path, target: Path, reps: tuple[int, int] = (15, 15)) -> None:
@@ -43,11 +51,74 @@ def cpu_of(args: list[str]) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+Clock = dict[str, list[float]]  # part -> [wall, CPU] seconds
+
+
+def clocked(function: Callable[..., Any], clock: Clock, part: str) -> Callable[..., Any]:
+    """``function``, adding the wall and CPU seconds of each call to ``clock[part]``."""
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = function(*args, **kwargs)
+        spent = clock.setdefault(part, [0.0, 0.0])
+        spent[0] += time.perf_counter() - wall
+        spent[1] += time.process_time() - cpu
+        return result
+
+    return wrapper
+
+
+def parts(folder: Path, frames: int, repeat: int) -> None:
+    """Print the wall and CPU seconds per frame of `LayeredDenoiser.process`'s parts."""
+    from svgf_cli.filters import composable
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.layers import build_mapping
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    paths = [folder / f"in.{frame:04d}.exr" for frame in range(1, frames + 1)]
+    mapping, _ = fix_signal_set(paths[0], build_mapping("cycles"))
+    clock: Clock = {}
+    inner = ("colour filter", "groups filter", "write_passes", "compose_groups")
+    for name in inner[2:]:
+        setattr(composable, name, clocked(getattr(composable, name), clock, name))
+    layered = composable.LayeredDenoiser(PRESETS["default"])
+    filters = {"colour": layered.colour, "groups": layered.groups}
+    for name, denoiser in filters.items():
+        denoiser._run = clocked(denoiser._run, clock, f"{name} filter")  # type: ignore[method-assign]
+    process = clocked(layered.process, clock, "process")
+    best: Clock = {}
+    for _ in range(repeat):
+        layered.reset()
+        clock.clear()
+        for index, path in enumerate(paths):
+            result = read_frame(path, mapping)
+            result.frame.light = read_light_layers(result, "cycles")
+            if index == 1:
+                clock.clear()  # the first frame: no history, and JIT caches loaded
+            process(result.frame)
+            for name, denoiser in filters.items():
+                spent = clock.setdefault(f"{name} fill_medium", [0.0, 0.0])
+                spent[0] += denoiser.stage_seconds.get("medium", 0.0)
+                spent[1] += denoiser.stage_cpu_seconds.get("medium", 0.0)
+        clock["rest"] = [clock["process"][i] - sum(clock.get(k, [0.0, 0.0])[i] for k in inner)
+                         for i in range(2)]
+        for part, (wall, cpu) in clock.items():
+            per_frame = [wall / (frames - 1), cpu / (frames - 1)]
+            if part not in best or per_frame[0] < best[part][0]:
+                best[part] = per_frame
+    print(f"per frame over frames 2-{frames}, best of {repeat} (wall s, CPU s):")
+    for part, (wall, cpu) in best.items():
+        print(f"  {part:>20}: {wall:7.3f} {cpu:7.3f}")
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=4)
     parser.add_argument("--tiled", type=Path, help="folder for the tiled frames (kept)")
     parser.add_argument("--repeat", type=int, default=2, help="runs of each mode (best kept)")
+    parser.add_argument("--parts", action="store_true",
+                        help="time LayeredDenoiser.process's parts in this process instead")
     args = parser.parse_args(argv)
     folder = args.tiled or Path(tempfile.mkdtemp(prefix="svgf_light_cost_"))
     folder.mkdir(parents=True, exist_ok=True)
@@ -55,6 +126,9 @@ def main(argv: list[str]) -> int:
         target = folder / f"in.{frame:04d}.exr"
         if not target.exists():
             tile(SHOT / f"in.{frame:04d}.exr", target)
+    if args.parts:
+        parts(folder, args.frames, args.repeat)
+        return 0
     svgf = str(ROOT / ".venv/bin/svgf")
     env_threads = os.environ.get("NUMBA_NUM_THREADS", "default")
     results = {}

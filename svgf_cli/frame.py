@@ -319,6 +319,9 @@ class DenoisedFrame:
     emission: np.ndarray | None = None
     # (H, W) bool: the pixels whose G-buffer was a medium's (filters.stages.fill_medium).
     medium: np.ndarray | None = None
+    # The frame's G-buffer as the filter used it, in a frame without signals (None unless
+    # the filter was asked for it: `filters.denoiser.Denoiser.gbuffer_output`).
+    gbuffer: Frame | None = None
 
     def warnings(self) -> list[str]:
         """One message per problem counted in this frame (empty when there is none)."""

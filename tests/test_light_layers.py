@@ -99,6 +99,104 @@ def test_split_by_shares_adds_up_with_fallbacks() -> None:
     assert pa[0, 1, 1] == pytest.approx(1.0)  # negative weights count as 0
 
 
+def box_running_sums(planes: np.ndarray, radius: int) -> np.ndarray:
+    """filters.shares.box_mean in plain Python (float64): running sums along each row, then
+    down each column, in the same order."""
+    channels, height, width = planes.shape
+    rows = np.zeros(planes.shape)
+    out = np.empty(planes.shape, np.float32)
+    for c in range(channels):
+        for y in range(height):
+            running = sum((float(v) for v in planes[c, y, :min(radius, width)]), 0.0)
+            for x in range(width):
+                if x + radius < width:
+                    running += float(planes[c, y, x + radius])
+                if x - radius - 1 >= 0:
+                    running -= float(planes[c, y, x - radius - 1])
+                rows[c, y, x] = running
+        for x in range(width):
+            running = sum((float(v) for v in rows[c, :min(radius, height), x]), 0.0)
+            for y in range(height):
+                if y + radius < height:
+                    running += rows[c, y + radius, x]
+                if y - radius - 1 >= 0:
+                    running -= rows[c, y - radius - 1, x]
+                cover = ((min(y + radius + 1, height) - max(y - radius, 0))
+                         * (min(x + radius + 1, width) - max(x - radius, 0)))
+                out[c, y, x] = running / cover
+    return out
+
+
+@pytest.mark.parametrize(("radius", "shape"), [(3, (7, 150)), (1, (20, 64)), (4, (3, 2))])
+def test_box_filter_is_bit_identical_to_its_running_sums(radius: int,
+                                                         shape: tuple[int, int]) -> None:
+    """Whatever order the kernel walks the columns in (blocks of them), each value is the
+    same float64 sums rounded once: bit for bit the plain running sums."""
+    rng = np.random.default_rng(radius)
+    planes = (rng.random((3, *shape)) * 10.0 ** rng.integers(-5, 5, (3, *shape))).astype(
+        np.float32)
+    assert np.array_equal(box_filter(planes, radius).view(np.uint32),
+                          box_running_sums(planes, radius).view(np.uint32))
+
+
+def test_split_by_shares_in_place_and_stacked_as_from_a_list() -> None:
+    """The weights given stacked, and the parts written over them, give the parts of a list
+    of weights bit for bit, with and without the fallback."""
+    rng = np.random.default_rng(7)
+    total = (rng.random((3, 9, 11)).astype(np.float32) - 0.1) * 4
+    weights = [np.where(rng.random((3, 9, 11)) < 0.3, 0.0, rng.random((3, 9, 11)) - 0.2)
+               .astype(np.float32) for _ in range(4)]
+    fallback = [rng.random((3, 9, 11)).astype(np.float32) for _ in range(4)]
+    for backup in (None, fallback):
+        want = split_by_shares(total, weights, backup)
+        stack = np.stack(weights)
+        got = split_by_shares(total, stack, backup, out=stack)
+        assert got is stack
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    one = np.ones((1, 3, 9, 11), np.float32)
+    assert np.array_equal(split_by_shares(total, one, out=one)[0], total)
+
+
+def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
+    """The light groups' filter runs no fill_medium of its own: on the fog shot it filters
+    the groups bit for bit as from the frame's own G-buffer (its own fill would compute the
+    same from the same planes and settings)."""
+    import dataclasses
+
+    from svgf_cli.filters.composable import LayeredDenoiser, group_frame, group_params
+    from svgf_cli.filters.denoiser import Denoiser
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.frame import DenoisedFrame, Frame
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    layered = LayeredDenoiser(PRESETS["default"])
+    own = Denoiser(group_params(PRESETS["default"]))
+    own.setup = dataclasses.replace(own.setup, signal_outputs=True)
+    taken: list[DenoisedFrame] = []
+    process = layered.groups.process
+
+    def keep(frame: Frame) -> DenoisedFrame:
+        taken.append(process(frame))
+        return taken[-1]
+
+    layered.groups.process = keep  # type: ignore[method-assign]
+    for frame in (1, 2, 3):
+        result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+        light = read_light_layers(result, "cycles")
+        result.frame.light = light
+        denoised = layered.process(result.frame)
+        assert denoised.medium is not None and denoised.medium.any()  # medium pixels filled
+        assert "medium" in layered.colour.stage_seconds
+        assert "medium" not in layered.groups.stage_seconds
+        want = own.process(group_frame(result.frame, light.groups))
+        assert "medium" in own.stage_seconds
+        assert taken[-1].layers.keys() == want.layers.keys()
+        for name, plane in want.layers.items():
+            assert np.array_equal(taken[-1].layers[name], plane), name
+
+
 # ------------------------------------------------------------------------- the real shot
 
 

@@ -42,51 +42,61 @@ SHARE_RADIUS = 3
 SHARE_FLOOR = 1e-8
 
 
-def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS) -> np.ndarray:
+def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS,
+               out: np.ndarray | None = None) -> np.ndarray:
     """The (C, H, W) planes' mean over a (2 radius + 1)^2 window, clipped at the borders
-    (``filters.shares.box_mean``)."""
-    out = np.empty(planes.shape, dtype=F32)
+    (``filters.shares.box_mean``), into ``out`` when given (float32, C-contiguous)."""
+    out = np.empty(planes.shape, dtype=F32) if out is None else out
     box_mean(np.ascontiguousarray(planes, dtype=F32), int(radius), out)
     return out
 
 
-Fallback = list[np.ndarray] | Callable[[], list[np.ndarray]] | None
+Planes = np.ndarray | list[np.ndarray]  # K (3, H, W) planes: a list, or one (K, 3, H, W) array
+Fallback = Planes | Callable[[], Planes] | None
 
 
-def split_by_shares(total: np.ndarray, weights: list[np.ndarray],
-                    fallback: Fallback = None) -> list[np.ndarray]:
-    """``total`` split per pixel and channel in proportion to ``weights`` (negative weights
-    count as 0): the parts add up to ``total`` (to float32 rounding). Where the weights sum
-    to at most SHARE_FLOOR, ``fallback``'s proportions (a list, or a function making it),
-    and where those too, equal parts (``filters.shares.split_shares``). The fallback is
-    made and stacked only when some value needs it (most frames: none)."""
+def _stacked(planes: Planes) -> np.ndarray:
+    """``planes`` as one (K, 3, H, W) float32 C-contiguous array (itself when it is one)."""
+    return np.ascontiguousarray(planes if isinstance(planes, np.ndarray) else np.stack(planes),
+                                dtype=F32)
+
+
+def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = None,
+                    out: np.ndarray | None = None) -> np.ndarray:
+    """``total`` split per pixel and channel in proportion to the K ``weights`` (negative
+    weights count as 0): the (K, 3, H, W) parts, adding up to ``total`` (to float32
+    rounding). Where the weights sum to at most SHARE_FLOOR, ``fallback``'s proportions
+    (the planes, or a function making them), and where those too, equal parts
+    (``filters.shares.split_shares``). The fallback is made and stacked only when some value
+    needs it (most frames: none). ``out`` (None: a new array) may be the stacked weights
+    themselves: each value's weights are read before its parts are written."""
+    weights = _stacked(weights)
+    parts = np.empty_like(weights) if out is None else out
     if len(weights) == 1:
-        return [total.astype(F32, copy=True)]
-    stacked = np.ascontiguousarray(np.stack(weights), dtype=F32)
+        np.copyto(parts[0], total)
+        return parts
     total = np.ascontiguousarray(total, dtype=F32)
-    backup = stacked
-    if fallback is not None and fallback_pixels(total, stacked, SHARE_FLOOR):
-        planes = fallback() if callable(fallback) else fallback
-        backup = np.ascontiguousarray(np.stack(planes), dtype=F32)
-    out = np.empty_like(stacked)
-    split_shares(total, stacked, backup, backup is not stacked, SHARE_FLOOR, out)
-    return list(out)
+    backup = weights
+    if fallback is not None and fallback_pixels(total, weights, SHARE_FLOOR):
+        backup = _stacked(fallback() if callable(fallback) else fallback)
+    split_shares(total, weights, backup, backup is not weights, SHARE_FLOOR, parts)
+    return parts
 
 
-def compose_groups(colour: np.ndarray, filtered: list[np.ndarray],
-                   groups: list[LightLayer]) -> list[np.ndarray]:
-    """The denoised light groups: ``colour`` split by the filtered groups' shares (the
-    input groups' box-filtered shares where the filtered ones are 0)."""
-    return split_by_shares(colour, filtered, lambda: [box_filter(g.radiance) for g in groups])
+def compose_groups(colour: np.ndarray, filtered: np.ndarray,
+                   groups: list[LightLayer]) -> np.ndarray:
+    """The denoised light groups, (K, 3, H, W), into ``filtered`` (the K filtered groups,
+    stacked): ``colour`` split by their shares (the input groups' box-filtered shares where
+    the filtered ones are 0)."""
+    return split_by_shares(colour, filtered, lambda: [box_filter(g.radiance) for g in groups],
+                           out=filtered)
 
 
-def compose_passes(colour: np.ndarray, emission: np.ndarray | None,
-                   signal_outputs: dict[str, np.ndarray],
-                   passes: list[LightLayer]) -> list[np.ndarray]:
-    """The denoised light passes, in the colour's units (light x colour pass), adding up
-    to ``colour - emission``."""
-    light = colour if emission is None else colour - emission
-    estimates: list[np.ndarray | None] = [None] * len(passes)
+def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
+                   passes: list[LightLayer]) -> np.ndarray:
+    """The denoised light passes, (P, 3, H, W), in the colour's units (light x colour
+    pass), adding up to ``light`` (the colour less the emission)."""
+    estimates = np.empty((len(passes), *light.shape), dtype=F32)
     members: dict[str, list[int]] = {}
     for index, layer in enumerate(passes):
         owner = layer.signal if layer.signal in signal_outputs else ""
@@ -96,16 +106,15 @@ def compose_passes(colour: np.ndarray, emission: np.ndarray | None,
         if len(indexes) == 1:  # the signal is this pass's light alone
             estimates[indexes[0]] = filtered
             continue
-        weights = []
-        for i in indexes:
-            smooth = box_filter(passes[i].stored)
-            colour_pass = passes[i].colour
-            weights.append(smooth if colour_pass is None else smooth * colour_pass)
-        parts = split_by_shares(filtered, weights, [passes[i].radiance for i in indexes])
-        for i, part in zip(indexes, parts, strict=True):
-            estimates[i] = part
-    done = [e for e in estimates if e is not None]
-    return split_by_shares(light, done, [p.radiance for p in passes])
+        own = [passes[i] for i in indexes]
+        weights = np.empty((len(own), *light.shape), dtype=F32)
+        for smooth, layer in zip(weights, own, strict=True):
+            box_filter(layer.stored, out=smooth)
+            if layer.colour is not None:
+                smooth *= layer.colour
+        estimates[indexes] = split_by_shares(filtered, weights, [p.radiance for p in own],
+                                             out=weights)
+    return split_by_shares(light, estimates, [p.radiance for p in passes], out=estimates)
 
 
 def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
@@ -122,15 +131,15 @@ def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
             by_signal.setdefault(layer.signal, {})[layer.colour_channels] = layer.colour
     colours: dict[tuple[str, str, str], np.ndarray] = {}
     for signal, own in by_signal.items():
-        total = np.sum(list(own.values()), axis=0, dtype=F32)
+        total = np.sum(list(own.values()), axis=0, dtype=F32) if len(own) > 1 else None
         for key, colour in own.items():
             if key in colours:
                 continue
-            if len(own) == 1:
+            if total is None:  # a copy: medium_colours writes into it, the filter keeps its own
                 colours[key] = albedos[signal].astype(F32, copy=True)
                 continue
             share = np.divide(colour, total, out=np.zeros_like(colour), where=total > 0)
-            colours[key] = (albedos[signal] * share).astype(F32)
+            colours[key] = (albedos[signal] * share).astype(F32, copy=False)
     return colours
 
 
@@ -149,13 +158,14 @@ def medium_colours(colours: dict[tuple[str, str, str], np.ndarray],
 
 def stored_values(layer: LightLayer, radiance: np.ndarray,
                   colour: np.ndarray | None) -> np.ndarray:
-    """A denoised pass in its stored units: divided by its (written) colour pass where that
-    is not 0 (elsewhere the pass adds nothing to the colour: its stored light as read)."""
-    if colour is None:
-        return radiance
-    out = layer.stored.copy()
-    np.divide(radiance, colour, out=out, where=colour > 0)
-    return out
+    """A denoised pass in its stored units, in place of ``radiance``: divided by its
+    (written) colour pass where that is not 0 (elsewhere the pass adds nothing to the
+    colour: its stored light as read)."""
+    if colour is not None:
+        lit = colour > 0
+        np.divide(radiance, colour, out=radiance, where=lit)
+        np.copyto(radiance, layer.stored, where=~lit)
+    return radiance
 
 
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
@@ -164,18 +174,19 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     """The denoised light passes and their colour passes into ``denoised.light``; the light
     they cannot carry (where their colour passes are 0: the pixel filter's spill onto the
     background, emitters' edges) goes to the emission passes, split by their shares."""
-    parts = compose_passes(denoised.color, emission, outputs, light.passes)
+    residual = denoised.color.copy() if emission is None else denoised.color - emission
+    parts = compose_passes(residual, outputs, light.passes)
     colours = remodulated_colours(light.passes, albedos)
     if denoised.medium is not None:
         medium_colours(colours, light.passes, denoised.medium)
-    residual = denoised.color.copy() if emission is None else denoised.color - emission
+    lit = np.empty_like(residual)  # a pass's light as written: stored x colour
     for layer, part in zip(light.passes, parts, strict=True):
         colour = layer.colour
         if layer.colour_channels is not None and layer.colour_channels in colours:
             colour = colours[layer.colour_channels]
         stored = stored_values(layer, part, colour)
         _write(layer.channels, stored, denoised.light)
-        residual -= stored if colour is None else stored * colour
+        residual -= stored if colour is None else np.multiply(stored, colour, out=lit)
     for channels, colour in colours.items():
         _write(channels, colour, denoised.light)
     if not light.emission:
@@ -183,11 +194,12 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     # Emit and Env are noise-free: their own values are the shares. Where the filter took
     # the emission into a signal (medium pixels: filters.stages.fill_medium) it is 0 in
     # ``emission`` and in the passes as written, which the residual then fills.
-    kept = [e.radiance if emission is None else np.where(emission != 0.0, e.radiance, F32(0.0))
-            for e in light.emission]
+    kept = np.zeros((len(light.emission), *residual.shape), dtype=F32)
+    for own, layer in zip(kept, light.emission, strict=True):
+        np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
     extra = split_by_shares(residual, kept, None)
     for layer, own, part in zip(light.emission, kept, extra, strict=True):
-        _write(layer.channels, own + part, denoised.light)
+        _write(layer.channels, np.add(own, part, out=part), denoised.light)
 
 
 def _write(channels: tuple[str, str, str], planes: np.ndarray,
@@ -196,11 +208,25 @@ def _write(channels: tuple[str, str, str], planes: np.ndarray,
         into[name] = np.ascontiguousarray(plane, dtype=F32)
 
 
+def _rgb(layers: dict[str, np.ndarray], name: str) -> np.ndarray:
+    """The layers ``<name>.R/G/B`` as one (3, H, W) array: a view of them where they lie one
+    after the other in memory (a signal's output and colour as the filter hands them:
+    ``filters.stages.remodulate.signal_output``), else their stack (a copy)."""
+    planes = [layers[f"{name}.{c}"] for c in "RGB"]
+    first = planes[0]
+    if all(p.flags.c_contiguous and p.dtype == first.dtype and p.shape == first.shape
+           and p.ctypes.data == first.ctypes.data + c * first.nbytes
+           for c, p in enumerate(planes)):
+        return np.lib.stride_tricks.as_strided(first, (3, *first.shape),
+                                               (first.nbytes, *first.strides))
+    return np.stack(planes)
+
+
 def _planes(layers: dict[str, np.ndarray], names: tuple[str, ...], suffix: str = ""
             ) -> dict[str, np.ndarray]:
-    """``<name><suffix>.R/G/B`` of each signal ``name`` as (3, H, W) planes."""
-    return {name: np.stack([layers[f"{name}{suffix}.{c}"] for c in "RGB"])
-            for name in names if f"{name}{suffix}.R" in layers}
+    """``<name><suffix>.R/G/B`` of each signal ``name`` as (3, H, W) planes (`_rgb`)."""
+    return {name: _rgb(layers, f"{name}{suffix}") for name in names
+            if f"{name}{suffix}.R" in layers}
 
 
 # The light groups' filter only gives shares of the colour, whose detail is the colour's own
@@ -238,6 +264,7 @@ class LayeredDenoiser:
         self.debug_layers = debug_layers
         self.colour = Denoiser(params, debug_layers=debug_layers)
         self.colour.setup = dataclasses.replace(self.colour.setup, signal_outputs=True)
+        self.colour.gbuffer_output = True
         self.groups = Denoiser(group_params(params))
         self.groups.setup = dataclasses.replace(self.groups.setup, signal_outputs=True)
 
@@ -263,10 +290,14 @@ class LayeredDenoiser:
         self.colour.load_state(state)
 
     def process(self, frame: Frame) -> DenoisedFrame:
-        """Denoise the next frame and its light layers."""
+        """Denoise the next frame and its light layers. The light groups' filter takes the
+        G-buffer as the colour's filter used it (medium pixels filled: its own fill_medium
+        would compute the same from the same planes and settings)."""
         light = frame.light or LightLayers()
-        groups = group_frame(frame, light.groups) if light.groups else None
         denoised = self.colour.process(frame)
+        gbuffer, denoised.gbuffer = denoised.gbuffer, None  # for the groups' filter only
+        assert gbuffer is not None
+        groups = group_frame(gbuffer, light.groups) if light.groups else None
         emission = denoised.emission  # the frame's, less what the filter took into a signal
         names = self.colour.signal_names or ()
         outputs = _planes(denoised.layers, names)
@@ -280,10 +311,9 @@ class LayeredDenoiser:
         if light.passes:
             write_passes(denoised, emission, outputs, albedos, light)
         if groups is not None:
-            filtered = self.groups.process(groups)
-            planes = [np.stack([filtered.layers[f"{s.name}.{c}"] for c in "RGB"])
-                      for s in groups.signals]
-            for layer, part in zip(light.groups, compose_groups(denoised.color, planes,
+            layers = self.groups.process(groups).layers
+            filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
+            for layer, part in zip(light.groups, compose_groups(denoised.color, filtered,
                                                                 light.groups), strict=True):
                 _write(layer.channels, part, denoised.light)
         return denoised

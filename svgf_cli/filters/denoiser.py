@@ -15,7 +15,14 @@ the arrays kept between frames (history, workspace, colour means, TAA) in
 
 from __future__ import annotations
 
-from svgf_cli.filters.context import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR, TemporalState
+import dataclasses
+
+from svgf_cli.filters.context import (
+    MAX_REFLECTANCE,
+    RELATIVE_ALBEDO_FLOOR,
+    FrameContext,
+    TemporalState,
+)
 from svgf_cli.filters.engine import PipelineFilter
 from svgf_cli.filters.resident import STATE_FORMAT
 from svgf_cli.filters.stages.atrous import signal_groups, signal_sigma_luminance
@@ -54,10 +61,26 @@ class Denoiser(PipelineFilter):
 
     kind = "causal"
 
+    # Also hand back each frame's G-buffer as the stages used it (`DenoisedFrame.gbuffer`):
+    # another filter of the same frame takes it instead of filling the medium pixels again
+    # (``filters.composable.LayeredDenoiser``).
+    gbuffer_output = False
+
     def process(self, frame: Frame) -> DenoisedFrame:
         """Denoise the next frame of the sequence."""
         ctx = self._run(frame)
         assert ctx.output is not None
         colour = ctx.output if frame.final_colour is None else frame.final_colour
         return DenoisedFrame(color=colour, layers=ctx.layers, counts=ctx.counts,
-                             emission=ctx.frame.emission, medium=ctx.medium_pixels)
+                             emission=ctx.frame.emission, medium=ctx.medium_pixels,
+                             gbuffer=_used_gbuffer(ctx) if self.gbuffer_output else None)
+
+
+def _used_gbuffer(ctx: FrameContext) -> Frame:
+    """The frame's G-buffer as the stages used it: depth, normal and motion after the value
+    policy, every plane with the medium pixels filled (``filters.stages.fill_medium``); a
+    frame with no signals and no medium left to fill (what a filter with the same value and
+    medium settings would make of the frame's own)."""
+    return dataclasses.replace(
+        ctx.frame, signals=[], depth=ctx.depth, normal=ctx.normal_in, motion=ctx.motion,
+        emission=None, medium=None, light=None, final_colour=None)

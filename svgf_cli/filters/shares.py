@@ -13,10 +13,16 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, parall
             error_model="numpy")
 
 
+# Columns of one job of box_mean's vertical pass: each row's run of them is read at once.
+_COLUMNS = 64
+
+
 @njit(**_JIT)
 def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     """``out`` = the (C, H, W) planes' mean over a (2 radius + 1)^2 window clipped at the
-    borders (each window divided by the pixels it covers), summed in float64."""
+    borders (each window divided by the pixels it covers), summed in float64: running sums
+    along each row, then down each column (a block of columns at a time, each column's sum
+    in the same order)."""
     channels, height, width = planes.shape
     rows = np.empty((channels, height, width), dtype=np.float64)
     for job in prange(channels * height):
@@ -30,19 +36,23 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
             if x - radius - 1 >= 0:
                 running -= planes[c, y, x - radius - 1]
             rows[c, y, x] = running
-    for job in prange(channels * width):
-        c, x = job // width, job % width
-        left, right = max(x - radius, 0), min(x + radius + 1, width)
-        running = 0.0
+    blocks = (width + _COLUMNS - 1) // _COLUMNS
+    for job in prange(channels * blocks):
+        c, start = job // blocks, job % blocks * _COLUMNS
+        end = min(start + _COLUMNS, width)
+        running_columns = np.zeros(end - start)
         for y in range(min(radius, height)):
-            running += rows[c, y, x]
+            for x in range(start, end):
+                running_columns[x - start] += rows[c, y, x]
         for y in range(height):
-            if y + radius < height:
-                running += rows[c, y + radius, x]
-            if y - radius - 1 >= 0:
-                running -= rows[c, y - radius - 1, x]
             top, bottom = max(y - radius, 0), min(y + radius + 1, height)
-            out[c, y, x] = running / ((bottom - top) * (right - left))
+            for x in range(start, end):
+                if y + radius < height:
+                    running_columns[x - start] += rows[c, y + radius, x]
+                if y - radius - 1 >= 0:
+                    running_columns[x - start] -= rows[c, y - radius - 1, x]
+                left, right = max(x - radius, 0), min(x + radius + 1, width)
+                out[c, y, x] = running_columns[x - start] / ((bottom - top) * (right - left))
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
@@ -60,7 +70,8 @@ def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
                  use_fallback: bool, floor: float, out: np.ndarray) -> None:
     """``out[k]`` = ``total`` x ``weights[k] / sum_j weights[j]`` per pixel and channel
     (negative weights count as 0); where that sum is at most ``floor``, the same with
-    ``fallback`` (when ``use_fallback``), and where that is too, equal parts."""
+    ``fallback`` (when ``use_fallback``), and where that is too, equal parts. ``out`` may be
+    ``weights``: a value's weights are all read before its parts are written."""
     count, channels, height, width = weights.shape
     for job in prange(channels * height):
         c, y = job // height, job % height
