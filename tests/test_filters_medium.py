@@ -217,3 +217,34 @@ def test_smoke_fixture_volume_error_is_a_tenth_of_the_input(tmp_path: Path) -> N
             per_pixel = per_pixel.mean(axis=0) if per_pixel.ndim == 3 else per_pixel
             errors[name].append(float(per_pixel[inside].mean()))
     assert np.mean(errors["svgf"]) <= 0.1 * np.mean(errors["input"]), errors
+
+
+def test_smoke_fixture_sky_seen_through_the_smoke_goes_back_to_env(tmp_path: Path) -> None:
+    """The light layers of the committed smoke shot: on medium pixels the sky seen through
+    the smoke (Cycles' ``Env``) is filtered with the volume signal, and its part goes back
+    to ``Env``, not to ``VolumeDir`` (filters.composable.medium_emission). Measured
+    2026-11-27 over the 8 frames (bench/light_layers.py): VolumeDir 0.06x its input's
+    relMSE (trimmed), Env 0.50x; with the whole signal given to VolumeDir 0.78x and 0.88x."""
+    import OpenEXR
+    from test_cli_support import exit_code
+
+    from svgf_cli.evaluate.metrics import relmse_trimmed
+
+    shot = ROOT / "testdata/cycles/smoke"
+    out = tmp_path / "den"
+    assert exit_code(["denoise", shot / "in.####.exr", "-o", out / "o.####.exr", "-q",
+                      "--preset-aovs", "cycles", "--frames", "1-4"]) == 0
+
+    def layer(path: Path, name: str) -> np.ndarray:
+        with OpenEXR.File(str(path), separate_channels=True) as exr:
+            channels = {n: c for part in exr.parts for n, c in part.channels.items()}
+            return np.stack([channels[f"ViewLayer.{name}.{c}"].pixels.astype(np.float64)
+                             for c in "RGB"])
+
+    for name, ratio in (("VolumeDir", 0.2), ("Env", 0.7)):
+        errors = {"input": [], "svgf": []}
+        for f in range(1, 5):
+            ref = layer(shot / f"ref.{f:04d}.exr", name)
+            errors["input"].append(relmse_trimmed(layer(shot / f"in.{f:04d}.exr", name), ref))
+            errors["svgf"].append(relmse_trimmed(layer(out / f"o.{f:04d}.exr", name), ref))
+        assert np.mean(errors["svgf"]) <= ratio * np.mean(errors["input"]), (name, errors)

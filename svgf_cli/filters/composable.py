@@ -168,12 +168,48 @@ def stored_values(layer: LightLayer, radiance: np.ndarray,
     return radiance
 
 
+def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[LightLayer],
+                    emitters: list[LightLayer]) -> np.ndarray:
+    """The emission passes' part of the filtered medium signal ``filtered`` (the medium's
+    light plus, on the medium ``pixels``, the emission seen through it: filters.stages.
+    fill_medium), per emission pass, (E, 3, H, W): on those pixels the signal split between
+    its own passes and the emission passes in proportion to their box-filtered input light;
+    0 elsewhere."""
+    def smooth_sum(layers: list[LightLayer]) -> np.ndarray:
+        return np.sum([box_filter(layer.radiance) for layer in layers], axis=0, dtype=F32)
+
+    emitted = [box_filter(layer.radiance) for layer in emitters]
+    through = np.sum(emitted, axis=0, dtype=F32)
+    total = through + smooth_sum(passes) if passes else through.copy()
+    share = np.divide(through, total, out=np.zeros_like(through), where=total > SHARE_FLOOR)
+    share[:, ~pixels] = 0.0
+    return split_by_shares(filtered * share, emitted, None)
+
+
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
                  outputs: dict[str, np.ndarray], albedos: dict[str, np.ndarray],
-                 light: LightLayers) -> None:
+                 light: LightLayers, medium_signal: str | None = None) -> None:
     """The denoised light passes and their colour passes into ``denoised.light``; the light
     they cannot carry (where their colour passes are 0: the pixel filter's spill onto the
-    background, emitters' edges) goes to the emission passes, split by their shares."""
+    background, emitters' edges) goes to the emission passes, split by their shares. On
+    medium pixels the emission seen through the medium was filtered with the medium's
+    signal ``medium_signal``: its part goes back to the emission passes
+    (:func:`medium_emission`)."""
+    kept = np.zeros((len(light.emission), *denoised.color.shape), dtype=F32)
+    for own, layer in zip(kept, light.emission, strict=True):
+        # Emit and Env are noise-free: their own values are the shares. Where the filter took
+        # the emission into a signal it is 0 in ``emission``: the medium's split fills it.
+        np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
+    if (light.emission and denoised.medium is not None and emission is not None
+            and medium_signal in outputs):
+        assert medium_signal is not None
+        through = medium_emission(outputs[medium_signal], denoised.medium,
+                                  [p for p in light.passes if p.signal == medium_signal],
+                                  light.emission)
+        kept += through
+        taken = through.sum(axis=0)
+        outputs = {**outputs, medium_signal: outputs[medium_signal] - taken}
+        emission = emission + taken
     residual = denoised.color.copy() if emission is None else denoised.color - emission
     parts = compose_passes(residual, outputs, light.passes)
     colours = remodulated_colours(light.passes, albedos)
@@ -191,12 +227,6 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
         _write(channels, colour, denoised.light)
     if not light.emission:
         return
-    # Emit and Env are noise-free: their own values are the shares. Where the filter took
-    # the emission into a signal (medium pixels: filters.stages.fill_medium) it is 0 in
-    # ``emission`` and in the passes as written, which the residual then fills.
-    kept = np.zeros((len(light.emission), *residual.shape), dtype=F32)
-    for own, layer in zip(kept, light.emission, strict=True):
-        np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
     extra = split_by_shares(residual, kept, None)
     for layer, own, part in zip(light.emission, kept, extra, strict=True):
         _write(layer.channels, np.add(own, part, out=part), denoised.light)
@@ -312,7 +342,9 @@ class LayeredDenoiser:
         denoised.layers = ({k: v for k, v in denoised.layers.items() if ".albedo." not in k}
                            if self.debug_layers else {})
         if light.passes:
-            write_passes(denoised, emission, outputs, albedos, light)
+            medium = next((s.name for s in frame.signals
+                           if frame.medium is not None and s.radiance is frame.medium), None)
+            write_passes(denoised, emission, outputs, albedos, light, medium)
         if groups is not None:
             layers = self.groups.process(groups).layers
             filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
