@@ -318,3 +318,40 @@ def test_inspect_check_reports_the_additivity_of_an_output(
     OpenEXR.File(dict(part.header), channels_).write(str(broken))
     assert exit_code(["inspect", "--check", "--preset-aovs", "cycles", broken]) == 3
     assert "3 light groups add up to the colour (FAILED)" in capsys.readouterr().out
+
+
+def test_medium_emission_splits_on_the_medium_pixels_as_over_the_whole_frame() -> None:
+    """``medium_emission`` computes its box means over the medium pixels' bounding box grown
+    by the box radius: on those pixels the same as over the whole frame (a plain NumPy
+    reference of its definition), at the image border too; each pixel's parts add up to the
+    emission passes' share of the filtered signal."""
+    from svgf_cli.filters.composable import SHARE_RADIUS, medium_emission
+    from svgf_cli.frame import LightLayer
+
+    rng = np.random.default_rng(5)
+    h, w = 40, 56
+    pixels = np.zeros((h, w), bool)
+    pixels[2:14, 30:56] = rng.random((12, 26)) < 0.6  # touches the right border
+    pixels[0, 31] = True  # and the top one
+
+    def layer(name: str, scale: float, zero: bool = False) -> LightLayer:
+        light = (rng.random((3, h, w)) * scale).astype(np.float32) * (not zero)
+        return LightLayer((f"{name}.R", f"{name}.G", f"{name}.B"), light, light)
+
+    volume = [layer("VolumeDir", 0.5), layer("VolumeInd", 0.2)]
+    for emitters in ([layer("Emit", 0.0, zero=True), layer("Env", 1.0)],
+                     [layer("Emit", 0.3), layer("Env", 1.0)]):
+        filtered = (rng.random((3, h, w)) * 2).astype(np.float32)
+        parts = medium_emission(filtered, pixels, volume, emitters)
+
+        def box(planes: np.ndarray) -> np.ndarray:
+            return box_filter(planes.astype(np.float32), SHARE_RADIUS)
+
+        through = box(sum(e.radiance for e in emitters))
+        total = through + box(sum(v.radiance for v in volume))
+        taken = filtered * through / total
+        weights = [box(e.radiance) for e in emitters]
+        expected = [taken * wk / sum(weights) for wk in weights]
+        for part, want in zip(parts, expected, strict=True):
+            np.testing.assert_allclose(part, want[:, pixels], rtol=1e-4, atol=1e-6)
+        np.testing.assert_allclose(parts.sum(axis=0), taken[:, pixels], rtol=1e-5)

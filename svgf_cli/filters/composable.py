@@ -172,18 +172,36 @@ def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[Light
                     emitters: list[LightLayer]) -> np.ndarray:
     """The emission passes' part of the filtered medium signal ``filtered`` (the medium's
     light plus, on the medium ``pixels``, the emission seen through it: filters.stages.
-    fill_medium), per emission pass, (E, 3, H, W): on those pixels the signal split between
-    its own passes and the emission passes in proportion to their box-filtered input light;
-    0 elsewhere."""
-    def smooth_sum(layers: list[LightLayer]) -> np.ndarray:
-        return np.sum([box_filter(layer.radiance) for layer in layers], axis=0, dtype=F32)
+    fill_medium), per emission pass, (E, 3, N) over the N medium pixels: the signal split
+    between its own passes and the emission passes in proportion to their box-filtered input
+    light, and among the emission passes likewise (equal parts where they are all 0). Two box
+    means of sums (and one per emission pass where several hold light there), each over the
+    medium pixels' bounding box grown by the box radius: the same means on those pixels."""
+    rows, columns = np.nonzero(pixels)
+    height, width = pixels.shape
+    crop = (slice(max(rows.min() - SHARE_RADIUS, 0), min(rows.max() + SHARE_RADIUS + 1, height)),
+            slice(max(columns.min() - SHARE_RADIUS, 0),
+                  min(columns.max() + SHARE_RADIUS + 1, width)))
+    inside = pixels[crop]
 
-    emitted = [box_filter(layer.radiance) for layer in emitters]
-    through = np.sum(emitted, axis=0, dtype=F32)
-    total = through + smooth_sum(passes) if passes else through.copy()
+    def smooth(planes: list[np.ndarray]) -> np.ndarray:
+        return box_filter(np.sum([p[(slice(None), *crop)] for p in planes], axis=0,
+                                 dtype=F32))[:, inside]
+
+    through = smooth([layer.radiance for layer in emitters])
+    total = through + smooth([layer.radiance for layer in passes]) if passes else through
     share = np.divide(through, total, out=np.zeros_like(through), where=total > SHARE_FLOOR)
-    share[:, ~pixels] = 0.0
-    return split_by_shares(filtered * share, emitted, None)
+    taken = filtered[:, pixels] * share
+    lit = [k for k, layer in enumerate(emitters) if layer.radiance[:, pixels].any()]
+    if len(lit) == 1:
+        out = np.zeros((len(emitters), *taken.shape), dtype=F32)
+        out[lit[0]] = taken
+        return out
+    weights = np.stack([smooth([layer.radiance]) for layer in emitters])
+    weight_sum = weights.sum(axis=0)
+    return np.where(weight_sum > SHARE_FLOOR,
+                    taken * weights / np.maximum(weight_sum, SHARE_FLOOR),
+                    taken / len(emitters)).astype(F32)
 
 
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
@@ -201,15 +219,18 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
         # the emission into a signal it is 0 in ``emission``: the medium's split fills it.
         np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
     if (light.emission and denoised.medium is not None and emission is not None
-            and medium_signal in outputs):
+            and medium_signal in outputs and denoised.medium.any()):
         assert medium_signal is not None
-        through = medium_emission(outputs[medium_signal], denoised.medium,
+        pixels = denoised.medium
+        through = medium_emission(outputs[medium_signal], pixels,
                                   [p for p in light.passes if p.signal == medium_signal],
                                   light.emission)
-        kept += through
+        kept[:, :, pixels] += through
         taken = through.sum(axis=0)
-        outputs = {**outputs, medium_signal: outputs[medium_signal] - taken}
-        emission = emission + taken
+        medium_light, emission = outputs[medium_signal].copy(), emission.copy()
+        medium_light[:, pixels] -= taken
+        emission[:, pixels] += taken
+        outputs = {**outputs, medium_signal: medium_light}
     residual = denoised.color.copy() if emission is None else denoised.color - emission
     parts = compose_passes(residual, outputs, light.passes)
     colours = remodulated_colours(light.passes, albedos)
