@@ -395,9 +395,7 @@ def build_production(scene) -> dict:
     """A production-like shot: three light groups (key, fill switching on, env), glass, a fog
     volume box, thin metal wires, Cryptomatte, a camera move."""
     index = PASS_INDEX["production"]
-    layer = scene.view_layers[0]
-    for group in LIGHT_GROUPS["production"]:
-        layer.lightgroups.add(name=group)
+    add_light_groups(scene, "production")
     gradient_world(scene, horizon=(0.5, 0.5, 0.55), zenith=(0.1, 0.2, 0.5), strength=0.5)
     scene.world.lightgroup = "env"
 
