@@ -19,7 +19,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 TEMPORAL = ["values", "gradients", "demodulate", "reproject"]
 DEFAULT_TEMPORAL = ["values", "fill_medium", "gradients", "reflected_lights", "demodulate",
-                    "reproject", "history_clamp", "antilag", "spread_fireflies"]
+                    "reproject", "object_history", "history_clamp", "antilag",
+                    "adopt_object_history", "spread_fireflies"]
 
 
 @pytest.mark.parametrize(("preset", "kind", "expected"), [
@@ -51,6 +52,8 @@ def test_stage_order_per_preset(preset: str, kind: str, expected: list[str]) -> 
     ({"history_clamp": 3.0}, ("history_clamp",)),
     ({"glossy_history_clamp": 1.0}, ("history_clamp",)),
     ({"antilag": True}, ("antilag",)),
+    ({"antilag": True, "object_history": True},
+     ("antilag", "object_history", "adopt_object_history")),
     ({"spread_fireflies": 10.0}, ("spread_fireflies",)),
     ({"temporal_albedo": True}, ("temporal_albedo",)),
     ({"despike": 2.0}, ("despike", "despike_lone")),

@@ -666,6 +666,35 @@ def test_reprojection_of_the_moving_scene_matches_reference() -> None:
             assert np.sum((want.path[0] == ref.REJECTED) & surface) >= 2
 
 
+def test_reprojection_of_a_window_matches_the_whole_frame() -> None:
+    """``origin``: the current frame's arrays cut to a window (object_history's box) give
+    that window of the whole frame's result, bit for bit, taps outside the window included."""
+    prev, cur = scene_frame(1), scene_frame(2)
+    history = _history_for(prev, seed=3)
+    out, want = _run_reproject(prev, cur, history)
+    _assert_reprojection_matches(out, want)
+    g_prev, g_cur = kernel_geometry(prev), kernel_geometry(cur)
+    rows, columns = slice(3, 13), slice(5, 20)
+    cut = np.ascontiguousarray
+    height, width = rows.stop - rows.start, columns.stop - columns.start
+    window = (np.full((2, 3, height, width), np.nan, F32),
+              np.full((2, 2, height, width), np.nan, F32),
+              np.full((2, height, width), np.nan, F32))
+    reproject(cut(cur.motion[:, rows, columns]), cut(cur.depth[rows, columns]),
+              cut(g_cur["unit_normal"][:, rows, columns]), cut(cur.mesh_id[rows, columns]),
+              np.zeros((height, width), np.uint16), cut(g_cur["depth_slope"][rows, columns]),
+              cut(g_cur["normal_width"][rows, columns]), prev.depth, g_prev["unit_normal"],
+              prev.mesh_id, np.zeros(prev.depth.shape, np.uint16), history["illumination"],
+              history["moments"], history["length"], F32(10.0), F32(0.002), F32(16.0),
+              *window, origin=(rows.start, columns.start))
+    for got, whole in zip(window, out, strict=True):
+        np.testing.assert_array_equal(got, whole[..., rows, columns])
+    # The window's taps reach outside it: a crop of last frame's arrays would lose them.
+    reach = cur.motion[0, rows, columns] + np.arange(columns.start, columns.stop)
+    assert np.any((reach < columns.start) | (reach >= columns.stop - 1))
+    assert np.count_nonzero(window[2]) > 100  # 2 signals x 150 pixels
+
+
 def test_reprojection_with_perturbed_history_takes_every_test() -> None:
     """The scene with its previous frame perturbed (ids, depths, normals, background pixels)
     and sub-pixel motion jitter: every test rejects somewhere, on its own."""

@@ -101,12 +101,14 @@ class Share:
 SPATIAL = ("variance", "pass_history")
 ATROUS = ("atrous", "pass_history")
 LAST_ATROUS = ("pass_history", "atrous")
+# The stages that resample last frame's history (a turning object's a second time).
+RESAMPLING = ("reproject", "object_history")
 
 # Who lives in whose memory, and when. A host's own lifetime is listed as a share of itself.
 SHARING: tuple[Share, ...] = (
-    Share("depth_slope", "variance[0]", ("gradients",), ("reproject",),
+    Share("depth_slope", "variance[0]", ("gradients",), RESAMPLING,
           "the reprojection's depth threshold"),
-    Share("normal_width", "variance[1]", ("gradients",), ("reproject",),
+    Share("normal_width", "variance[1]", ("gradients",), RESAMPLING,
           "the reprojection's normal threshold (its own plane with one signal)"),
     Share("reverse_length", "variance_b", ("combine",), ("accumulate",),
           "the reverse pass's shortened own history length"),
@@ -115,17 +117,17 @@ SHARING: tuple[Share, ...] = (
     Share("variance", "variance[1]", SPATIAL, ("pass_history", "remodulate"),
           "the variance itself"),
     Share("variance_b", "variance_b", ATROUS, LAST_ATROUS, "a-trous variance ping-pong"),
-    Share("history_illumination", "history_illumination", ("values",), ("reproject",),
+    Share("history_illumination", "history_illumination", ("values",), RESAMPLING,
           "last frame's colour history"),
     Share("antilag_scratch", "history_illumination", ("antilag",), ("antilag",),
           "anti-lag's statistics, a prefix of the stale colour"),
     Share("stale_colour", "history_illumination", ATROUS, ("store_history",),
           "an a-trous colour buffer"),
-    Share("history_moments", "history_moments", ("values",), ("reproject",),
+    Share("history_moments", "history_moments", ("values",), RESAMPLING,
           "last frame's moments"),
     Share("guide_luminance", "history_moments", ATROUS, LAST_ATROUS,
           "first half: the a-trous luminance guide"),
-    Share("history_length", "history_length", ("values",), ("reproject",),
+    Share("history_length", "history_length", ("values",), RESAMPLING,
           "last frame's history length"),
     Share("variance_a", "history_length", ATROUS, LAST_ATROUS, "a-trous variance ping-pong"),
     Share("demodulated", "demodulated", ("demodulate",), ("accumulate",),

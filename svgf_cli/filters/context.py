@@ -144,6 +144,9 @@ class FrameContext:
     # store_history replaces it); they take precedence over the workspace's own planes.
     borrowed: dict[str, np.ndarray] = field(default_factory=dict)
     keep: Any = None  # a forward pass: what to hand back of the resampled history
+    # A turning object's history resampled at its translation, until it is adopted
+    # (filters.stages.object_history).
+    turned: Any = None
     kept: Any = None  # ... and what it handed back
     forward: SideHistory | None = None  # a reverse pass: the forward history here
     into: SideHistory | None = None  # ... and where it is combined

@@ -204,6 +204,13 @@ class SVGFParams:
         " (svgf trace --gradient-samples).",
         group="antilag",
     )
+    object_history: bool = _p(
+        False,
+        "On an object turning about its own axis (a rolling ball), also fetch the light's"
+        " history at the object's translation, and keep it where anti-lag trusts it more"
+        " than the material point's (needs antilag and an object id pass).",
+        group="antilag",
+    )
     # Glossy signals (Signal.glossy: reflections and refractions move with what they show,
     # not with the surface, so their reprojected history is unreliable).
     glossy_history_clamp: float = _p(
@@ -382,6 +389,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   "#the-default-since-2026-11-27"),
         Departure("antilag", True, "moving lights and shadows, lights switched or dimmed"
                   f" and moving reflections lag otherwise: {_GLOSSY}"),
+        Departure("object_history", True, "a turning object's points turn away from the"
+                  " light: their light's history is at the object's translation, not the"
+                  f" material point's: {_ALG}#turning-objects"),
         Departure("history_clamp", 3.0, "a loose clamp of the history against outliers:"
                   f" {_GLOSSY}"),
         Departure("glossy_history_clamp", 1.0, "reflections move with what they show, so"

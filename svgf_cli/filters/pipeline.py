@@ -27,6 +27,7 @@ from svgf_cli.filters.stages.fill_medium import FillMedium
 from svgf_cli.filters.stages.firefly_clamp import FireflyClamp
 from svgf_cli.filters.stages.gradients import Gradients
 from svgf_cli.filters.stages.history_clamp import HistoryClamp
+from svgf_cli.filters.stages.object_history import AdoptObjectHistory, ObjectHistory
 from svgf_cli.filters.stages.pass_history import PassHistory
 from svgf_cli.filters.stages.pixel_filter import PixelFilter
 from svgf_cli.filters.stages.reflected_lights import MarkReflectedLights
@@ -53,8 +54,10 @@ def temporal() -> list[Stage]:
         Demodulate(),
         FireflyClamp(),  # firefly_clamp
         Reproject(),
+        ObjectHistory(),  # object_history
         HistoryClamp(),  # history_clamp, glossy_history_clamp
         AntiLag(),  # antilag
+        AdoptObjectHistory(),  # object_history
         SpreadFireflies(),  # spread_fireflies
     ]
 

@@ -117,6 +117,7 @@ def reproject(
     out_moments: np.ndarray,
     out_history_length: np.ndarray,
     catmull_rom: bool = False,
+    origin: tuple[int, int] = (0, 0),
 ) -> None:
     """Resample the history of every signal at the backprojected position.
 
@@ -134,13 +135,16 @@ def reproject(
     further tap of the 4x4 support passes the same tests with the pixel's modes, the colour
     and moments are the clamped Catmull-Rom fetch (``resample``) instead; the history length
     stays bilinear.
+
+    ``origin``: the (row, column) of the current arrays' first pixel in last frame's image,
+    for a window of this frame (the current arrays smaller than the ``prev_*`` ones).
     """
     _reproject_rows(
         motion, depth, normal, mesh_id, mode, depth_slope, normal_width, prev_depth,
         prev_normal, prev_mesh_id, prev_mode, prev_illumination, prev_moments,
         prev_history_length, F32(depth_tolerance), F32(depth_slack), F32(normal_tolerance),
         out_illumination, out_moments, out_history_length, bool(catmull_rom),
-        np.int64(get_num_threads()),
+        np.int64(get_num_threads()), np.int64(origin[0]), np.int64(origin[1]),
     )
 
 
@@ -186,33 +190,36 @@ def _reproject_rows(
     out_history_length: np.ndarray,
     catmull_rom: bool,
     threads: int,
+    origin_y: int,
+    origin_x: int,
 ) -> None:
     """All rows of :func:`reproject`, balanced over the threads (see ``rows``)."""
     num_signals = prev_illumination.shape[0]
-    height, width = depth.shape
+    rows, columns = depth.shape
+    height, width = prev_depth.shape
     fwidth = F32(width)
     fheight = F32(height)
-    for i in prange(balanced_row_count(height, threads)):
-        y = balanced_row(i, height, threads)
-        if y >= height:
+    for i in prange(balanced_row_count(rows, threads)):
+        y = balanced_row(i, rows, threads)
+        if y >= rows:
             continue
         uy = U(y)
         # Pixels whose usable taps all agree with their modes (the common case) only record
         # their taps and weights here; their signals are resampled after the row's pass,
         # one signal at a time (fewer memory streams at once than all signals per pixel).
         # 1: bilinear taps recorded; 2: and the Catmull-Rom support (``catmull_rom``).
-        agreed = np.zeros(width, dtype=np.uint8)
-        tap_rows = np.empty((2, width), dtype=np.uint64)
-        tap_columns = np.empty((2, width), dtype=np.uint64)
-        tap_weights = np.empty((4, width), dtype=np.float32)
-        support_rows = np.empty((4, width), dtype=np.uint64)
-        support_columns = np.empty((4, width), dtype=np.uint64)
-        support_weights = np.empty((8, width), dtype=np.float32)
-        for x in range(width):
+        agreed = np.zeros(columns, dtype=np.uint8)
+        tap_rows = np.empty((2, columns), dtype=np.uint64)
+        tap_columns = np.empty((2, columns), dtype=np.uint64)
+        tap_weights = np.empty((4, columns), dtype=np.float32)
+        support_rows = np.empty((4, columns), dtype=np.uint64)
+        support_columns = np.empty((4, columns), dtype=np.uint64)
+        support_weights = np.empty((8, columns), dtype=np.float32)
+        for x in range(columns):
             ux = U(x)
             z = depth[uy, ux]
-            px = F32(x) + motion[0, uy, ux]
-            py = F32(y) + motion[1, uy, ux]
+            px = F32(x + origin_x) + motion[0, uy, ux]
+            py = F32(y + origin_y) + motion[1, uy, ux]
             # Positions this far outside cannot reach a tap (the Denoiser replaces
             # non-finite motion by a far-away one), which also keeps the int conversions
             # below in range.
@@ -348,7 +355,7 @@ def _reproject_rows(
                 out_moments[s, 0, uy, ux] *= inv
                 out_moments[s, 1, uy, ux] *= inv
         for s in range(num_signals):
-            for x in range(width):
+            for x in range(columns):
                 ux = U(x)
                 if agreed[ux] == 1:
                     _bilinear(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux], tap_columns[0, ux],

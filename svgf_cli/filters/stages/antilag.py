@@ -34,12 +34,17 @@ class AntiLag(StageBase):
         scratch = temporal.antilag_scratch
         if scratch is None:
             scratch = work["antilag_scratch"]
-        # A bidirectional pass's false alarm costs less: the other side refills the history.
-        sigma = p.antilag_sigma * (PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)
         ctx.counts["antilag"] = antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
-            sigma, p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
-            scratch, work["antilag_lambda"], temporal.gradients,
+            antilag_sigma(p, temporal.bidirectional), p.antilag_spatial_samples,
+            p.antilag_tolerance, p.moments_alpha, scratch, work["antilag_lambda"],
+            temporal.gradients,
         )
         return True
+
+
+def antilag_sigma(params: SVGFParams, bidirectional: bool) -> float:
+    """The significance anti-lag tests at: a bidirectional pass's false alarm costs less
+    (the other side refills the history), so it tests at ``PASS_ANTILAG_SIGMA_SCALE``."""
+    return params.antilag_sigma * (PASS_ANTILAG_SIGMA_SCALE if bidirectional else 1.0)

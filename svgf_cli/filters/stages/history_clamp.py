@@ -7,6 +7,12 @@ from svgf_cli.filters.context import FrameContext, StageBase
 from svgf_cli.filters.params import SVGFParams
 
 
+def clamp_ks(params: SVGFParams, glossy: tuple[bool, ...]) -> list[float]:
+    """Per signal, its history clamp's k (``glossy_history_clamp`` for glossy signals)."""
+    glossy_k = params.glossy_history_clamp or params.history_clamp
+    return [glossy_k if g else params.history_clamp for g in glossy]
+
+
 class HistoryClamp(StageBase):
     """Each signal's reprojected history clamped to this frame's 3x3 mean +- k sigma, its
     moments scaled with it (``filters.clamp.history_clamp``; k: ``history_clamp``, for
@@ -25,9 +31,7 @@ class HistoryClamp(StageBase):
         temporal, p = ctx.temporal, ctx.params
         if not ctx.reprojected or temporal is None:
             return False
-        glossy_k = p.glossy_history_clamp or p.history_clamp
-        ks = [glossy_k if glossy else p.history_clamp
-              for glossy in temporal.glossy or (False,) * len(temporal.names)]
+        ks = clamp_ks(p, temporal.glossy or (False,) * len(temporal.names))
         if max(ks) > 0.0:  # one pass for all signals
             history_clamp(temporal.history_illumination, temporal.history_moments,
                           temporal.history_length, temporal.current, temporal.depth, ks,
