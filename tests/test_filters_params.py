@@ -55,7 +55,7 @@ PINNED: dict[str, dict[str, object]] = {
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.0, "temporal_albedo": False, "albedo_catmull_rom": False,
         "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
-        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
+        "pixel_filter": 0.0, "edge_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
         "medium_fill_radius": 0,
     },
     "default": {
@@ -72,7 +72,7 @@ PINNED: dict[str, dict[str, object]] = {
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.1, "temporal_albedo": True, "albedo_catmull_rom": True,
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
-        "pixel_filter": -1.0, "taa": False, "taa_alpha": 0.5, "warm_start": 4,
+        "pixel_filter": -1.0, "edge_filter": -1.0, "taa": False, "taa_alpha": 0.5, "warm_start": 4,
         "medium_fill_radius": 4,
     },
     "falcor": {
@@ -89,7 +89,7 @@ PINNED: dict[str, dict[str, object]] = {
         "sigma_normal": 128.0, "sigma_depth": 1.0, "albedo_epsilon": 0.001,
         "guide_albedo_floor": 0.0, "temporal_albedo": False, "albedo_catmull_rom": False,
         "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
-        "pixel_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
+        "pixel_filter": 0.0, "edge_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
         "medium_fill_radius": 0,
     },
 }

@@ -30,7 +30,7 @@ DEFAULT_TEMPORAL = ["values", "fill_medium", "gradients", "reflected_lights", "d
                           "remodulate"]),
     ("default", "causal", [*DEFAULT_TEMPORAL, "accumulate", "temporal_albedo", "variance",
                            "atrous", "store_history", "despike", "remodulate",
-                           "despike_lone", "pixel_filter"]),
+                           "despike_lone", "pixel_filter", "edge_filter"]),
     ("paper", "forward", [*TEMPORAL, "capture", "accumulate", "pass_history",
                           "store_history"]),
     ("default", "forward", [*DEFAULT_TEMPORAL, "temporal_albedo", "capture", "accumulate",
@@ -40,7 +40,7 @@ DEFAULT_TEMPORAL = ["values", "fill_medium", "gradients", "reflected_lights", "d
     ("default", "reverse", [*DEFAULT_TEMPORAL, "combine", "accumulate", "temporal_albedo",
                             "combine_albedo", "pass_history", "variance", "atrous",
                             "store_history", "despike", "remodulate", "despike_lone",
-                            "pixel_filter", "release_combination"]),
+                            "pixel_filter", "edge_filter", "release_combination"]),
 ])
 def test_stage_order_per_preset(preset: str, kind: str, expected: list[str]) -> None:
     assert stage_names(PRESETS[preset], kind) == expected
@@ -59,6 +59,7 @@ def test_stage_order_per_preset(preset: str, kind: str, expected: list[str]) -> 
     ({"despike": 2.0}, ("despike", "despike_lone")),
     ({"taa": True}, ("taa",)),
     ({"pixel_filter": 0.05}, ("pixel_filter",)),
+    ({"edge_filter": 0.05}, ("edge_filter",)),
 ])
 def test_an_optional_stage_runs_only_when_its_setting_is_on(
     changes: dict[str, object], stages: tuple[str, ...],

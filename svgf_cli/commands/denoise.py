@@ -360,6 +360,7 @@ def _light_text(run: _Run, options: dict[str, Any]) -> str:
 
 def _log_start(run: _Run, info: Any) -> None:
     """Version, threads, preset, every parameter, and what auto resolved to on ``info``."""
+    from svgf_cli.filters.edge_filter import edge_filter_weight
     from svgf_cli.filters.pixel_filter import pixel_filter_weight
     from svgf_cli.io.exr import centre_sampled
 
@@ -377,6 +378,9 @@ def _log_start(run: _Run, info: Any) -> None:
         progress.info(f"Pixel filter: {weight:g} (auto: "
                       + ("the header says one sample through the pixel centre)" if centre
                          else "the header does not say the samples are pixel centres)"))
+    if params.edge_filter == AUTO_PIXEL_FILTER:
+        weight = edge_filter_weight(params.edge_filter, centre_sampled(info.attributes))
+        progress.info(f"Edge filter: {weight:g} (auto, as the pixel filter)")
 
 
 def _log_frames(run: _Run) -> None:

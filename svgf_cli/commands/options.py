@@ -96,11 +96,11 @@ PARAM_FIELD_NAMES = frozenset(PARAM_TYPES)
 
 
 def param_label(name: str, value: Any) -> str:
-    """A parameter value as the user writes it (``auto`` for the automatic a-trous count
-    and pixel filter; booleans as on/off in listings are the caller's choice)."""
+    """A parameter value as the user writes it (``auto`` for the automatic a-trous count,
+    pixel filter and edge filter; booleans as on/off in listings are the caller's choice)."""
     if name == "atrous_iterations" and value == AUTO_ITERATIONS:
         return "auto"
-    if name == "pixel_filter" and value == AUTO_PIXEL_FILTER:
+    if name in ("pixel_filter", "edge_filter") and value == AUTO_PIXEL_FILTER:
         return "auto"
     return str(value)
 

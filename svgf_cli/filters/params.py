@@ -344,6 +344,16 @@ class SVGFParams:
         group="output",
         valid=Range(0, 1 / 3, auto=AUTO_PIXEL_FILTER, shown="0..1/3", noun="a weight"),
     )
+    edge_filter: float = _p(
+        0.0,
+        "Weight w each pair of neighbouring pixels on two surfaces (another object, the"
+        " background, a depth step) exchanges of its whole colour, emission included: the"
+        " renderer's pixel filter across outlines, which frames sampled at pixel centres lack"
+        " (0 = off; auto (-1 in svgf/params) = 0.05 where the header says the frame is one"
+        " sample through the pixel centre, else off).",
+        group="output",
+        valid=Range(0, 0.25, auto=AUTO_PIXEL_FILTER, shown="0..1/4", noun="a weight"),
+    )
     taa: bool = _p(
         False,
         "Temporal anti-aliasing of the output at object outlines (the paper's last step):"
@@ -433,6 +443,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   " otherwise: docs/algorithm.md#volumes-medium-pixels"),
         Departure("atrous_iterations", AUTO_ITERATIONS, "the filter's reach grows with the"
                   f" image (atrous_iterations_for): {_ALG}#the-filters-reach-grows-with-the-image"),
+        Departure("edge_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres show"
+                  " staircase outlines that crawl as they move, where the renderer's frame"
+                  f" is anti-aliased: {_ALG}#outlines-of-centre-sampled-frames-edge-filter"),
         Departure("pixel_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres lack the"
                   f" renderer's pixel filter: {_ALG}"
                   "#the-pixel-filter-of-centre-sampled-frames---pixel-filter"),

@@ -23,6 +23,7 @@ from svgf_cli.filters.stages.combine_albedo import CombineAlbedo
 from svgf_cli.filters.stages.demodulate import Demodulate
 from svgf_cli.filters.stages.despike import Despike
 from svgf_cli.filters.stages.despike_lone import DespikeLone
+from svgf_cli.filters.stages.edge_filter import EdgeFilter
 from svgf_cli.filters.stages.fill_medium import FillMedium
 from svgf_cli.filters.stages.firefly_clamp import FireflyClamp
 from svgf_cli.filters.stages.gradients import Gradients
@@ -78,6 +79,7 @@ def causal() -> list[Stage]:
         *composition(),
         TAA(),  # taa
         PixelFilter(),  # pixel_filter
+        EdgeFilter(),  # edge_filter
     ]
 
 
@@ -106,6 +108,7 @@ def reverse() -> list[Stage]:
         StoreHistory(),
         *(output_frame(stage) for stage in composition()),
         output_frame(PixelFilter()),  # pixel_filter
+        output_frame(EdgeFilter()),  # edge_filter
         output_frame(ReleaseCombination()),
     ]
 
