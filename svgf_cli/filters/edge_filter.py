@@ -55,38 +55,53 @@ def _outline(mesh_a: np.int32, mesh_b: np.int32, z_a: np.float32, z_b: np.float3
     return z_a > DEPTH_JUMP * z_b or z_b > DEPTH_JUMP * z_a
 
 
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _pair_weights(ids_a: np.ndarray, z_a: np.ndarray, ids_b: np.ndarray, z_b: np.ndarray,
+                  weight: np.float32, out: np.ndarray) -> None:
+    """``out[i] = weight`` where pixels ``a[i]`` and ``b[i]`` show two surfaces, else 0."""
+    for i in range(out.size):
+        out[i] = weight if _outline(ids_a[i], ids_b[i], z_a[i], z_b[i]) else _ZERO
+
+
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def edge_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
                 weight: np.float32, out: np.ndarray) -> None:
     """``out`` (3, H, W): ``colour`` (3, H, W) with ``weight`` of each outline neighbour's
-    colour exchanged, along rows then columns (module docstring); float32."""
+    colour exchanged, along rows then columns (module docstring); float32. The pairs'
+    weights are found once per row; the exchanges run over row slices."""
     height, width = depth.shape
     rows = np.empty((3, height, width), dtype=F32)
     for y in prange(height):
         ids, z = mesh_id[y], depth[y]
+        left = np.zeros(width, dtype=F32)  # with the pixel to the left
+        right = np.zeros(width, dtype=F32)
+        _pair_weights(ids[:-1], z[:-1], ids[1:], z[1:], weight, right[:-1])
+        left[1:] = right[:-1]
         for c in range(3):
             source, row = colour[c, y], rows[c, y]
-            for x in range(width):
-                row[x] = source[x]
-            for x in range(width - 1):
-                if _outline(ids[x], ids[x + 1], z[x], z[x + 1]):
-                    flow = weight * (source[x + 1] - source[x])
-                    row[x] += flow
-                    row[x + 1] -= flow
+            row[0] = source[0] + right[0] * (source[1] - source[0]) if width > 1 else source[0]
+            for x in range(1, width - 1):
+                here = source[x]
+                row[x] = (here + left[x] * (source[x - 1] - here)
+                          + right[x] * (source[x + 1] - here))
+            if width > 1:
+                row[width - 1] = source[width - 1] + left[width - 1] * (
+                    source[width - 2] - source[width - 1])
     for y in prange(height):
+        ids, z = mesh_id[y], depth[y]
+        up = np.zeros(width, dtype=F32)
+        down = np.zeros(width, dtype=F32)
+        if y > 0:
+            _pair_weights(ids, z, mesh_id[y - 1], depth[y - 1], weight, up)
+        if y < height - 1:
+            _pair_weights(ids, z, mesh_id[y + 1], depth[y + 1], weight, down)
+        above = max(y - 1, 0)
+        below = min(y + 1, height - 1)
         for c in range(3):
-            target = out[c, y]
-            here = rows[c, y]
+            here, target = rows[c, y], out[c, y]
+            over, under = rows[c, above], rows[c, below]
             for x in range(width):
-                target[x] = here[x]
-        for other in (y - 1, y + 1):
-            if other < 0 or other >= height:
-                continue
-            ids, z = mesh_id[y], depth[y]
-            ids_o, z_o = mesh_id[other], depth[other]
-            for x in range(width):
-                if _outline(ids[x], ids_o[x], z[x], z_o[x]):
-                    for c in range(3):
-                        out[c, y, x] += weight * (rows[c, other, x] - rows[c, y, x])
+                h = here[x]
+                target[x] = h + up[x] * (over[x] - h) + down[x] * (under[x] - h)
