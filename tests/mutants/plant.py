@@ -164,8 +164,10 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "reproject-motion-sign", "filters", "motion sign flipped in reprojection",
         "svgf_cli/filters/reproject.py",
-        (("px = F32(x) + motion[0, uy, ux]\n            py = F32(y) + motion[1, uy, ux]",
-          "px = F32(x) - motion[0, uy, ux]\n            py = F32(y) - motion[1, uy, ux]"),),
+        (("px = F32(x + origin_x) + motion[0, uy, ux]\n"
+          "            py = F32(y + origin_y) + motion[1, uy, ux]",
+          "px = F32(x + origin_x) - motion[0, uy, ux]\n"
+          "            py = F32(y + origin_y) - motion[1, uy, ux]"),),
         FILTER_TESTS + ("tests/test_cli_ground_truth.py",),
     ),
     Mutant(
@@ -289,8 +291,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "glossy-no-clamp", "filters", "glossy signals' history not clamped",
         "svgf_cli/filters/stages/history_clamp.py",
-        (('        ks = [glossy_k if glossy else p.history_clamp',
-          '        ks = [p.history_clamp'),),
+        (('    return [glossy_k if g else params.history_clamp for g in glossy]',
+          '    return [params.history_clamp for g in glossy]'),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -469,8 +471,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "bidirectional-antilag-causal-sigma", "filters",
         "the passes of a bidirectional run test their history at the causal significance",
         "svgf_cli/filters/stages/antilag.py",
-        (('(PASS_ANTILAG_SIGMA_SCALE if temporal.bidirectional else 1.0)',
-          '(1.0 if temporal.bidirectional else 1.0)'),),
+        (('(PASS_ANTILAG_SIGMA_SCALE if bidirectional else 1.0)',
+          '(1.0 if bidirectional else 1.0)'),),
         FILTER_TESTS,
     ),
     Mutant(
