@@ -9,16 +9,24 @@ applies one set of weights to every AOV):
 
 * **light groups**: each group is filtered as a signal of a second Denoiser (its own
   history, variance and anti-lag: a group switching on is a lighting change of that group
-  alone), and the filtered groups ``f_k`` give the shares: ``g_k = C * f_k / sum_j f_j``.
+  alone), and the filtered groups ``f_k``, with the colour's pixel filter applied as the
+  colour's filter applies it (:func:`spill_groups`), give the shares:
+  ``g_k = C * f_k / sum_j f_j``.
 * **light passes**: each pass belongs to the filtered signal built from it (Cycles' ``DiffDir``
   to ``diffuse_direct``...); a signal holding several passes (``specular``: glossy and
-  transmission, direct and indirect) is split by the passes' light box-filtered over 7x7
-  pixels times the pixel's own colour pass; the passes are then scaled together so that they
-  add up to ``C - emission`` (the pixel filter and despike stages act on the colour after
-  the signals are summed), and a pass stored divided by its colour is divided back.
+  transmission, direct and indirect) is split by the passes' stored light averaged over the
+  7x7 pixels that have its colour pass, times the pixel's own colour pass; the passes are
+  then scaled together so that they add up to ``C - emission`` (the pixel filter and despike
+  stages act on the colour after the signals are summed), and a pass stored divided by its
+  colour is divided back. Where that colour is 0, next to a pixel where it is not, such a
+  pass is its neighbours' light over their colour (a converged render's pixel filter reaches
+  one pixel past the 1-spp colour's edge; it adds nothing there). On medium pixels it
+  carries light only next to a sample that reached the surface (:func:`colour_cover`).
 
 Where the shares' denominator is (near) 0 while the colour is not, the input layers'
-box-filtered shares are used, and where those are 0 too, equal shares.
+box-filtered shares are used, and where those are 0 too, each layer's light over the frame
+(a layer black in the frame gets none); the light no light pass has goes to the emission
+passes.
 """
 
 from __future__ import annotations
@@ -28,8 +36,16 @@ from collections.abc import Callable
 
 import numpy as np
 
+from svgf_cli.filters.medium import MEDIUM_DEPTH
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.filters.shares import box_mean, fallback_pixels, split_shares
+from svgf_cli.filters.pixel_filter import pixel_filter, pixel_filter_weight
+from svgf_cli.filters.shares import (
+    box_mean,
+    fallback_pixels,
+    fill_from_neighbours,
+    split_shares,
+    touching,
+)
 from svgf_cli.frame import DenoisedFrame, Frame, LightLayer, LightLayers, Signal
 
 F32 = np.float32
@@ -53,6 +69,7 @@ def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS,
 
 Planes = np.ndarray | list[np.ndarray]  # K (3, H, W) planes: a list, or one (K, 3, H, W) array
 Fallback = Planes | Callable[[], Planes] | None
+Last = np.ndarray | Callable[[], np.ndarray] | None  # (K, 3) weights for the whole image
 
 
 def _stacked(planes: Planes) -> np.ndarray:
@@ -62,25 +79,43 @@ def _stacked(planes: Planes) -> np.ndarray:
 
 
 def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = None,
-                    out: np.ndarray | None = None) -> np.ndarray:
+                    out: np.ndarray | None = None, last: Last = None) -> np.ndarray:
     """``total`` split per pixel and channel in proportion to the K ``weights`` (negative
     weights count as 0): the (K, 3, H, W) parts, adding up to ``total`` (to float32
     rounding). Where the weights sum to at most SHARE_FLOOR, ``fallback``'s proportions
-    (the planes, or a function making them), and where those too, equal parts
-    (``filters.shares.split_shares``). The fallback is made and stacked only when some value
-    needs it (most frames: none). ``out`` (None: a new array) may be the stacked weights
-    themselves: each value's weights are read before its parts are written."""
+    (the planes, or a function making them), and where those too, ``last``'s: one weight
+    per part and channel for the whole image ((K, 3), or a function making it: e.g. each
+    part's light over the frame, :func:`frame_totals`; None: equal parts); where those are
+    0 too, no parts (the caller gives that total to someone else;
+    ``filters.shares.split_shares``). The fallback and ``last`` are made and stacked only
+    when some value needs them (most frames: none). ``out`` (None: a new array) may be the
+    stacked weights themselves: each value's weights are read before its parts are
+    written."""
     weights = _stacked(weights)
     parts = np.empty_like(weights) if out is None else out
     if len(weights) == 1:
         np.copyto(parts[0], total)
         return parts
     total = np.ascontiguousarray(total, dtype=F32)
-    backup = weights
-    if fallback is not None and fallback_pixels(total, weights, SHARE_FLOOR):
-        backup = _stacked(fallback() if callable(fallback) else fallback)
-    split_shares(total, weights, backup, backup is not weights, SHARE_FLOOR, parts)
+    backup, rest = weights, None
+    if fallback_pixels(total, weights, SHARE_FLOOR):
+        if fallback is not None:
+            backup = _stacked(fallback() if callable(fallback) else fallback)
+        if last is not None:
+            rest = np.asarray(last() if callable(last) else last, dtype=np.float64)
+    if rest is None:
+        rest = np.ones(weights.shape[:2])
+    split_shares(total, weights, backup, backup is not weights, rest, SHARE_FLOOR, parts)
     return parts
+
+
+def frame_totals(planes: list[np.ndarray]) -> np.ndarray:
+    """Each (3, H, W) plane's light summed over the image, (K, 3) float64, negative sums as
+    0: the last resort of :func:`split_by_shares`, so a layer black in the whole frame is
+    given none; a channel black in every plane gets equal weights (the total is not lost)."""
+    totals = np.maximum([p.sum(axis=(1, 2)) for p in planes], 0.0).astype(np.float64)
+    totals[:, totals.sum(axis=0) <= 0.0] = 1.0
+    return totals
 
 
 def compose_groups(colour: np.ndarray, filtered: np.ndarray,
@@ -89,14 +124,34 @@ def compose_groups(colour: np.ndarray, filtered: np.ndarray,
     stacked): ``colour`` split by their shares (the input groups' box-filtered shares where
     the filtered ones are 0)."""
     return split_by_shares(colour, filtered, lambda: [box_filter(g.radiance) for g in groups],
-                           out=filtered)
+                           out=filtered, last=lambda: frame_totals([g.radiance for g in groups]))
+
+
+def spill_groups(filtered: np.ndarray, weight: float) -> None:
+    """In place: the renderer's pixel filter (``filters.pixel_filter``, neighbour ``weight``;
+    0: none) on each filtered group (K, 3, H, W), as the colour's filter applies it to the
+    colour it splits. Without it the light the kernel spills from an object onto the pixels
+    beside it (the sky behind a silhouette) would go to the groups that light those pixels
+    (the world's) rather than to those that light the object."""
+    if weight <= 0.0 or not len(filtered):
+        return
+    zero = np.zeros(filtered.shape[1:], dtype=F32)
+    for group in filtered:  # contiguous (3, H, W) each: the kernel reads before it writes
+        pixel_filter(group, zero, F32(weight), group)
 
 
 def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
-                   passes: list[LightLayer]) -> np.ndarray:
+                   passes: list[LightLayer], barred: dict[int, np.ndarray] | None = None,
+                   emitters: bool = False) -> np.ndarray:
     """The denoised light passes, (P, 3, H, W), in the colour's units (light x colour
-    pass), adding up to ``light`` (the colour less the emission)."""
+    pass), adding up to ``light`` (the colour less the emission). ``barred`` maps a pass's
+    index to the (H, W) pixels where it carries no light (its part there goes to the other
+    passes, in proportion to theirs). Where no pass has light, filtered or read: none when
+    the file has ``emitters`` (emission passes: they take that light), else by the passes'
+    light over the frame; a signal's light where none of its passes has any, likewise among
+    them (a pass black in the whole frame, e.g. Cycles' VolumeInd or TransDir, gets none)."""
     estimates = np.empty((len(passes), *light.shape), dtype=F32)
+    covered: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # by id of a colour pass
     members: dict[str, list[int]] = {}
     for index, layer in enumerate(passes):
         owner = layer.signal if layer.signal in signal_outputs else ""
@@ -109,12 +164,43 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
         own = [passes[i] for i in indexes]
         weights = np.empty((len(own), *light.shape), dtype=F32)
         for smooth, layer in zip(weights, own, strict=True):
-            box_filter(layer.stored, out=smooth)
-            if layer.colour is not None:
-                smooth *= layer.colour
-        estimates[indexes] = split_by_shares(filtered, weights, [p.radiance for p in own],
-                                             out=weights)
-    return split_by_shares(light, estimates, [p.radiance for p in passes], out=estimates)
+            if layer.colour is None:
+                box_filter(layer.stored, out=smooth)
+                continue
+            # The stored light's mean over the window's pixels that have its colour (a pass
+            # divided by its colour is 0 off it: a plain mean dims it along the colour's
+            # edges, e.g. TransInd around the rim of a glass), times the pixel's colour.
+            if id(layer.colour) not in covered:
+                covered[id(layer.colour)] = _coverage(layer.colour)
+            surface, coverage = covered[id(layer.colour)]
+            box_filter(np.multiply(layer.stored, surface, dtype=F32), out=smooth)
+            np.divide(smooth, coverage, out=smooth, where=coverage > 0)
+            smooth *= layer.colour
+        estimates[indexes] = split_by_shares(
+            filtered, weights, [p.radiance for p in own], out=weights,
+            last=lambda own=own: frame_totals([p.radiance for p in own]))
+    barred = {k: pixels for k, pixels in (barred or {}).items() if pixels.any()}
+    for index, pixels in barred.items():
+        np.copyto(estimates[index], 0.0, where=pixels)
+
+    def fallback() -> Planes:
+        if not barred:
+            return [p.radiance for p in passes]
+        read = np.stack([p.radiance for p in passes])
+        for index, pixels in barred.items():
+            np.copyto(read[index], 0.0, where=pixels)
+        return read
+
+    last = (np.zeros((len(passes), 3)) if emitters
+            else lambda: frame_totals([p.radiance for p in passes]))
+    return split_by_shares(light, estimates, fallback, out=estimates, last=last)
+
+
+def _coverage(colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where a colour pass (3, H, W) is not 0 in some channel, (H, W) float32 1/0, and that
+    mask's mean over the share window, (1, H, W)."""
+    surface = (colour > 0).any(axis=0).astype(F32)
+    return surface, box_filter(surface[None])
 
 
 def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
@@ -157,15 +243,54 @@ def medium_colours(colours: dict[tuple[str, str, str], np.ndarray],
 
 
 def stored_values(layer: LightLayer, radiance: np.ndarray,
-                  colour: np.ndarray | None) -> np.ndarray:
+                  colour: np.ndarray | None, cover: Cover | None = None) -> np.ndarray:
     """A denoised pass in its stored units, in place of ``radiance``: divided by its
     (written) colour pass where that is not 0 (elsewhere the pass adds nothing to the
-    colour: its stored light as read)."""
+    colour: its stored light as read). With its colour pass's ``cover``: on the pixels
+    where that colour is 0 in every channel, next to a pixel where the pass carries light,
+    those neighbours' light over their colour (:func:`filters.shares.fill_from_neighbours`),
+    as a converged render's pixel filter spreads a pass divided by its colour one pixel past
+    the 1-spp colour's edge; it still adds nothing there."""
     if colour is not None:
         lit = colour > 0
         np.divide(radiance, colour, out=radiance, where=lit)
         np.copyto(radiance, layer.stored, where=~lit)
+        if cover is not None:
+            fill_from_neighbours(radiance, colour, cover.source, cover.vacant)
     return radiance
+
+
+@dataclasses.dataclass
+class Cover:
+    """Where a colour pass (as written) lets its light passes carry light, (H, W) bool each:
+    ``surface``, its colour not 0 in some channel; ``barred``, the medium pixels where they
+    carry none (its colour 0 there, or no pixel among the 4 neighbours that is no medium pixel
+    and has the colour: a sample that reached the surface); ``source``, surface and not
+    barred; ``vacant``, not surface."""
+
+    surface: np.ndarray
+    barred: np.ndarray | None
+    source: np.ndarray
+    vacant: np.ndarray = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        self.vacant = ~self.surface
+
+
+def colour_cover(colour: np.ndarray, medium: np.ndarray | None) -> Cover:
+    """The :class:`Cover` of a colour pass (3, H, W) as written, with the frame's medium
+    pixels (None: none). A medium pixel's colour is the file's averaged over 7x7 pixels
+    (:func:`medium_colours`): some reach the surface, but next to the sky or deep in the
+    medium none may, and a pass divided by a colour averaged from samples a few pixels away
+    is a light divided by a colour near 0 (a converged render's is 0 there: no surface in
+    the pixel). Next to a pixel whose sample reached it, the converged colour is not 0."""
+    surface = (colour > 0).any(axis=0)
+    if medium is None:
+        return Cover(surface, None, surface)
+    reached = np.empty_like(surface)
+    touching(surface & ~medium, reached)
+    barred = medium & ~(surface & reached)
+    return Cover(surface, barred, surface & ~barred)
 
 
 def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[LightLayer],
@@ -232,23 +357,36 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
         emission[:, pixels] += taken
         outputs = {**outputs, medium_signal: medium_light}
     residual = denoised.color.copy() if emission is None else denoised.color - emission
-    parts = compose_passes(residual, outputs, light.passes)
     colours = remodulated_colours(light.passes, albedos)
-    if denoised.medium is not None:
-        medium_colours(colours, light.passes, denoised.medium)
-    lit = np.empty_like(residual)  # a pass's light as written: stored x colour
-    for layer, part in zip(light.passes, parts, strict=True):
+    medium = denoised.medium if denoised.medium is not None and denoised.medium.any() else None
+    if medium is not None:
+        medium_colours(colours, light.passes, medium)
+    written: list[np.ndarray | None] = []  # each pass's colour pass as written
+    covers: dict[int, Cover] = {}  # by id of the colour written
+    for layer in light.passes:
         colour = layer.colour
         if layer.colour_channels is not None and layer.colour_channels in colours:
             colour = colours[layer.colour_channels]
-        stored = stored_values(layer, part, colour)
+        written.append(colour)
+        if colour is not None and id(colour) not in covers:
+            covers[id(colour)] = colour_cover(colour, medium)
+    barred = {k: cover.barred for k, colour in enumerate(written) if colour is not None
+              and (cover := covers[id(colour)]).barred is not None}
+    # Light no pass has, filtered or read (the pixel filter's spill onto the background) goes
+    # to the emission passes when there are some, not in equal parts to every pass.
+    parts = compose_passes(residual, outputs, light.passes, barred, bool(light.emission))
+    lit = np.empty_like(residual)  # a pass's light as written: stored x colour
+    for layer, part, colour in zip(light.passes, parts, written, strict=True):
+        stored = stored_values(layer, part, colour,
+                               None if colour is None else covers[id(colour)])
         _write(layer.channels, stored, denoised.light)
         residual -= stored if colour is None else np.multiply(stored, colour, out=lit)
     for channels, colour in colours.items():
         _write(channels, colour, denoised.light)
     if not light.emission:
         return
-    extra = split_by_shares(residual, kept, None)
+    extra = split_by_shares(residual, kept, None,
+                            last=lambda: frame_totals([e.radiance for e in light.emission]))
     for layer, own, part in zip(light.emission, kept, extra, strict=True):
         _write(layer.channels, np.add(own, part, out=part), denoised.light)
 
@@ -284,6 +422,8 @@ def _planes(layers: dict[str, np.ndarray], names: tuple[str, ...], suffix: str =
 # filter's: cheaper settings (bench/light_layers.py and bench/light_layers_cost.py; docs/
 # cycles.md#light-groups-and-light-passes-come-out-denoised).
 GROUP_SETTINGS: dict[str, object] = {
+    # The filter's pixel filter stage acts on its summed output, which the shares do not use:
+    # spill_groups applies the colour's to each filtered group instead.
     "atrous_iterations": 3, "temporal_albedo": False, "pixel_filter": 0.0, "despike": 0.0,
     # Shares want smooth groups: the colour's tighter stop (docs/stability.md#a-tighter-
     # luminance-stop) left Combined_env at 0.30x its input's relMSE, 2.5 gives 0.27x.
@@ -296,10 +436,23 @@ def group_params(params: SVGFParams) -> SVGFParams:
     return dataclasses.replace(params, **GROUP_SETTINGS)  # type: ignore[arg-type]
 
 
-def group_frame(frame: Frame, groups: list[LightLayer]) -> Frame:
+def group_frame(frame: Frame, groups: list[LightLayer],
+                medium: np.ndarray | None = None) -> Frame:
     """The frame whose signals are the light groups (each filtered like a combined colour:
-    demodulated by the G-buffer albedo, direct and indirect light together), same guides."""
-    signals = [Signal(f"group{k}", np.ascontiguousarray(g.radiance, dtype=F32), frame.albedo,
+    demodulated by the G-buffer albedo, direct and indirect light together), same guides.
+    On the ``medium`` pixels (the colour filter's, its G-buffer filled: ``frame``) that are
+    a medium surface of their own (no surface near: ``filters.medium``) the groups are
+    filtered as radiance, as the colour's medium signal is: the G-buffer albedo there is
+    the medium's on this pixel's sample (Cycles' ``Denoising Albedo`` inside smoke: 0.2 to
+    1.8 from one pixel to the next), and remodulating by it puts that noise back into the
+    groups' shares."""
+    albedo = frame.albedo
+    if medium is not None:
+        own = medium & (frame.depth == MEDIUM_DEPTH)
+        if own.any():
+            albedo = albedo.copy()
+            albedo[:, own] = 1.0
+    signals = [Signal(f"group{k}", np.ascontiguousarray(g.radiance, dtype=F32), albedo,
                       guide_albedo=True, mixed=True) for k, g in enumerate(groups)]
     return dataclasses.replace(frame, signals=signals, emission=None, light=None,
                                final_colour=None)
@@ -351,7 +504,8 @@ class LayeredDenoiser:
         denoised = self.colour.process(frame)
         gbuffer, denoised.gbuffer = denoised.gbuffer, None  # for the groups' filter only
         assert gbuffer is not None
-        groups = group_frame(gbuffer, light.groups) if light.groups else None
+        groups = (group_frame(gbuffer, light.groups, denoised.medium) if light.groups
+                  else None)
         emission = denoised.emission  # the frame's, less what the filter took into a signal
         names = self.colour.signal_names or ()
         outputs = _planes(denoised.layers, names)
@@ -369,6 +523,8 @@ class LayeredDenoiser:
         if groups is not None:
             layers = self.groups.process(groups).layers
             filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
+            spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
+                                                       frame.centre_sampled))
             for layer, part in zip(light.groups, compose_groups(denoised.color, filtered,
                                                                 light.groups), strict=True):
                 _write(layer.channels, part, denoised.light)

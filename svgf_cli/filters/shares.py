@@ -67,14 +67,19 @@ def _positive_sum(weights: np.ndarray, c: int, y: int, x: int) -> float:
 
 @njit(**_JIT)
 def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
-                 use_fallback: bool, floor: float, out: np.ndarray) -> None:
+                 use_fallback: bool, last: np.ndarray, floor: float, out: np.ndarray) -> None:
     """``out[k]`` = ``total`` x ``weights[k] / sum_j weights[j]`` per pixel and channel
     (negative weights count as 0); where that sum is at most ``floor``, the same with
-    ``fallback`` (when ``use_fallback``), and where that is too, equal parts. ``out`` may be
-    ``weights``: a value's weights are all read before its parts are written."""
+    ``fallback`` (when ``use_fallback``), and where that is too, with the (K, C) ``last``
+    (one weight per part and channel for the whole image: ones for equal parts), and where
+    those are all 0, no parts (0: the caller gives the total to someone else). ``out`` may
+    be ``weights``: a value's weights are all read before its parts are written."""
     count, channels, height, width = weights.shape
     for job in prange(channels * height):
         c, y = job // height, job % height
+        rest = 0.0
+        for k in range(count):
+            rest += max(last[k, c], 0.0)
         for x in range(width):
             s = _positive_sum(weights, c, y, x)
             source = 0
@@ -84,7 +89,7 @@ def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
             t = total[c, y, x]
             if s <= floor:
                 for k in range(count):
-                    out[k, c, y, x] = t / count
+                    out[k, c, y, x] = t * (max(last[k, c], 0.0) / rest) if rest > 0.0 else 0.0
             elif source == 0:
                 for k in range(count):
                     out[k, c, y, x] = t * (max(weights[k, c, y, x], 0.0) / s)
@@ -106,3 +111,45 @@ def fallback_pixels(total: np.ndarray, weights: np.ndarray, floor: float) -> int
             if _positive_sum(weights, c, y, x) <= floor and total[c, y, x] != 0.0:
                 found[job] += 1
     return int(found.sum())
+
+
+@njit(**_JIT)
+def touching(mask: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (H, W) bool: whether one of the pixel's 4 neighbours (up, down, left, right;
+    inside the image) is in ``mask`` (H, W) bool."""
+    height, width = mask.shape
+    for y in prange(height):
+        for x in range(width):
+            out[y, x] = ((y > 0 and mask[y - 1, x]) or (y + 1 < height and mask[y + 1, x])
+                         or (x > 0 and mask[y, x - 1]) or (x + 1 < width and mask[y, x + 1]))
+
+
+@njit(**_JIT)
+def fill_from_neighbours(stored: np.ndarray, colour: np.ndarray, source: np.ndarray,
+                         target: np.ndarray) -> int:
+    """In place, on each ``target`` pixel (H, W) bool with a ``source`` pixel among its 4
+    neighbours: ``stored`` (3, H, W) = those neighbours' ``stored x colour`` summed over their
+    ``colour`` summed, per channel (0 where that colour sum is 0): a light pass stored
+    divided by its colour, one pixel past where its colour ends. Targets must not be
+    sources (a target's value is read by none). Returns how many pixels were filled."""
+    _, height, width = stored.shape
+    filled = np.zeros(height, np.int64)
+    for y in prange(height):
+        for x in range(width):
+            if not target[y, x]:
+                continue
+            found = False
+            for c in range(3):
+                light = 0.0
+                weight = 0.0
+                for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                    yy, xx = y + dy, x + dx
+                    if 0 <= yy < height and 0 <= xx < width and source[yy, xx]:
+                        found = True
+                        light += stored[c, yy, xx] * colour[c, yy, xx]
+                        weight += colour[c, yy, xx]
+                if found:
+                    stored[c, y, x] = light / weight if weight > 0.0 else 0.0
+            if found:
+                filled[y] += 1
+    return int(filled.sum())
