@@ -24,9 +24,13 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(PY) -m svgf_cli.demo
 
+# pytest-xdist: TEST_WORKERS processes, worksteal balancing; on a clean clone they share numba's
+# compile through its on-disk cache (tests/conftest.py orders their shares). TEST_WORKERS=0: one.
+TEST_WORKERS ?= 2
+
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist worksteal
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
