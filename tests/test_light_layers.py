@@ -423,17 +423,24 @@ def test_a_group_switching_on_is_not_lagged(outputs: dict[str, Path]) -> None:
     assert ratio(5) == pytest.approx(steady, rel=0.15)
 
 
-@pytest.mark.parametrize("name", ["Combined_key", "Combined_fill", "DiffInd", "GlossDir",
-                                  "GlossInd"])
-def test_denoised_layer_relmse_at_most_a_third_of_the_input(outputs: dict[str, Path],
-                                                             name: str) -> None:
+def _layer_relmse(outputs: dict[str, Path], name: str) -> tuple[float, float]:
+    """Layer ``name``'s mean relMSE (trimmed) over the shot's frames against the reference's
+    same layer: the denoised output's and the input's."""
     out, noisy = [], []
     for frame in FRAMES:
         file = f"in.{frame:04d}.exr"
         ref = layer(channels(SHOT / file.replace("in.", "ref.")), name)
         out.append(relmse_trimmed(layer(channels(outputs["denoised"] / file), name), ref))
         noisy.append(relmse_trimmed(layer(channels(SHOT / file), name), ref))
-    assert np.mean(out) <= 0.3 * np.mean(noisy)
+    return float(np.mean(out)), float(np.mean(noisy))
+
+
+@pytest.mark.parametrize("name", ["Combined_key", "Combined_fill", "DiffInd", "GlossDir",
+                                  "GlossInd"])
+def test_denoised_layer_relmse_at_most_a_third_of_the_input(outputs: dict[str, Path],
+                                                             name: str) -> None:
+    out, noisy = _layer_relmse(outputs, name)
+    assert out <= 0.3 * noisy
 
 
 @pytest.mark.parametrize(("name", "bound"), [("Combined_env", 0.25), ("DiffDir", 0.27),
@@ -443,14 +450,10 @@ def test_layer_errors_measured_on_the_production_shot(outputs: dict[str, Path], 
     """Measured 2026-11-28 (bench/light_layers.py): Combined_env 0.22x its input's relMSE
     (0.27x before the groups' shares took the colour's pixel filter), DiffDir 0.23x (0.30x
     before a pass divided by its colour reached one pixel past the colour's edge), TransInd
-    0.30x (0.51x before that and the shares' means over the colour's pixels)."""
-    out, noisy = [], []
-    for frame in FRAMES:
-        file = f"in.{frame:04d}.exr"
-        ref = layer(channels(SHOT / file.replace("in.", "ref.")), name)
-        out.append(relmse_trimmed(layer(channels(outputs["denoised"] / file), name), ref))
-        noisy.append(relmse_trimmed(layer(channels(SHOT / file), name), ref))
-    assert np.mean(out) <= bound * np.mean(noisy), (np.mean(out), np.mean(noisy))
+    0.30x (0.51x before that and the shares' means over the colour's pixels). With the
+    edge filter in default: Combined_env 0.200x, DiffDir 0.263x, TransInd 0.303x."""
+    out, noisy = _layer_relmse(outputs, name)
+    assert out <= bound * noisy, (out, noisy)
 
 
 def test_no_light_where_a_pass_has_none(outputs: dict[str, Path]) -> None:
