@@ -319,6 +319,39 @@ def test_split_by_shares_in_place_and_stacked_as_from_a_list() -> None:
     assert np.array_equal(split_by_shares(total, one, out=one)[0], total)
 
 
+def test_passes_read_side_by_side_are_stacked_without_a_copy() -> None:
+    """The light passes as read lie one after the other (io.lightlayers.pass_layers): a run
+    of them is one (K, 3, H, W) view for the shares; other lists are stacked, as before."""
+    from svgf_cli.filters.composable import _stacked
+    from svgf_cli.frame import Frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    rng = np.random.default_rng(5)
+    block = rng.random((4, 3, 5, 6)).astype(np.float32)
+    view = _stacked([block[1], block[2], block[3]])
+    assert np.shares_memory(view, block) and np.array_equal(view, block[1:])
+    apart = [block[0], block[2]]  # not consecutive: a copy
+    copied = _stacked(apart)
+    assert not np.shares_memory(copied, block) and np.array_equal(copied, np.stack(apart))
+    # The reader's passes: one block, each radiance its stored light x colour, bit for bit.
+    result = _read_production_frame()
+    light = read_light_layers(result, "cycles")
+    assert isinstance(result.frame, Frame) and len(light.passes) >= 4
+    passes = light.passes
+    whole = _stacked([p.radiance for p in passes])
+    assert np.shares_memory(whole, passes[0].radiance)
+    for layer in passes:
+        want = layer.stored * layer.colour if layer.colour is not None else layer.stored
+        assert np.array_equal(layer.radiance.view(np.uint32), want.view(np.uint32))
+
+
+def _read_production_frame():  # noqa: ANN202
+    from svgf_cli.io.exr import read_frame
+
+    mapping = build_mapping("cycles")
+    return read_frame(SHOT / "in.0001.exr", mapping, mapping.motion_convention)
+
+
 def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
     """The light groups' filter runs no fill_medium of its own: on the fog shot it filters
     the groups bit for bit as from the frame's own G-buffer (its own fill would compute the

@@ -90,6 +90,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, fast_exp, luminance
+from svgf_cli.halfconv import to_half
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -337,7 +338,7 @@ def _scaled_half(plane: np.ndarray) -> tuple[np.ndarray, float]:
     if not np.isfinite(largest) or largest <= 0.0:
         return np.zeros(plane.shape, dtype=np.float16), 1.0
     factor = largest / HALF_TARGET
-    half = np.multiply(plane, F32(1.0 / factor), dtype=F32).astype(np.float16)
+    half = to_half(np.multiply(plane, F32(1.0 / factor), dtype=F32))
     return half, factor
 
 

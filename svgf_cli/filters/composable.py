@@ -73,9 +73,18 @@ Last = np.ndarray | Callable[[], np.ndarray] | None  # (K, 3) weights for the wh
 
 
 def _stacked(planes: Planes) -> np.ndarray:
-    """``planes`` as one (K, 3, H, W) float32 C-contiguous array (itself when it is one)."""
-    return np.ascontiguousarray(planes if isinstance(planes, np.ndarray) else np.stack(planes),
-                                dtype=F32)
+    """``planes`` as one (K, 3, H, W) float32 C-contiguous array: itself when it is one, a
+    view when the planes lie one after the other in memory (the light passes as read:
+    ``io.lightlayers.pass_layers``), else their stack (a copy)."""
+    if isinstance(planes, np.ndarray):
+        return np.ascontiguousarray(planes, dtype=F32)
+    first = planes[0]
+    if all(p.dtype == F32 and p.flags.c_contiguous and p.shape == first.shape
+           and p.ctypes.data == first.ctypes.data + k * first.nbytes
+           for k, p in enumerate(planes)):
+        return np.lib.stride_tricks.as_strided(first, (len(planes), *first.shape),
+                                               (first.nbytes, *first.strides))
+    return np.ascontiguousarray(np.stack(planes), dtype=F32)
 
 
 def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = None,
@@ -428,6 +437,12 @@ GROUP_SETTINGS: dict[str, object] = {
     # Shares want smooth groups: the colour's tighter stop (docs/stability.md#a-tighter-
     # luminance-stop) left Combined_env at 0.30x its input's relMSE, 2.5 gives 0.27x.
     "mixed_sigma_luminance": 2.5,
+    # Cost (issue 32): the turning objects' history and the outline filter do not change the
+    # shares, and a 3x3 spatial variance where the history is short moves each group's relMSE
+    # by at most 2 % (bench/light_layers.py on cycles/production, smoke and dof: better on
+    # smoke, worse on dof), for 20-35 % less time in the groups' filter at 1080p
+    # (docs/performance.md#production-frames-1080p-80-channels).
+    "object_history": False, "edge_filter": 0.0, "spatial_variance_radius": 1,
 }
 
 

@@ -32,6 +32,13 @@ REC709 = (F32(0.2126), F32(0.7152), F32(0.0722))
 
 _LOG2E = F32(1.4426950408889634)
 _EXP2_MIN = F32(-126.0)
+# fast_exp gives exactly 0 at or below 2**-50 (x <= -34.66). The weights it makes are summed
+# with a centre weight of at least 9/64, so what is flushed is 14 orders of magnitude below
+# float32's resolution of the sum; without the flush, tiny weights (a depth step of a fog
+# pixel's 1e10 "no surface" next to a wall) went on into products below 2**-126, subnormal
+# numbers, which the CPU handles in microcode: the a-trous measured 5-8x slower per
+# iteration on a 1080p frame of random depths (bench numbers in docs/performance.md).
+_EXP2_FLUSH = F32(-50.0)
 _ZERO = F32(0.0)
 # 2**f on [-1, 0]: least squares on relative error with the constant pinned to 1.
 _C1 = F32(0.6930601)
@@ -117,13 +124,15 @@ def fast_log2(x: np.float32) -> np.float32:
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")
 def fast_exp(x: np.float32) -> np.float32:
-    """exp(x) for float32 ``x <= 0`` (positive x is treated as 0; below -87 gives ~1e-38)."""
+    """exp(x) for float32 ``x <= 0`` (positive x is treated as 0); 0 where exp(x) <= 2**-50
+    (never a subnormal number: see ``_EXP2_FLUSH``)."""
     t = min(max(x * _LOG2E, _EXP2_MIN), _ZERO)
     whole = np.int32(t)  # truncates toward zero, so frac lies in (-1, 0]
     frac = t - np.float32(whole)
     poly = fma(frac, fma(frac, fma(frac, fma(frac, _C4, _C3), _C2), _C1), _ONE)
     bits = (whole + 127) << 23
-    return poly * _int32_bits_as_float32(bits)
+    value = poly * _int32_bits_as_float32(bits)
+    return value if t > _EXP2_FLUSH else _ZERO
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, error_model="numpy")

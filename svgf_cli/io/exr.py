@@ -24,6 +24,7 @@ import OpenImageIO as oiio
 
 from svgf_cli.errors import InputError, SvgfError, UsageError
 from svgf_cli.frame import Frame, Signal
+from svgf_cli.halfconv import gather_float32
 from svgf_cli.io import atomic
 from svgf_cli.io.colour import LuminanceWeights, luminance_weights
 from svgf_cli.io.layers import (
@@ -529,11 +530,7 @@ class _Planes:
 
     def gather(self, names: tuple[str, ...]) -> np.ndarray:
         """(len(names), H, W) float32, C-contiguous (a copy: the source stays as read)."""
-        first = self.located[names[0]].channels[names[0]].pixels
-        stacked = np.empty((len(names), *first.shape), dtype=np.float32)
-        for index, name in enumerate(names):
-            stacked[index] = self.located[name].channels[name].pixels
-        return stacked
+        return gather_float32([self.located[name].channels[name].pixels for name in names])
 
     def locate_like(self, names: tuple[str, ...], like: str) -> bool:
         """Locate ``names`` (not asked for when the file was read) in a part with the same

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from svgf_cli.frame import Frame, LightLayer, LightLayers, Signal
+from svgf_cli.halfconv import gather_float32, zero_nonfinite
 from svgf_cli.io.layers import LOBE_LIGHT_DIVIDED, LOBES
 from svgf_cli.io.signals import SignalPlan, SumCheck, check_sum
 from svgf_cli.io.source import SourceFile
@@ -84,8 +85,8 @@ def _plane(source: SourceFile, names: Sequence[str]) -> np.ndarray | None:
         if pixels is None:
             return None
         planes.append(pixels)
-    plane = np.stack(planes).astype(F32)
-    plane[~np.isfinite(plane)] = 0.0
+    plane = gather_float32(planes)
+    zero_nonfinite(plane)
     return plane
 
 
@@ -113,7 +114,7 @@ def pass_layers(source: SourceFile, resolved, plan: SignalPlan | None,  # noqa: 
         for term in recipe.terms:
             for role in term.light:
                 owner.setdefault(role, recipe.name)
-    layers = []
+    found = []
     colours: dict[tuple[str, ...], np.ndarray | None] = {}  # each colour pass read once
     for role, names, colour_names in _lobe_passes(resolved, preset):
         colour = None
@@ -123,9 +124,19 @@ def pass_layers(source: SourceFile, resolved, plan: SignalPlan | None,  # noqa: 
                 colours[key] = _plane(source, colour_names)
             colour = colours[key]
         stored = _plane(source, names)
-        if stored is None:
-            continue
-        radiance = stored * colour if colour is not None else stored
+        if stored is not None:
+            found.append((role, names, colour_names, colour, stored))
+    if not found:
+        return []
+    # The passes' radiances side by side in one block, in the order of the list: the
+    # filter's shares read consecutive passes as one (K, 3, H, W) array without a copy.
+    block = np.empty((len(found), *found[0][4].shape), dtype=F32)
+    layers = []
+    for radiance, (role, names, colour_names, colour, stored) in zip(block, found, strict=True):
+        if colour is not None:
+            np.multiply(stored, colour, out=radiance)
+        else:
+            radiance[...] = stored
         layers.append(LightLayer(
             tuple(names), radiance, stored, colour,  # type: ignore[arg-type]
             owner.get(role, ""),

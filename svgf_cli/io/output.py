@@ -23,6 +23,7 @@ import numpy as np
 import OpenEXR
 
 from svgf_cli.errors import InputError
+from svgf_cli.halfconv import storable
 from svgf_cli.io import atomic
 from svgf_cli.io.exr import (
     LOSSY_COMPRESSIONS,
@@ -79,17 +80,12 @@ def prepare_colour(colour: np.ndarray, half: bool) -> PreparedColour:
     The order matters: a value is finite before it is clamped, and a finite value above
     65504 would otherwise become Inf in half. ``colour`` is modified in place.
     """
-    bad = ~np.isfinite(colour)
-    nonfinite = int(np.count_nonzero(bad))
-    if nonfinite:
-        colour[bad] = 0.0
-    if not half:
-        return PreparedColour(np.ascontiguousarray(colour, dtype=np.float32), nonfinite)
-    over = np.abs(colour) > HALF_MAX
-    clamped = int(np.count_nonzero(over))
-    if clamped:
-        np.clip(colour, -HALF_MAX, HALF_MAX, out=colour)
-    return PreparedColour(colour.astype(np.float16), nonfinite, clamped)
+    planes, nonfinite, clamped = storable(colour, half)
+    if nonfinite or clamped:  # rare: the same fixes in place, as documented
+        colour[~np.isfinite(colour)] = 0.0
+        if half:
+            np.clip(colour, -HALF_MAX, HALF_MAX, out=colour)
+    return PreparedColour(planes, nonfinite, clamped)
 
 
 # -- choosing per-part settings --------------------------------------------------------------

@@ -4,7 +4,9 @@ read one ahead by the reader thread and written behind by the writer thread.
 Memory holds about three frames whatever the sequence length: the one filtered, the one
 read and the one written (the writer thread reads a denoised frame's planes while the next
 one is filtered: safe because `DenoisedFrame` arrays are fresh per frame, not the filter's
-buffers).
+buffers). The one filtered has let go of the input pixels of the light layers a layered
+filter writes anew, the one written of every channel its output replaces
+(`output.release_light_inputs`, `output.release_replaced`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from svgf_cli.progress import Progress
 from svgf_cli.run.filter import FrameFilter, PassFilter
 from svgf_cli.run.history import HistoryFile
 from svgf_cli.run.light import LightLayerReader
+from svgf_cli.run.output import release_light_inputs
 from svgf_cli.run.stop import StopFlag, interrupted
 from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats, WarmupCount
 from svgf_cli.run.workers import (
@@ -81,6 +84,8 @@ def run_causal(
     light = LightLayerReader(config, progress)
     if light.enabled and make_denoiser is default_denoiser:
         make_denoiser = layered_denoiser
+    # A layered filter writes the light layers anew: their input pixels need not be held.
+    release_light = light.enabled and make_denoiser is layered_denoiser
     frames = FrameFilter(
         config, progress, stats, make_denoiser, history=history, on_first_frame=on_first_frame
     )
@@ -95,6 +100,8 @@ def run_causal(
         for task, result, read_seconds in reads:
             frames.admit(task, result)
             light.attach(task, result)
+            if release_light:
+                release_light_inputs(result, task)
             if task.output is not None and task.frame in warm_colours:
                 result.frame = replace(result.frame, final_colour=warm_colours.pop(task.frame))
             writes.poll()  # report a finished write now rather than a frame later

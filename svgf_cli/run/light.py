@@ -64,7 +64,7 @@ def light_channels(part: SourcePart, planes: dict[str, np.ndarray]
     """The denoised light channels of ``part`` in their stored pixel types (half clamped to
     +-65504, non-finite -> 0) and how many values were fixed. Channels of other parts stay
     as read."""
-    from svgf_cli.io.output import HALF_MAX
+    from svgf_cli.halfconv import storable
 
     out: dict[str, np.ndarray] = {}
     fixed = 0
@@ -72,13 +72,6 @@ def light_channels(part: SourcePart, planes: dict[str, np.ndarray]
         channel = part.channels.get(name)
         if channel is None:
             continue
-        plane = np.array(plane, dtype=np.float32)
-        bad = ~np.isfinite(plane)
-        fixed += int(np.count_nonzero(bad))
-        plane[bad] = 0.0
-        if channel.type_name == "half":
-            np.clip(plane, -HALF_MAX, HALF_MAX, out=plane)
-            out[name] = plane.astype(np.float16)
-        else:
-            out[name] = plane
+        out[name], nonfinite, _clamped = storable(plane, channel.type_name == "half")
+        fixed += nonfinite
     return out, fixed

@@ -6,6 +6,7 @@ where it goes in the input's layout, the debug channels and the ``svgf/*`` prove
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,13 +14,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from svgf_cli import __version__
-from svgf_cli.frame import DenoisedFrame
+from svgf_cli.frame import DenoisedFrame, LightLayers
 from svgf_cli.run.stages import run_stages
 from svgf_cli.run.tasks import FrameTask, RunConfig
 
 if TYPE_CHECKING:
     from svgf_cli.io.exr import ReadResult
-    from svgf_cli.io.source import SourceFile
+    from svgf_cli.io.source import SourceFile, SourcePart
 
 # Prefix of the debug channels (--debug-aovs): a layer name no renderer writes, so they
 # never collide with an input layer that is passed through.
@@ -98,6 +99,42 @@ def layer_alpha(name: str) -> str:
     return f"{layer}{dot}A"
 
 
+def release_replaced(part: SourcePart, channels: Collection[str]) -> int:
+    """Let go of the input pixels of ``part``'s channels that the output writes anew
+    (the denoised colour, the light layers): the writer never reads them, and the frame's
+    file is held until its write is done. Returns the bytes let go."""
+    released = 0
+    for name in channels:
+        held = part.channels.get(name)
+        if held is not None and held.pixels is not None:
+            released += held.pixels.nbytes
+            held.pixels = None
+    return released
+
+
+def light_replaced(light: LightLayers) -> list[str]:
+    """The input channels a layered filter (``filters.composable.LayeredDenoiser``) writes
+    anew for the light layers ``light`` attached to a frame: every light pass, the emission
+    passes beside them (they take the light no pass carries) and every light group. (The
+    colour passes it remodulates depend on the signals: they are not counted here.)"""
+    layers = [*light.passes, *(light.emission if light.passes else ()), *light.groups]
+    return [name for layer in layers for name in layer.channels]
+
+
+def release_light_inputs(result: ReadResult, task: FrameTask) -> int:
+    """Let go of the input pixels that the light layers attached to ``result.frame`` will
+    replace in the output (`light_replaced`), in the part the output's colour and light
+    layers are written to (channels of other parts pass through as read): the filter has
+    its float32 copies, and the frame's file is held while it is filtered and written.
+    For a layered filter only. Returns the bytes let go."""
+    frame = getattr(result, "frame", None)
+    light = getattr(frame, "light", None)
+    if light is None or getattr(result, "source", None) is None:
+        return 0
+    source, part_index, _ = colour_layout(result, (frame.height, frame.width), task.input)
+    return release_replaced(source.parts[part_index], light_replaced(light))
+
+
 def build_output(
     result: ReadResult, denoised: DenoisedFrame, config: RunConfig, task: FrameTask
 ) -> OutputFrame:
@@ -133,6 +170,7 @@ def build_output(
     keep_only = None
     if config.colour_only:
         keep_only = {layer_alpha(names[0])} & set(part.channels)
+    release_replaced(part, channels)
     return OutputFrame(
         source, part_index, channels, output_attributes(config, task), keep_only, warnings
     )
