@@ -394,6 +394,35 @@ def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
             assert np.array_equal(taken[-1].layers[name], plane), name
 
 
+def test_layered_filter_holds_one_workspace_at_a_time_and_gives_the_same_bits() -> None:
+    """The colour's filter and the groups' filter run one after the other and each lets go of
+    its per-frame planes when done (none is held between frames): the planes are scratch,
+    so every output layer is bit for bit as when both filters keep theirs."""
+    from svgf_cli.filters.composable import LayeredDenoiser
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    lean, keeping = LayeredDenoiser(PRESETS["default"]), LayeredDenoiser(PRESETS["default"])
+    for inner in (keeping.colour, keeping.groups):
+        inner.resident.release_workspace = lambda: None  # type: ignore[method-assign]
+    for frame in (1, 2, 3, 4):
+        outputs = []
+        for layered in (lean, keeping):
+            result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+            result.frame.light = read_light_layers(result, "cycles")
+            outputs.append(layered.process(result.frame))
+        assert lean.colour.resident.work is None and lean.groups.resident.work is None
+        assert keeping.colour.resident.work is not None
+        assert lean.held_bytes() < keeping.held_bytes()
+        got, want = outputs
+        assert np.array_equal(got.color.view(np.uint32), want.color.view(np.uint32))
+        assert got.light.keys() == want.light.keys() and len(got.light) > 20
+        for name, plane in want.light.items():
+            assert np.array_equal(got.light[name].view(np.uint32), plane.view(np.uint32)), name
+
+
 # ------------------------------------------------------------------------- the real shot
 
 

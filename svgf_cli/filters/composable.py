@@ -517,6 +517,10 @@ class LayeredDenoiser:
         would compute the same from the same planes and settings)."""
         light = frame.light or LightLayers()
         denoised = self.colour.process(frame)
+        # The two filters run one after the other: each lets go of its per-frame planes
+        # when done (scratch: outputs are the same), so one workspace is held at a time,
+        # not two (1080p production frames: peak 4.14 -> 3.72 GB, same speed).
+        self.colour.resident.release_workspace()
         gbuffer, denoised.gbuffer = denoised.gbuffer, None  # for the groups' filter only
         assert gbuffer is not None
         groups = (group_frame(gbuffer, light.groups, denoised.medium) if light.groups
@@ -537,6 +541,7 @@ class LayeredDenoiser:
             write_passes(denoised, emission, outputs, albedos, light, medium)
         if groups is not None:
             layers = self.groups.process(groups).layers
+            self.groups.resident.release_workspace()
             filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))

@@ -72,6 +72,12 @@ class Resident:
             return int(self.taa_previous.shape[2]), int(self.taa_previous.shape[1])
         return None
 
+    def release_workspace(self) -> None:
+        """Let go of the per-frame planes (the next frame allocates them afresh, zeroed): they
+        are scratch, so outputs are the same; a caller running two filters one after the
+        other holds one workspace at a time instead of two."""
+        self.work = None
+
     def workspace(self, height: int, width: int, num_signals: int) -> Workspace:
         """The workspace for this size (a new one when the signal count changes)."""
         previous = self.resolution()
