@@ -72,19 +72,24 @@ Fallback = Planes | Callable[[], Planes] | None
 Last = np.ndarray | Callable[[], np.ndarray] | None  # (K, 3) weights for the whole image
 
 
-def _stacked(planes: Planes) -> np.ndarray:
-    """``planes`` as one (K, 3, H, W) float32 C-contiguous array: itself when it is one, a
-    view when the planes lie one after the other in memory (the light passes as read:
-    ``io.lightlayers.pass_layers``), else their stack (a copy)."""
-    if isinstance(planes, np.ndarray):
-        return np.ascontiguousarray(planes, dtype=F32)
+def _joined(planes: list[np.ndarray]) -> np.ndarray:
+    """Equal planes as one array along a new first axis: a view of them where they lie one
+    after the other in memory, else their stack (a copy)."""
     first = planes[0]
-    if all(p.dtype == F32 and p.flags.c_contiguous and p.shape == first.shape
+    if all(p.flags.c_contiguous and p.dtype == first.dtype and p.shape == first.shape
            and p.ctypes.data == first.ctypes.data + k * first.nbytes
            for k, p in enumerate(planes)):
         return np.lib.stride_tricks.as_strided(first, (len(planes), *first.shape),
                                                (first.nbytes, *first.strides))
-    return np.ascontiguousarray(np.stack(planes), dtype=F32)
+    return np.stack(planes)
+
+
+def _stacked(planes: Planes) -> np.ndarray:
+    """``planes`` as one (K, 3, H, W) float32 C-contiguous array: itself when it is one, a
+    view when the planes lie one after the other in memory (the light passes as read:
+    ``io.lightlayers.pass_layers``), else their stack (a copy)."""
+    return np.ascontiguousarray(planes if isinstance(planes, np.ndarray) else _joined(planes),
+                                dtype=F32)
 
 
 def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = None,
@@ -410,14 +415,7 @@ def _rgb(layers: dict[str, np.ndarray], name: str) -> np.ndarray:
     """The layers ``<name>.R/G/B`` as one (3, H, W) array: a view of them where they lie one
     after the other in memory (a signal's output and colour as the filter hands them:
     ``filters.stages.remodulate.signal_output``), else their stack (a copy)."""
-    planes = [layers[f"{name}.{c}"] for c in "RGB"]
-    first = planes[0]
-    if all(p.flags.c_contiguous and p.dtype == first.dtype and p.shape == first.shape
-           and p.ctypes.data == first.ctypes.data + c * first.nbytes
-           for c, p in enumerate(planes)):
-        return np.lib.stride_tricks.as_strided(first, (3, *first.shape),
-                                               (first.nbytes, *first.strides))
-    return np.stack(planes)
+    return _joined([layers[f"{name}.{c}"] for c in "RGB"])
 
 
 def _planes(layers: dict[str, np.ndarray], names: tuple[str, ...], suffix: str = ""
