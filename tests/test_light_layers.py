@@ -85,6 +85,51 @@ def test_split_by_shares_matches_float64_reference() -> None:
         np.testing.assert_allclose(part, want, rtol=1e-5, atol=1e-7)
 
 
+def split_reference(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray | None,
+                    excluded: dict[int, np.ndarray], last: np.ndarray) -> np.ndarray:
+    """filters.shares.split_shares value by value in float64: the weights' shares, else the
+    fallback's (an excluded part's counted as 0), else ``last``'s, else +0."""
+    count, channels, height, width = weights.shape
+    out = np.zeros(weights.shape, np.float32)
+    for c, y, x in np.ndindex(channels, height, width):
+        t = float(total[c, y, x])
+        kept = [max(float(w), 0.0) for w in weights[:, c, y, x]]
+        if sum(kept) <= 1e-8 and fallback is not None:
+            kept = [0.0 if k in excluded and excluded[k][y, x] else max(float(f), 0.0)
+                    for k, f in enumerate(fallback[:, c, y, x])]
+        if sum(kept) <= 1e-8:
+            kept = [max(float(v), 0.0) for v in last[:, c]]
+        if sum(kept) > 0.0:
+            out[:, c, y, x] = [t * (k / sum(kept)) for k in kept]
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_split_by_shares_chooses_each_value_as_its_float64_reference(seed: int) -> None:
+    """Every value takes the weights', the fallback's (with excluded parts), ``last``'s or no
+    share, whichever its row neighbours take (the kernel splits whole rows at once and
+    chooses per value): bit for bit the float64 reference, +0 where nobody's."""
+    from svgf_cli.filters.composable import frame_totals
+
+    rng = np.random.default_rng(seed)
+    shape = (3, 5, 37)
+    total = ((rng.random(shape) - 0.3) * 4).astype(np.float32)
+    weights = np.where(rng.random((4, *shape)) < 0.5, 0.0, rng.random((4, *shape)) - 0.1
+                       ).astype(np.float32)
+    weights[:, :, 0] = np.abs(weights[:, :, 0]) + 0.1  # a row with no value at the floor
+    fallback = np.where(rng.random((4, *shape)) < 0.5, 0.0, rng.random((4, *shape))
+                        ).astype(np.float32)
+    excluded = {1: rng.random(shape[1:]) < 0.5, 3: rng.random(shape[1:]) < 0.3}
+    lasts = [frame_totals(list(fallback)), np.zeros((4, 3))]
+    for last in lasts:
+        got = split_by_shares(total, weights, fallback, last=last, excluded=excluded)
+        want = split_reference(total, weights, fallback, excluded, last)
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+        got = split_by_shares(total, weights, None, last=last)
+        want = split_reference(total, weights, None, {}, last)
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
 def test_split_by_shares_adds_up_with_fallbacks() -> None:
     total = np.full((3, 2, 2), 2.0, np.float32)
     a = np.array([[1, 0], [0, -1]], np.float32)[None].repeat(3, 0)
@@ -289,11 +334,13 @@ def box_running_sums(planes: np.ndarray, radius: int) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize(("radius", "shape"), [(3, (7, 150)), (1, (20, 64)), (4, (3, 2))])
+@pytest.mark.parametrize(("radius", "shape"), [(3, (7, 150)), (1, (20, 64)), (4, (3, 2)),
+                                               (3, (40, 9)), (0, (4, 5))])
 def test_box_filter_is_bit_identical_to_its_running_sums(radius: int,
                                                          shape: tuple[int, int]) -> None:
-    """Whatever order the kernel walks the columns in (blocks of them), each value is the
-    same float64 sums rounded once: bit for bit the plain running sums."""
+    """However the kernel keeps its row sums (a ring of the rows the column sums still
+    need), each value is the same float64 sums rounded once: bit for bit the plain running
+    sums, on images shorter and taller than the ring."""
     rng = np.random.default_rng(radius)
     planes = (rng.random((3, *shape)) * 10.0 ** rng.integers(-5, 5, (3, *shape))).astype(
         np.float32)

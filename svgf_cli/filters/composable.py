@@ -93,34 +93,48 @@ def _stacked(planes: Planes) -> np.ndarray:
 
 
 def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = None,
-                    out: np.ndarray | None = None, last: Last = None) -> np.ndarray:
+                    out: np.ndarray | None = None, last: Last = None,
+                    excluded: dict[int, np.ndarray] | None = None) -> np.ndarray:
     """``total`` split per pixel and channel in proportion to the K ``weights`` (negative
     weights count as 0): the (K, 3, H, W) parts, adding up to ``total`` (to float32
     rounding). Where the weights sum to at most SHARE_FLOOR, ``fallback``'s proportions
-    (the planes, or a function making them), and where those too, ``last``'s: one weight
-    per part and channel for the whole image ((K, 3), or a function making it: e.g. each
-    part's light over the frame, :func:`frame_totals`; None: equal parts); where those are
-    0 too, no parts (the caller gives that total to someone else;
-    ``filters.shares.split_shares``). The fallback and ``last`` are made and stacked only
-    when some value needs them (most frames: none). ``out`` (None: a new array) may be the
-    stacked weights themselves: each value's weights are read before its parts are
-    written."""
+    (the planes, or a function making them; part k's counted as 0 on the (H, W) pixels
+    ``excluded[k]``), and where those too, ``last``'s: one weight per part and channel for
+    the whole image ((K, 3), or a function making it: e.g. each part's light over the frame,
+    :func:`frame_totals`; None: equal parts); where those are 0 too, no parts (the caller
+    gives that total to someone else; ``filters.shares.split_shares``). The fallback and
+    ``last`` are made and stacked only when some value needs them (most frames: none).
+    ``out`` (None: a new array) may be the stacked weights themselves: each value's weights
+    are read before its parts are written."""
     weights = _stacked(weights)
     parts = np.empty_like(weights) if out is None else out
     if len(weights) == 1:
         np.copyto(parts[0], total)
         return parts
     total = np.ascontiguousarray(total, dtype=F32)
-    backup, rest = weights, None
+    backup, rest, bits = weights, None, np.empty((0, 0), np.uint64)
     if fallback_pixels(total, weights, SHARE_FLOOR):
         if fallback is not None:
             backup = _stacked(fallback() if callable(fallback) else fallback)
+            if excluded:
+                bits = _exclusion_bits(excluded, total.shape[1:])
         if last is not None:
             rest = np.asarray(last() if callable(last) else last, dtype=np.float64)
     if rest is None:
         rest = np.ones(weights.shape[:2])
-    split_shares(total, weights, backup, backup is not weights, rest, SHARE_FLOOR, parts)
+    split_shares(total, weights, backup, backup is not weights, bits, rest, SHARE_FLOOR, parts)
     return parts
+
+
+def _exclusion_bits(excluded: dict[int, np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+    """The (H, W) uint64 bit masks of ``filters.shares.split_shares``: bit k where part k
+    is excluded (at most 64 parts)."""
+    bits = np.zeros(shape, np.uint64)
+    for k, pixels in excluded.items():
+        if not 0 <= k < 64:
+            raise ValueError(f"part {k} cannot be excluded: at most 64 parts")
+        bits[pixels] |= np.uint64(1) << np.uint64(k)
+    return bits
 
 
 def frame_totals(planes: list[np.ndarray]) -> np.ndarray:
@@ -196,18 +210,12 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
     barred = {k: pixels for k, pixels in (barred or {}).items() if pixels.any()}
     for index, pixels in barred.items():
         np.copyto(estimates[index], 0.0, where=pixels)
-
-    def fallback() -> Planes:
-        if not barred:
-            return [p.radiance for p in passes]
-        read = np.stack([p.radiance for p in passes])
-        for index, pixels in barred.items():
-            np.copyto(read[index], 0.0, where=pixels)
-        return read
-
     last = (np.zeros((len(passes), 3)) if emitters
             else lambda: frame_totals([p.radiance for p in passes]))
-    return split_by_shares(light, estimates, fallback, out=estimates, last=last)
+    # The passes as read where no estimate has light, a barred pass's counted as 0 there (a
+    # view of them as read: io.lightlayers.pass_layers reads them side by side).
+    return split_by_shares(light, estimates, lambda: [p.radiance for p in passes],
+                           out=estimates, last=last, excluded=barred)
 
 
 def _coverage(colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -13,46 +13,56 @@ _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, parall
             error_model="numpy")
 
 
-# Columns of one job of box_mean's vertical pass: each row's run of them is read at once.
-_COLUMNS = 64
-
-
 @njit(**_JIT)
 def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     """``out`` = the (C, H, W) planes' mean over a (2 radius + 1)^2 window clipped at the
     borders (each window divided by the pixels it covers), summed in float64: running sums
-    along each row, then down each column (a block of columns at a time, each column's sum
-    in the same order)."""
+    along each row, then down each column, each in the same order. One job per channel
+    keeps only the 2 radius + 2 row sums the column sums still need (a ring of rows): a
+    frame-sized float64 temporary made this memory-bound."""
     channels, height, width = planes.shape
-    rows = np.empty((channels, height, width), dtype=np.float64)
-    for job in prange(channels * height):
-        c, y = job // height, job % height
-        running = 0.0
-        for x in range(min(radius, width)):
-            running += planes[c, y, x]
-        for x in range(width):
-            if x + radius < width:
-                running += planes[c, y, x + radius]
-            if x - radius - 1 >= 0:
-                running -= planes[c, y, x - radius - 1]
-            rows[c, y, x] = running
-    blocks = (width + _COLUMNS - 1) // _COLUMNS
-    for job in prange(channels * blocks):
-        c, start = job // blocks, job % blocks * _COLUMNS
-        end = min(start + _COLUMNS, width)
-        running_columns = np.zeros(end - start)
+    ring = 2 * radius + 2  # rows y - radius - 1 .. y + radius
+    for c in prange(channels):
+        rows = np.empty((ring, width), dtype=np.float64)
+        columns = np.zeros(width)
         for y in range(min(radius, height)):
-            for x in range(start, end):
-                running_columns[x - start] += rows[c, y, x]
+            _row_sums(planes[c, y], radius, rows[y % ring])
+            columns += rows[y % ring]
         for y in range(height):
-            top, bottom = max(y - radius, 0), min(y + radius + 1, height)
-            for x in range(start, end):
-                if y + radius < height:
-                    running_columns[x - start] += rows[c, y + radius, x]
+            if y + radius < height:
+                added = rows[(y + radius) % ring]
+                _row_sums(planes[c, y + radius], radius, added)
                 if y - radius - 1 >= 0:
-                    running_columns[x - start] -= rows[c, y - radius - 1, x]
-                left, right = max(x - radius, 0), min(x + radius + 1, width)
-                out[c, y, x] = running_columns[x - start] / ((bottom - top) * (right - left))
+                    removed = rows[(y - radius - 1) % ring]
+                    for x in range(width):
+                        columns[x] = columns[x] + added[x] - removed[x]
+                else:
+                    for x in range(width):
+                        columns[x] += added[x]
+            elif y - radius - 1 >= 0:
+                removed = rows[(y - radius - 1) % ring]
+                for x in range(width):
+                    columns[x] -= removed[x]
+            rows_covered = min(y + radius + 1, height) - max(y - radius, 0)
+            for x in range(width):
+                cover = rows_covered * (min(x + radius + 1, width) - max(x - radius, 0))
+                out[c, y, x] = columns[x] / cover
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _row_sums(row: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """``out[x]`` = the running sum of ``row`` over x - radius .. x + radius (float64)."""
+    width = row.shape[0]
+    running = 0.0
+    for x in range(min(radius, width)):
+        running += row[x]
+    for x in range(width):
+        if x + radius < width:
+            running += row[x + radius]
+        if x - radius - 1 >= 0:
+            running -= row[x - radius - 1]
+        out[x] = running
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
@@ -67,35 +77,87 @@ def _positive_sum(weights: np.ndarray, c: int, y: int, x: int) -> float:
 
 @njit(**_JIT)
 def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
-                 use_fallback: bool, last: np.ndarray, floor: float, out: np.ndarray) -> None:
+                 use_fallback: bool, excluded: np.ndarray, last: np.ndarray, floor: float,
+                 out: np.ndarray) -> None:
     """``out[k]`` = ``total`` x ``weights[k] / sum_j weights[j]`` per pixel and channel
     (negative weights count as 0); where that sum is at most ``floor``, the same with
-    ``fallback`` (when ``use_fallback``), and where that is too, with the (K, C) ``last``
+    ``fallback`` (when ``use_fallback``; ``excluded``, (H, W) uint64 or empty: bit k set
+    where ``fallback[k]`` counts as 0), and where that is too, with the (K, C) ``last``
     (one weight per part and channel for the whole image: ones for equal parts), and where
-    those are all 0, no parts (0: the caller gives the total to someone else). ``out`` may
-    be ``weights``: a value's weights are all read before its parts are written."""
+    those are all 0, no parts (0: the caller gives that total to someone else). ``out`` may
+    be ``weights``: a value's weights are all read before its parts are written. Whole-row
+    loops that choose per value (they vectorize: 30-97 % of a real frame's values may take
+    the fallback)."""
     count, channels, height, width = weights.shape
     for job in prange(channels * height):
         c, y = job // height, job % height
+        sums = np.empty(width)
+        _row_positive_sums(weights, c, y, sums)
+        if _all_above(sums, floor):
+            for k in range(count):
+                _split_row(total[c, y], weights[k, c, y], sums, out[k, c, y])
+            continue
+        backup = np.zeros(width)  # the fallback's sums (0: not used)
+        bits = np.zeros(width, np.uint64)
+        if use_fallback and excluded.shape[0] > 0:
+            bits[:] = excluded[y]
+        if use_fallback:
+            for k in range(count):
+                row = fallback[k, c, y]
+                for x in range(width):
+                    backup[x] += _kept(row[x], bits[x], k)
         rest = 0.0
         for k in range(count):
             rest += max(last[k, c], 0.0)
-        for x in range(width):
-            s = _positive_sum(weights, c, y, x)
-            source = 0
-            if s <= floor and use_fallback:
-                s = _positive_sum(fallback, c, y, x)
-                source = 1
-            t = total[c, y, x]
-            if s <= floor:
-                for k in range(count):
-                    out[k, c, y, x] = t * (max(last[k, c], 0.0) / rest) if rest > 0.0 else 0.0
-            elif source == 0:
-                for k in range(count):
-                    out[k, c, y, x] = t * (max(weights[k, c, y, x], 0.0) / s)
-            else:
-                for k in range(count):
-                    out[k, c, y, x] = t * (max(fallback[k, c, y, x], 0.0) / s)
+        for k in range(count):
+            row, spare, part = weights[k, c, y], fallback[k, c, y], out[k, c, y]
+            even = max(last[k, c], 0.0) / rest if rest > 0.0 else 0.0
+            spread = rest > 0.0  # else the part is +0, not t x 0
+            for x in range(width):
+                t, s, f = total[c, y, x], sums[x], backup[x]
+                mine = t * (max(row[x], 0.0) / (s if s > floor else 1.0))
+                other = t * (_kept(spare[x], bits[x], k) / (f if f > floor else 1.0)) \
+                    if use_fallback else 0.0
+                part[x] = mine if s > floor else (
+                    other if f > floor else (t * even if spread else 0.0))
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _kept(weight: float, excluded: np.uint64, k: int) -> float:
+    """A fallback weight as counted: negative as 0, and 0 where bit ``k`` of ``excluded``."""
+    if (excluded >> np.uint64(k)) & np.uint64(1):
+        return 0.0
+    return max(weight, 0.0)
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _row_positive_sums(weights: np.ndarray, c: int, y: int, sums: np.ndarray) -> None:
+    """``sums[x]`` = :func:`_positive_sum` of every pixel of row ``y``, in the same order."""
+    sums[:] = 0.0
+    for k in range(weights.shape[0]):
+        row = weights[k, c, y]
+        for x in range(sums.shape[0]):
+            sums[x] += max(row[x], 0.0)
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _all_above(sums: np.ndarray, floor: float) -> bool:
+    low = 0
+    for x in range(sums.shape[0]):
+        low += sums[x] <= floor
+    return low == 0
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _split_row(total: np.ndarray, weights: np.ndarray, sums: np.ndarray,
+               out: np.ndarray) -> None:
+    """One part of a row: ``total x max(weight, 0) / sum``; ``out`` may be ``weights``."""
+    for x in range(sums.shape[0]):
+        out[x] = total[x] * (max(weights[x], 0.0) / sums[x])
 
 
 @njit(**_JIT)
@@ -107,9 +169,11 @@ def fallback_pixels(total: np.ndarray, weights: np.ndarray, floor: float) -> int
     found = np.zeros(channels * height, np.int64)
     for job in prange(channels * height):
         c, y = job // height, job % height
+        sums = np.empty(width)
+        _row_positive_sums(weights, c, y, sums)
+        row = total[c, y]
         for x in range(width):
-            if _positive_sum(weights, c, y, x) <= floor and total[c, y, x] != 0.0:
-                found[job] += 1
+            found[job] += (sums[x] <= floor) & (row[x] != 0.0)
     return int(found.sum())
 
 
