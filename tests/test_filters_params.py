@@ -37,7 +37,8 @@ HEADER = "| parameter | group | values | paper | falcor | meaning |"
 # Each preset's resolved values as they were before the presets became the paper's values
 # plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
 # every output stores them in svgf/params. Added since: warm_start (2026-11-27, issue 29),
-# medium_fill_radius (2026-11-27, issue 30). Changed since: default's sigma_luminance 4 -> 2
+# medium_fill_radius (2026-11-27, issue 30), medium_coverage_radius (2026-11-28). Changed
+# since: default's sigma_luminance 4 -> 2
 # and mixed_sigma_luminance 2.5 -> 1.5 (2026-11-27, issue 29:
 # docs/stability.md#a-tighter-luminance-stop).
 PINNED: dict[str, dict[str, object]] = {
@@ -57,6 +58,7 @@ PINNED: dict[str, dict[str, object]] = {
         "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
         "pixel_filter": 0.0, "edge_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
         "medium_fill_radius": 0,
+        "medium_coverage_radius": 0,
     },
     "default": {
         "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -74,6 +76,7 @@ PINNED: dict[str, dict[str, object]] = {
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
         "pixel_filter": -1.0, "edge_filter": -1.0, "taa": False, "taa_alpha": 0.5, "warm_start": 4,
         "medium_fill_radius": 4,
+        "medium_coverage_radius": 1,
     },
     "falcor": {
         "alpha": 0.05, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -91,6 +94,7 @@ PINNED: dict[str, dict[str, object]] = {
         "firefly_clamp": 0.0, "spread_fireflies": 0.0, "history_clamp": 0.0, "despike": 0.0,
         "pixel_filter": 0.0, "edge_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
         "medium_fill_radius": 0,
+        "medium_coverage_radius": 0,
     },
 }
 

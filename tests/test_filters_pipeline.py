@@ -18,9 +18,9 @@ from svgf_cli.frame import Frame, Signal
 ROOT = Path(__file__).resolve().parents[1]
 
 TEMPORAL = ["values", "gradients", "demodulate", "reproject"]
-DEFAULT_TEMPORAL = ["values", "fill_medium", "gradients", "reflected_lights", "demodulate",
-                    "reproject", "object_history", "history_clamp", "antilag",
-                    "adopt_object_history", "spread_fireflies"]
+DEFAULT_TEMPORAL = ["values", "fill_medium", "medium_coverage", "gradients",
+                    "reflected_lights", "demodulate", "reproject", "object_history",
+                    "history_clamp", "antilag", "adopt_object_history", "spread_fireflies"]
 
 
 @pytest.mark.parametrize(("preset", "kind", "expected"), [

@@ -137,6 +137,8 @@ class FrameContext:
     marked: dict[str, int] = field(default_factory=dict)  # reflected lights per signal
     # The pixels given a medium's G-buffer (filters.stages.fill_medium); None: none.
     medium_pixels: np.ndarray | None = None
+    # The index of the medium's signal in ``frame.signals`` (fill_medium); None: none.
+    medium_signal: int | None = None
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
     temporal: TemporalState | None = None
     reprojected: bool = False  # there was a history to reproject

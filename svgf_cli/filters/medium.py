@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH
+from svgf_cli.filters.shares import box_mean
 
 F32 = np.float32
 NO_FILL = -1  # not a medium pixel: keeps its own G-buffer
@@ -112,3 +113,14 @@ def _gather(plane: np.ndarray, sources: np.ndarray, own: bool, medium_value: flo
             elif source == MEDIUM_SURFACE and not own:
                 for c in range(channels):
                     out[c, i] = medium_value
+
+
+def coverage(pixels: np.ndarray, radius: int) -> np.ndarray:
+    """``c(p)``, (H, W) float32: the share of the (2 radius + 1)^2 pixels around ``p``
+    (clipped at the borders) that are medium pixels (``pixels`` (H, W) bool: their one sample
+    scattered in the medium), an estimate of the probability that a sample of ``p``
+    scatters: the medium's light divided by it is the light of one scattering, which does
+    not end where the medium does (``filters.stages.medium_coverage``)."""
+    out = np.empty((1, *pixels.shape), np.float32)
+    box_mean(np.ascontiguousarray(pixels, dtype=np.float32)[None], int(radius), out)
+    return out[0]

@@ -149,6 +149,13 @@ class SVGFParams:
         " docs/algorithm.md#volumes-medium-pixels).",
         group="temporal", valid=Range(0, 16),
     )
+    medium_coverage_radius: int = _p(
+        0,
+        "The medium's signal is demodulated by its coverage: the share of the (2 r + 1)^2"
+        " pixels around each pixel whose sample scattered in the medium (0: off, filtered as"
+        " radiance; needs medium_fill_radius; docs/algorithm.md#the-mediums-coverage).",
+        group="temporal", valid=Range(0, 8),
+    )
     # Variance estimation (paper section 4.2).
     variance_history_threshold: int = _p(
         4, "Below this history length the variance is estimated spatially (7x7 bilateral).",
@@ -441,6 +448,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("medium_fill_radius", 4, "a renderer's G-buffer holds no surface where"
                   " its one sample scattered in a medium: fog comes out as raw speckle"
                   " otherwise: docs/algorithm.md#volumes-medium-pixels"),
+        Departure("medium_coverage_radius", 1, "the fog's 1-spp light is a few bright"
+                  " samples among zeros, which the a-trous darkened by 16 % and spread past the"
+                  " fog's edge: docs/algorithm.md#the-mediums-coverage"),
         Departure("atrous_iterations", AUTO_ITERATIONS, "the filter's reach grows with the"
                   f" image (atrous_iterations_for): {_ALG}#the-filters-reach-grows-with-the-image"),
         Departure("edge_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres show"

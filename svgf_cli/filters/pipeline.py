@@ -28,6 +28,7 @@ from svgf_cli.filters.stages.fill_medium import FillMedium
 from svgf_cli.filters.stages.firefly_clamp import FireflyClamp
 from svgf_cli.filters.stages.gradients import Gradients
 from svgf_cli.filters.stages.history_clamp import HistoryClamp
+from svgf_cli.filters.stages.medium_coverage import MediumCoverage
 from svgf_cli.filters.stages.object_history import AdoptObjectHistory, ObjectHistory
 from svgf_cli.filters.stages.pass_history import PassHistory
 from svgf_cli.filters.stages.pixel_filter import PixelFilter
@@ -50,6 +51,7 @@ def temporal() -> list[Stage]:
     return [
         CleanGeometry(),
         FillMedium(),  # medium_fill_radius, frames with volume passes
+        MediumCoverage(),  # medium_coverage_radius, frames with medium pixels
         Gradients(),
         MarkReflectedLights(),  # glossy_emitter_radiance
         Demodulate(),

@@ -30,7 +30,7 @@ class FillMedium(StageBase):
     name = "fill_medium"
     reads = ("frame.medium", "depth", "normal_in", "motion", "frame.mesh_id", "frame.albedo",
              "frame.signals", "frame.emission")
-    writes = ("depth", "normal_in", "motion", "frame", "medium_pixels")
+    writes = ("depth", "normal_in", "motion", "frame", "medium_pixels", "medium_signal")
     clock = "medium"
 
     def enabled(self, params: SVGFParams) -> bool:
@@ -55,6 +55,7 @@ class FillMedium(StageBase):
         emission = frame.emission
         medium = next((i for i, s in enumerate(frame.signals) if s.radiance is frame.medium),
                       None)
+        ctx.medium_signal = medium
         if emission is not None and medium is not None:
             signals[medium].radiance, emission = emission_into_medium(
                 frame.medium, emission, ctx.medium_pixels)
