@@ -331,3 +331,15 @@ def test_the_medium_coverage_leaves_frames_without_medium_pixels_alone() -> None
         a = on.process(fog_frame(rng_a, with_medium=False)).color
         b = off.process(fog_frame(rng_b, with_medium=False)).color
         assert np.array_equal(a, b)
+
+
+def test_the_coverage_radius_grows_with_the_image() -> None:
+    """auto: one pixel per 360 of the shorter side, at least 1 (a 3x3 coverage mottles a
+    1080p fog; a 5x5 one is wider than a 128x72 fog's edge); an explicit radius is kept."""
+    from svgf_cli.filters.params import medium_coverage_radius_for
+
+    auto = PRESETS["default"]
+    assert [medium_coverage_radius_for(auto, h, w) for h, w in
+            ((72, 128), (144, 256), (540, 960), (1080, 1920), (1920, 1080), (2160, 3840))
+            ] == [1, 1, 2, 3, 3, 6]
+    assert medium_coverage_radius_for(auto.replace(medium_coverage_radius=2), 72, 128) == 2

@@ -76,7 +76,7 @@ PINNED: dict[str, dict[str, object]] = {
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
         "pixel_filter": -1.0, "edge_filter": -1.0, "taa": False, "taa_alpha": 0.5, "warm_start": 4,
         "medium_fill_radius": 4,
-        "medium_coverage_radius": 1,
+        "medium_coverage_radius": -1,
     },
     "falcor": {
         "alpha": 0.05, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,

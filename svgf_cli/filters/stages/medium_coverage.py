@@ -8,7 +8,7 @@ import numpy as np
 
 from svgf_cli.filters.context import FrameContext, StageBase
 from svgf_cli.filters.medium import coverage
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import SVGFParams, medium_coverage_radius_for
 
 
 class MediumCoverage(StageBase):
@@ -27,12 +27,13 @@ class MediumCoverage(StageBase):
     clock = "medium"
 
     def enabled(self, params: SVGFParams) -> bool:
-        return params.medium_coverage_radius > 0 and params.medium_fill_radius > 0
+        return params.medium_coverage_radius != 0 and params.medium_fill_radius > 0
 
     def run(self, ctx: FrameContext) -> bool | None:
         if ctx.medium_pixels is None or ctx.medium_signal is None:
             return False
-        cover = coverage(ctx.medium_pixels, ctx.params.medium_coverage_radius)
+        cover = coverage(ctx.medium_pixels,
+                         medium_coverage_radius_for(ctx.params, *ctx.medium_pixels.shape))
         signals = list(ctx.frame.signals)
         signals[ctx.medium_signal] = dataclasses.replace(
             signals[ctx.medium_signal], albedo=np.ascontiguousarray(np.broadcast_to(
