@@ -457,3 +457,45 @@ def test_atrous_iterations_take_a_count_or_auto(
                             "--feedback-iteration", "3"], capsys)
     assert code == 2 and "below --atrous-iterations (3)" in err
     assert not (tmp_path / "b.exr").exists() and not (tmp_path / "c.exr").exists()
+
+
+def test_every_frame_is_decoded_once(
+    sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The first frame, decoded to fix the signal set, is the run's first read too
+    (run.workers.FirstRead): every frame is decoded once (the first one was twice), and the
+    outputs are the same; a colour-only run (no pass-through channels) reads it again."""
+    import svgf_cli.io.exr as exr
+
+    reads: list[str] = []
+    real = exr.read_frame
+
+    def counting(path, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        reads.append(Path(path).name)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(exr, "read_frame", counting)
+    out = tmp_path / "den"
+    code, _, err = run_cli(["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr",
+                            "--warm-start", "0"], capsys)
+    assert code == 0, err
+    assert sorted(reads) == [f"in.{f:04d}.exr" for f in FRAMES]
+    monkeypatch.setattr("svgf_cli.run.workers.FirstRead.__call__",
+                        lambda self, path, mapping, *, passthrough=True:
+                        real(path, mapping, mapping.motion_convention,
+                             passthrough=passthrough))
+    assert run_cli(["denoise", sequence / "in.####.exr", "-o", tmp_path / "twice" /
+                    "den.####.exr", "--warm-start", "0"], capsys)[0] == 0
+    for f in FRAMES:
+        once = read_exr(out / f"den.{f:04d}.exr")
+        twice = read_exr(tmp_path / "twice" / f"den.{f:04d}.exr")
+        assert once.channels.keys() == twice.channels.keys()
+        for name, plane in once.channels.items():
+            assert np.array_equal(plane.view(np.uint8), twice.channels[name].view(np.uint8))
+    monkeypatch.undo()
+    monkeypatch.setattr(exr, "read_frame", counting)
+    reads.clear()
+    assert run_cli(["denoise", sequence / "in.####.exr", "-o", tmp_path / "colour" /
+                    "den.####.exr", "--warm-start", "0", "--colour-only"], capsys)[0] == 0
+    assert reads.count("in.0001.exr") == 2 and len(reads) == len(FRAMES) + 1

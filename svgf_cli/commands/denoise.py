@@ -260,6 +260,9 @@ class _Run:
     job: Any  # farm.job.Job
     progress: Progress
     threads: int
+    # The first frame as _read_first_frame decoded it, for the run's reader to use once
+    # (run.workers.FirstRead); None: read it again.
+    first_read: Any = None
 
     @property
     def distributed(self) -> bool:
@@ -326,6 +329,10 @@ def _read_first_frame(run: _Run) -> str | None:
     # The signal set is decided once, on the sequence's first frame, so that every chunk and
     # farm task of a sequence filters the same signals (they cannot change mid-run).
     run.mapping, decided = fix_signal_set(job.timeline[0][1], run.mapping)
+    if (decided.signal_warning is None and decided.plan is not None
+            and decided.plan.set == run.mapping.signals):
+        # The read with the fixed set would decode the same frame: the run reuses this one.
+        run.first_read = (Path(job.timeline[0][1]), decided)
     resolved.plan = plan_signals(run.mapping, resolved, info.channels, str(first_input))
     resolved.requested_signals = options["signals"]
     colour = resolve_output_colour(run.mapping, info.channels)
@@ -434,6 +441,7 @@ def _execute(run: _Run) -> Any:
     from svgf_cli.run.chunk import run_sequence
     from svgf_cli.run.stop import stop_on_signals
     from svgf_cli.run.tasks import RunConfig, RunStats
+    from svgf_cli.run.workers import FirstRead, default_reader
 
     options = run.options
     config = RunConfig(
@@ -465,6 +473,7 @@ def _execute(run: _Run) -> Any:
                 overwrite=options["overwrite"],
             )
     stats = RunStats()
+    first, run.first_read = run.first_read, None  # held by the first chunk's reader only
     with stop_on_signals() as stop:
         for tasks in run.job.chunk_tasks:
             stats.merge(
@@ -475,8 +484,10 @@ def _execute(run: _Run) -> Any:
                     stop=stop,
                     history=run.history,
                     save_history_to=options["save_history"],
+                    read=FirstRead(*first) if first is not None else default_reader,
                 )
             )
+            first = None
     return stats
 
 
