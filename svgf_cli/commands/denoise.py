@@ -473,7 +473,9 @@ def _execute(run: _Run) -> Any:
                 overwrite=options["overwrite"],
             )
     stats = RunStats()
-    first, run.first_read = run.first_read, None  # held by the first chunk's reader only
+    # The first chunk's reader alone holds the first frame, and lets go of it when read.
+    read = FirstRead(*run.first_read) if run.first_read is not None else default_reader
+    run.first_read = None
     with stop_on_signals() as stop:
         for tasks in run.job.chunk_tasks:
             stats.merge(
@@ -484,10 +486,10 @@ def _execute(run: _Run) -> Any:
                     stop=stop,
                     history=run.history,
                     save_history_to=options["save_history"],
-                    read=FirstRead(*first) if first is not None else default_reader,
+                    read=read,
                 )
             )
-            first = None
+            read = default_reader
     return stats
 
 
