@@ -130,11 +130,13 @@ def test_fog_is_filtered_where_its_samples_have_no_surface(radius: int) -> None:
     assert np.array_equal(sky, np.zeros_like(sky))  # no medium light near: background
 
 
-def test_frames_without_medium_light_are_unchanged() -> None:
+@pytest.mark.parametrize(("setting", "stage"), [("medium_fill_radius", "fill_medium"),
+                                              ("medium_coverage_radius", "medium_coverage")])
+def test_frames_without_medium_light_are_unchanged(setting: str, stage: str) -> None:
     rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
     on = Denoiser(PRESETS["default"])
-    off = Denoiser(PRESETS["default"].replace(medium_fill_radius=0))
-    assert "fill_medium" in on.stages and "fill_medium" not in off.stages
+    off = Denoiser(PRESETS["default"].replace(**{setting: 0}))
+    assert stage in on.stages and stage not in off.stages
     for _ in range(3):
         a = on.process(fog_frame(rng_a, with_medium=False)).color
         b = off.process(fog_frame(rng_b, with_medium=False)).color
@@ -320,17 +322,6 @@ def test_the_medium_coverage_keeps_a_small_fogs_light_in_it(seed: int) -> None:
     assert fog_on > 0.87 and fog_on > fog_off + 0.02
     assert far_on == pytest.approx(far_off, abs=0.002)  # the far wall: as it was
     assert abs(near_on - far_on) < 0.03 and abs(near_on - far_on) < abs(near_off - far_off)
-
-
-def test_the_medium_coverage_leaves_frames_without_medium_pixels_alone() -> None:
-    rng_a, rng_b = np.random.default_rng(6), np.random.default_rng(6)
-    on = Denoiser(PRESETS["default"])
-    off = Denoiser(PRESETS["default"].replace(medium_coverage_radius=0))
-    assert "medium_coverage" in on.stages and "medium_coverage" not in off.stages
-    for _ in range(3):
-        a = on.process(fog_frame(rng_a, with_medium=False)).color
-        b = off.process(fog_frame(rng_b, with_medium=False)).color
-        assert np.array_equal(a, b)
 
 
 def test_the_coverage_radius_grows_with_the_image() -> None:
