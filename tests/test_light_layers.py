@@ -699,3 +699,41 @@ def test_medium_emission_splits_on_the_medium_pixels_as_over_the_whole_frame() -
         for part, want in zip(parts, expected, strict=True):
             np.testing.assert_allclose(part, want[:, pixels], rtol=1e-4, atol=1e-6)
         np.testing.assert_allclose(parts.sum(axis=0), taken[:, pixels], rtol=1e-5)
+
+
+def test_passes_carry_no_negative_light_where_the_colour_is_below_the_emission() -> None:
+    """Where the denoised colour is below the emission (a defocused sky's edge: the filtered
+    colour is smooth, the emission is not), the light passes get no light, not negative
+    light (cycles/dof's GlossDir had relMSE 17x its input's from it: a negative part divided
+    by a colour near 0); the emission passes take the difference, and every layer still adds
+    up to the colour."""
+    from svgf_cli.filters.composable import write_passes
+    from svgf_cli.frame import DenoisedFrame, LightLayer, LightLayers
+
+    rng = np.random.default_rng(11)
+    h, w = 6, 7
+    colour = rng.random((3, h, w)).astype(np.float32) + 0.2
+    emission = np.zeros((3, h, w), np.float32)
+    emission[:, :, :2] = colour[:, :, :2] * 1.5  # the colour is below the emission there
+    gloss_colour = np.full((3, h, w), 0.05, np.float32)
+    diffuse_colour = np.full((3, h, w), 0.5, np.float32)
+
+    def light_pass(name: str, colour_pass: np.ndarray, channels: str) -> LightLayer:
+        stored = rng.random((3, h, w)).astype(np.float32)
+        return LightLayer(tuple(f"{name}.{c}" for c in "RGB"), stored * colour_pass, stored,
+                          colour_pass, "", tuple(f"{channels}.{c}" for c in "RGB"))
+
+    passes = [light_pass("DiffDir", diffuse_colour, "DiffCol"),
+              light_pass("GlossDir", gloss_colour, "GlossCol")]
+    env = LightLayer(("Env.R", "Env.G", "Env.B"), emission, emission)
+    denoised = DenoisedFrame(color=colour, layers={}, emission=emission)
+    write_passes(denoised, emission, {}, {}, LightLayers(passes=passes, emission=[env]))
+    out = denoised.light
+    rebuilt = np.zeros_like(colour)
+    for layer in passes:  # passes of no signal: their colour passes are written as read
+        stored = np.stack([out[name] for name in layer.channels])
+        assert stored.min() >= 0.0, layer.channels
+        assert np.all(stored[:, :, :2] == 0.0), layer.channels  # none there, not negative
+        rebuilt += stored * layer.colour
+    rebuilt += np.stack([out[f"Env.{c}"] for c in "RGB"])
+    np.testing.assert_allclose(rebuilt, colour, rtol=1e-5, atol=1e-6)

@@ -396,7 +396,11 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
               and (cover := covers[id(colour)]).barred is not None}
     # Light no pass has, filtered or read (the pixel filter's spill onto the background) goes
     # to the emission passes when there are some, not in equal parts to every pass.
-    parts = compose_passes(residual, outputs, light.passes, barred, bool(light.emission))
+    # Where the denoised colour is below the emission (a defocused sky's edge: the filtered
+    # colour is smooth, the emission passes are not), the light passes get no light rather
+    # than negative light; the emission passes take the difference.
+    light_only = np.maximum(residual, 0.0) if light.emission else residual
+    parts = compose_passes(light_only, outputs, light.passes, barred, bool(light.emission))
     lit = np.empty_like(residual)  # a pass's light as written: stored x colour
     for layer, part, colour in zip(light.passes, parts, written, strict=True):
         stored = stored_values(layer, part, colour,
