@@ -145,6 +145,9 @@ class Frame:
     # The file says its one sample per pixel went through the pixel centre (Cycles at 1 spp),
     # while a converged frame of its renderer averages the pixel filter's footprint.
     centre_sampled: bool = False
+    # Samples per pixel the renderer took (its header; 1 when it says nothing): a frame of
+    # N samples is worth N one-sample frames in the temporal blends (filters.params).
+    samples_per_pixel: int = 1
     # Light passes and light groups to be written denoised (None: none; the Denoiser itself
     # ignores them, `filters.composable.LayeredDenoiser` composes them).
     light: LightLayers | None = None

@@ -20,7 +20,9 @@ from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import (
     AUTO_ITERATIONS,
     AUTO_PIXEL_FILTER,
+    AUTO_SAMPLES,
     SVGFParams,
+    params_for_samples,
     resolve_params,
 )
 from svgf_cli.frame import Frame
@@ -415,6 +417,48 @@ def test_pixel_filter_auto_blurs_only_centre_sampled_frames() -> None:
     # The light keeps its own value (its neighbours' rest is blurred into it, not it out).
     assert np.all(auto[-1].color[:, 2:4, 2:4] >= glow[:, 2:4, 2:4])
     assert auto[-1].color[1, 2, 1] < 1.0
+
+
+def test_a_frame_of_several_samples_is_blended_as_that_many_frames() -> None:
+    """A frame whose header says N samples per pixel is blended with ``1 - (1 - alpha)^N``
+    (and the moments likewise) under ``auto``; the same frames marked 1 sample with those
+    blends set explicitly give the very same output, and 1 sample changes nothing."""
+    frames = static_sequence(5, 28, 20, noise=0.3)
+    auto = resolve_params("default", warm_start=0)
+    assert auto.samples_per_pixel == AUTO_SAMPLES
+
+    def marked(n: int) -> list[Frame]:
+        return [dataclasses.replace(f, samples_per_pixel=n) for f in frames]
+
+    four, _ = _run(auto, marked(4))
+    blend = 1.0 - 0.8**4
+    explicit, _ = _run(auto.replace(alpha=blend, moments_alpha=blend), marked(1))
+    for a, b in zip(four, explicit, strict=True):
+        np.testing.assert_array_equal(a.color, b.color)
+    one, _ = _run(auto, marked(1))
+    forced_one, _ = _run(auto.replace(samples_per_pixel=1), marked(4))
+    paper_like, _ = _run(auto.replace(samples_per_pixel=1), marked(1))
+    for a, b, c in zip(one, forced_one, paper_like, strict=True):
+        np.testing.assert_array_equal(a.color, b.color)
+        np.testing.assert_array_equal(a.color, c.color)
+    # The larger blend is a different, shorter-memory filter.
+    assert not np.array_equal(four[-1].color, one[-1].color)
+    forced_four, _ = _run(auto.replace(samples_per_pixel=4), marked(1))
+    np.testing.assert_array_equal(forced_four[-1].color, four[-1].color)
+
+
+def test_params_for_samples() -> None:
+    params = resolve_params("default")
+    assert params_for_samples(params, 1) is params
+    four = params_for_samples(params, 4)
+    assert four.alpha == pytest.approx(1 - 0.8**4)
+    assert four.moments_alpha == pytest.approx(1 - 0.8**4)
+    assert four.samples_per_pixel == params.samples_per_pixel  # the setting itself is kept
+    assert params_for_samples(params.replace(samples_per_pixel=2), 16).alpha == pytest.approx(
+        1 - 0.8**2)
+    assert params_for_samples(params.replace(samples_per_pixel=1), 16) is not None
+    assert params_for_samples(params.replace(samples_per_pixel=1), 16).alpha == 0.2
+    assert params_for_samples(resolve_params("paper"), 4).alpha == 0.2  # paper: 1 sample
 
 
 def test_feedback_iteration_output_becomes_the_history() -> None:

@@ -37,7 +37,8 @@ HEADER = "| parameter | group | values | paper | falcor | meaning |"
 # Each preset's resolved values as they were before the presets became the paper's values
 # plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
 # every output stores them in svgf/params. Added since: warm_start (2026-11-27, issue 29),
-# medium_fill_radius (2026-11-27, issue 30), medium_coverage_radius (2026-11-28). Changed
+# medium_fill_radius (2026-11-27, issue 30), medium_coverage_radius (2026-11-28),
+# samples_per_pixel (2026-11-28, issue 30). Changed
 # since: default's sigma_luminance 4 -> 2
 # and mixed_sigma_luminance 2.5 -> 1.5 (2026-11-27, issue 29:
 # docs/stability.md#a-tighter-luminance-stop).
@@ -59,6 +60,7 @@ PINNED: dict[str, dict[str, object]] = {
         "pixel_filter": 0.0, "edge_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
         "medium_fill_radius": 0,
         "medium_coverage_radius": 0,
+        "samples_per_pixel": 1,
     },
     "default": {
         "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -77,6 +79,7 @@ PINNED: dict[str, dict[str, object]] = {
         "pixel_filter": -1.0, "edge_filter": -1.0, "taa": False, "taa_alpha": 0.5, "warm_start": 4,
         "medium_fill_radius": 4,
         "medium_coverage_radius": -1,
+        "samples_per_pixel": -1,
     },
     "falcor": {
         "alpha": 0.05, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -95,6 +98,7 @@ PINNED: dict[str, dict[str, object]] = {
         "pixel_filter": 0.0, "edge_filter": 0.0, "taa": False, "taa_alpha": 0.5, "warm_start": 0,
         "medium_fill_radius": 0,
         "medium_coverage_radius": 0,
+        "samples_per_pixel": 1,
     },
 }
 

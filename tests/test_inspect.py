@@ -130,3 +130,9 @@ def test_a_centre_sampled_frame_is_named(
     assert code == 0 and "samples: one through the pixel centre" in out
     code, out, _ = run_cli(["inspect", str(_write(tmp_path / "j.0001.exr", SVGF))], capsys)
     assert code == 0 and "samples:" not in out
+    four = tmp_path / "f.0001.exr"
+    write_exr(four, {name: np.full((H, W), 0.5, np.float32) for name in SVGF},
+              attributes={"cycles.ViewLayer.samples": "4"})
+    code, out, _ = run_cli(["inspect", str(four)], capsys)
+    assert code == 0 and "samples: 4 per pixel (header)" in out
+    assert "pixel centre" not in out

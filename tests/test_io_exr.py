@@ -532,6 +532,26 @@ def test_centre_sampled_frames_are_told_by_their_header(
     assert read_frame(path, build_mapping()).frame.centre_sampled is expected
 
 
+@pytest.mark.parametrize(
+    ("attributes", "expected"),
+    [
+        ({"cycles.ViewLayer.samples": "1"}, 1),
+        ({"cycles.ViewLayer.samples": "4"}, 4),
+        ({"cycles.RenderLayer.samples": " 16 "}, 16),
+        ({"cycles.ViewLayer.samples": "many"}, 1),  # not a count: the premise, 1
+        ({"cycles.ViewLayer.samples": "0"}, 1),
+        ({"Software": "Arnold"}, 1),
+        ({}, 1),
+    ],
+)
+def test_samples_per_pixel_are_read_from_the_header(
+    tmp_path: Path, attributes: dict[str, str], expected: int
+) -> None:
+    path = tmp_path / "frame.exr"
+    write_exr(path, gbuffer(), attributes=attributes)
+    assert read_frame(path, build_mapping()).frame.samples_per_pixel == expected
+
+
 def test_an_alternative_depth_in_a_part_of_another_window_is_not_needed(tmp_path: Path) -> None:
     # Cycles-named frame in one part; a second, smaller part holds another Denoising Depth
     # candidate's channel. The chosen Depth has surfaces: the file reads, the other part is

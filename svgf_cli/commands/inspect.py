@@ -17,6 +17,7 @@ from svgf_cli.io.exr import (
     read_frame,
     read_info,
     refuse_multiview,
+    samples_per_pixel,
 )
 from svgf_cli.io.layers import (
     AOV_PRESETS,
@@ -146,6 +147,9 @@ def _text(
     if centre_sampled(info.attributes):
         lines.append("  samples: one through the pixel centre (header): the default preset "
                      "applies the renderer's pixel filter (--pixel-filter auto)")
+    elif (samples := samples_per_pixel(info.attributes)) > 1:
+        lines.append(f"  samples: {samples} per pixel (header): the default preset blends each "
+                     f"frame as {samples} one-sample frames (--set samples_per_pixel=auto)")
     colour = resolve_output_colour(mapping, info.channels)
     lines.append(
         f"  denoised colour written as: {', '.join(colour or ('R', 'G', 'B'))}"

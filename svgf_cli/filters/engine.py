@@ -11,7 +11,12 @@ import numpy as np
 from svgf_cli.filters import modulate
 from svgf_cli.filters.context import FrameContext, Setup
 from svgf_cli.filters.fastmath import float32_weights
-from svgf_cli.filters.params import SVGFParams, atrous_iterations_for, check_params
+from svgf_cli.filters.params import (
+    SVGFParams,
+    atrous_iterations_for,
+    check_params,
+    params_for_samples,
+)
 from svgf_cli.filters.pipeline import build
 from svgf_cli.filters.resident import Resident
 from svgf_cli.frame import Frame
@@ -29,6 +34,8 @@ class PipelineFilter:
         self.params = params
         self.debug_layers = debug_layers
         self.setup = Setup.of(params, debug_layers)
+        # The setups of frames of several samples per pixel (params_for_samples), by count.
+        self._setups: dict[int, Setup] = {}
         self.pipeline = build(params, self.kind)
         self.resident = Resident()
         self.stage_seconds: dict[str, float] = {}
@@ -90,10 +97,23 @@ class PipelineFilter:
             )
         work = resident.workspace(frame.height, frame.width, len(names))
         resident.signal_names = names
-        return FrameContext(frame, names, self.setup, resident, work,
+        return FrameContext(frame, names, self._setup_for(frame.samples_per_pixel), resident,
+                            work,
                             float32_weights(frame.luminance_weights),
                             atrous_iterations_for(self.params, frame.height, frame.width),
                             **fields)
+
+    def _setup_for(self, samples_per_pixel: int) -> Setup:
+        """The setup of a frame of ``samples_per_pixel`` samples (its blends:
+        ``params_for_samples``); the filter's own for one sample."""
+        setup = self._setups.get(samples_per_pixel)
+        if setup is None:
+            params = params_for_samples(self.params, samples_per_pixel)
+            setup = (self.setup if params is self.params
+                     else dataclasses.replace(Setup.of(params, self.debug_layers),
+                                              signal_outputs=self.setup.signal_outputs))
+            self._setups[samples_per_pixel] = setup
+        return setup
 
 
 def _writable(frame: Frame) -> Frame:

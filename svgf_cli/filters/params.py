@@ -24,6 +24,8 @@ AUTO_ITERATIONS = -1
 AUTO_PIXEL_FILTER = -1.0
 # ``medium_coverage_radius`` from the image's size (medium_coverage_radius_for).
 AUTO_COVERAGE = -1
+# ``samples_per_pixel`` from the frame's header (params_for_samples).
+AUTO_SAMPLES = -1
 
 # The parameter groups, in display order, with a one-line title each.
 GROUPS: dict[str, str] = {
@@ -99,11 +101,15 @@ class SVGFParams:
         0.2, "Minimum blend factor of the luminance moments.",
         group="temporal", valid=Range(0, 1, low_open=True),
     )
-    history_cap: int = _p(32, "Maximum history length in frames.", group="temporal", valid=Range(1))
-    temporal: bool = _p(
-        True, "Reuse history through motion vectors (off: every frame cold).",
-        group="temporal",
+    samples_per_pixel: int = _p(
+        1, "Samples per pixel of the inputs: a frame of N samples is blended as N one-sample"
+        " frames, alpha and moments_alpha -> 1 - (1 - alpha)^N; auto (-1 in svgf/params) = the"
+        " frame's header (Cycles'; else 1): docs/algorithm.md#frames-of-several-samples.",
+        group="temporal", valid=Range(1, 65536, auto=AUTO_SAMPLES, shown="1..65536"),
     )
+    history_cap: int = _p(32, "Maximum history length in frames.", group="temporal", valid=Range(1))
+    temporal: bool = _p(True, "Reuse history through motion vectors (off: every frame cold).",
+                        group="temporal")
     depth_tolerance: float = _p(
         10.0,
         "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient"
@@ -440,6 +446,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("temporal_albedo", True, "a renderer's reference is the pixel-filtered"
                   " texture, a 1-spp colour one sample of it: "
                   f"{_ALG}#5-remodulation-and-the-temporal-albedo"),
+        Departure("samples_per_pixel", AUTO_SAMPLES, "a frame of 4 samples holds less noise"
+                  " and as much history blur as one of 1: its blends come from its header:"
+                  f" {_ALG}#frames-of-several-samples"),
         Departure("albedo_catmull_rom", True, "bilinear resampling blurs the texture the"
                   f" means converge to a little more every frame: {_ALG}"
                   "#sharper-history-resampling-catmull-rom"),
@@ -508,6 +517,34 @@ def medium_coverage_radius_for(params: SVGFParams, height: int, width: int) -> i
     if params.medium_coverage_radius != AUTO_COVERAGE:
         return params.medium_coverage_radius
     return max(1, int(min(height, width) / 360 + 0.5))
+
+
+def params_for_samples(params: SVGFParams, samples_per_pixel: int) -> SVGFParams:
+    """The settings for a frame the renderer sampled ``samples_per_pixel`` times per pixel
+    (its header's count; ``params.samples_per_pixel`` when not auto).
+
+    A frame of N samples is blended as N one-sample frames of a still scene would be:
+    ``alpha`` and ``moments_alpha`` become ``1 - (1 - alpha)^N``. The history's loss
+    (resampling blur, lag) is the same per frame while the frame's noise falls with N
+    (measured on cycles/roll at 4 spp: docs/algorithm.md#frames-of-several-samples).
+    N = 1 gives back ``params`` itself.
+    """
+    n = params.samples_per_pixel
+    if n == AUTO_SAMPLES:
+        n = samples_per_pixel
+    if n <= 1:
+        return params
+    return dataclasses.replace(
+        params,
+        alpha=_frame_blend(params.alpha, n),
+        moments_alpha=_frame_blend(params.moments_alpha, n),
+    )
+
+
+def _frame_blend(alpha: float, samples: int) -> float:
+    """The blend factor of a frame worth ``samples`` one-sample frames, each blended at
+    ``alpha``: the history keeps ``(1 - alpha)^samples``."""
+    return 1.0 - (1.0 - alpha) ** samples
 
 
 # The preset used when none is named (CLI, evaluation baselines, farm templates).

@@ -671,6 +671,23 @@ def centre_sampled(attributes: Mapping[str, Any]) -> bool:
     return False
 
 
+def samples_per_pixel(attributes: Mapping[str, Any]) -> int:
+    """The samples per pixel the header says the frame was rendered with (1 when it says
+    nothing).
+
+    Cycles writes ``cycles.<view layer>.samples``: the sample count, or the end of the
+    subset for a render with a sample offset (then an overestimate). Other renderers'
+    headers carry no count svgf knows: 1, the tool's premise.
+    """
+    for key, value in attributes.items():
+        if key.startswith("cycles.") and key.endswith(".samples"):
+            try:
+                return max(1, int(str(value).strip()))
+            except ValueError:
+                continue
+    return 1
+
+
 def _depth_with_surfaces(
     depth: np.ndarray,
     resolved: ResolvedLayers,
@@ -907,6 +924,7 @@ def _assemble_frame(
         # The filter's luminance is the file's own (its chromaticities), never negative.
         luminance_weights=info.luminance_weights.for_filter(),
         centre_sampled=centre_sampled(info.attributes),
+        samples_per_pixel=samples_per_pixel(info.attributes),
         # The volume lobe's signal (sets of lobe passes) marks the medium's pixels.
         medium=next((s.radiance for s in composed.signals if s.name == "volume"), None),
     )

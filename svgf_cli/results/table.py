@@ -207,6 +207,15 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         contact_frames=(6,),
     ),
     SequenceSpec(
+        "testdata/cycles/roll4",
+        "Blender Cycles: cycles/roll's shot at 4 samples per pixel (the G-buffer a 4-sample "
+        "average, blended at edges), against cycles/roll's references.",
+        frozenset({"lag", "camera-motion", "moving-objects", "cycles", "lobes"}),
+        aovs="cycles",
+        contact_frames=(6,),
+        references="../roll/ref.####.exr",
+    ),
+    SequenceSpec(
         "testdata/cycles/metal",
         "Blender Cycles: polished metal ball on a glossy checker floor reflecting a sweeping "
         "area light; a point light switches on at frame 6 (+50% mean brightness); slow camera.",
