@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -325,6 +326,9 @@ class DenoisedFrame:
     # The frame's G-buffer as the filter used it, in a frame without signals (None unless
     # the filter was asked for it: `filters.denoiser.Denoiser.gbuffer_output`).
     gbuffer: Frame | None = None
+    # The noisy outlines' exchanges made on ``color`` after the emission was added
+    # (`filters.edge_filter.OutlineSpill`; None: none): the light layers make the same.
+    outline_spill: Any = None
 
     def warnings(self) -> list[str]:
         """One message per problem counted in this frame (empty when there is none)."""

@@ -8,8 +8,13 @@ import reference_svgf as ref
 from synthetic import make_frame
 
 from svgf_cli.filters.denoiser import Denoiser
-from svgf_cli.filters.edge_filter import edge_filter, edge_filter_weight
-from svgf_cli.filters.params import AUTO_PIXEL_FILTER, PRESETS
+from svgf_cli.filters.edge_filter import (
+    edge_filter,
+    edge_filter_weight,
+    noisy_outline_weights,
+    outline_share,
+)
+from svgf_cli.filters.params import AUTO_PIXEL_FILTER, PRESETS, resolve_params
 from svgf_cli.filters.pipeline import stage_names
 
 F32 = np.float32
@@ -34,7 +39,7 @@ def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_matches_a_float64_reference(weight: float) -> None:
     colour, mesh, depth = _scene()
     out = np.empty_like(colour)
-    edge_filter(colour, mesh, depth, F32(weight), out)
+    edge_filter(colour, mesh, depth, _plane(depth, weight), out)
     want = ref.edge_filter(colour, mesh, depth, weight)
     np.testing.assert_allclose(out, want, rtol=2e-6, atol=2e-6)
     # What moves: outline pixels only, and all of them.
@@ -47,8 +52,75 @@ def test_the_light_a_pair_holds_is_kept() -> None:
     """Each exchange moves light between two pixels: the frame's total stays."""
     colour, mesh, depth = _scene(3)
     out = np.empty_like(colour)
-    edge_filter(colour, mesh, depth, F32(0.25), out)
+    edge_filter(colour, mesh, depth, _plane(depth, 0.25), out)
     np.testing.assert_allclose(out.sum(axis=(1, 2)), colour.sum(axis=(1, 2)), rtol=1e-5)
+    # Per-pixel weights too: each pair exchanges the mean of its two pixels' weights.
+    weights = np.random.default_rng(5).uniform(0.0, 0.25, depth.shape).astype(F32)
+    edge_filter(colour, mesh, depth, weights, out)
+    np.testing.assert_allclose(out.sum(axis=(1, 2)), colour.sum(axis=(1, 2)), rtol=1e-5)
+    np.testing.assert_allclose(out, ref.edge_filter(colour, mesh, depth, weights),
+                               rtol=2e-6, atol=2e-6)
+
+
+def _plane(depth: np.ndarray, weight: float) -> np.ndarray:
+    return np.full(depth.shape, weight, dtype=F32)
+
+
+def _speckled(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 24x34 frame: on the left a defocused region whose samples see the ball (id 2) or
+    the floor (id 1) at random, on the right a clean outline and a one-pixel wire."""
+    rng = np.random.default_rng(seed)
+    height, width = 24, 34
+    mesh = np.ones((height, width), np.int32)
+    mesh[:, :12] = np.where(rng.random((height, 12)) < 0.5, 2, 1)
+    mesh[8:16, 18:26] = 3  # a clean object
+    mesh[2:22, 30] = 4  # a wire
+    depth = np.where(mesh == 2, 3.0, 5.0).astype(F32)
+    depth[mesh == 3] = 4.0
+    colour = np.where(mesh == 2, 4.0, 0.5).astype(F32)[None].repeat(3, axis=0)
+    return colour, mesh, depth
+
+
+def test_the_outlines_share_matches_a_float64_reference() -> None:
+    colour, mesh, depth = _speckled()
+    depth[0, 20:] = 0.0  # background counts as another surface
+    share = outline_share(mesh, depth)
+    np.testing.assert_allclose(share, ref.outline_share(mesh, depth), rtol=1e-6, atol=1e-7)
+    assert share[12, 5] > 0.4  # the speckle
+    assert share[12, 22] == 0.0  # inside the clean object
+    assert share[8, 22] <= 0.2 and share[12, 30] < 0.25  # its outline, the wire
+
+
+@pytest.mark.parametrize(("height", "width", "radius"), [(7, 9, 2), (3, 2, 2), (1, 5, 1),
+                                                     (40, 33, 2), (12, 10, 3)])
+def test_the_outlines_share_at_the_image_edges(height: int, width: int, radius: int) -> None:
+    """Windows cut by the image's edges count only the pairs inside it (float64 reference,
+    random ids and background)."""
+    rng = np.random.default_rng(height * width)
+    mesh = rng.integers(0, 3, (height, width)).astype(np.int32)
+    depth = rng.choice([0.0, 2.0, 5.0], (height, width)).astype(F32)
+    np.testing.assert_allclose(outline_share(mesh, depth, radius),
+                               ref.outline_share(mesh, depth, radius), rtol=1e-6, atol=1e-7)
+
+
+def test_noisy_outlines_are_blurred_and_clean_ones_are_not() -> None:
+    """The extra weight reaches the speckled region only: the clean object's outline and
+    the wire are exchanged exactly as without it; the speckle's contrast falls; the frame's
+    light is kept; and the stage matches the float64 reference."""
+    colour, mesh, depth = _speckled(1)
+    extra = noisy_outline_weights(outline_share(mesh, depth), 0.2)
+    assert extra[:, :8].min() > 0.0 and not extra[:, 16:].any()
+    frame = make_frame(34, 24, illumination=0.0, albedo=0.5, emission=colour, depth=depth)
+    frame.mesh_id[:] = mesh
+    params = resolve_params("paper", temporal=False, atrous_iterations=0)
+    plain = Denoiser(params.replace(edge_filter=0.05)).process(frame).color
+    noisy = Denoiser(params.replace(edge_filter=0.05, noisy_outline_weight=0.2)
+                     ).process(frame).color
+    np.testing.assert_array_equal(noisy[:, :, 16:], plain[:, :, 16:])
+    assert noisy[:, 4:20, 2:10].std() < 0.6 * plain[:, 4:20, 2:10].std()
+    np.testing.assert_allclose(noisy.sum(), plain.sum(), rtol=1e-5)
+    want = ref.noisy_outline_filter(plain * 0 + frame.emission, mesh, depth, 0.05, 0.2)
+    np.testing.assert_allclose(noisy, want, rtol=1e-5, atol=1e-5)
 
 
 def test_auto_is_for_centre_sampled_frames_only() -> None:
@@ -57,6 +129,8 @@ def test_auto_is_for_centre_sampled_frames_only() -> None:
     assert edge_filter_weight(0.1, False) == 0.1
     assert "edge_filter" in stage_names(PRESETS["default"])
     assert "edge_filter" not in stage_names(PRESETS["paper"])
+    # The noisy outlines' part runs on every frame: the stage is on without the base weight.
+    assert "edge_filter" in stage_names(PRESETS["paper"].replace(noisy_outline_weight=0.1))
 
 
 def test_the_denoiser_softens_a_centre_sampled_silhouette_only() -> None:

@@ -38,7 +38,7 @@ HEADER = "| parameter | group | values | paper | falcor | meaning |"
 # plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
 # every output stores them in svgf/params. Added since: warm_start (2026-11-27, issue 29),
 # medium_fill_radius (2026-11-27, issue 30), medium_coverage_radius (2026-11-28),
-# samples_per_pixel (2026-11-28, issue 30). Changed
+# samples_per_pixel, noisy_outline_weight (2026-11-28, issue 30). Changed
 # since: default's sigma_luminance 4 -> 2
 # and mixed_sigma_luminance 2.5 -> 1.5 (2026-11-27, issue 29:
 # docs/stability.md#a-tighter-luminance-stop).
@@ -61,6 +61,7 @@ PINNED: dict[str, dict[str, object]] = {
         "medium_fill_radius": 0,
         "medium_coverage_radius": 0,
         "samples_per_pixel": 1,
+        "noisy_outline_weight": 0.0,
     },
     "default": {
         "alpha": 0.2, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -80,6 +81,7 @@ PINNED: dict[str, dict[str, object]] = {
         "medium_fill_radius": 4,
         "medium_coverage_radius": -1,
         "samples_per_pixel": -1,
+        "noisy_outline_weight": 0.25,
     },
     "falcor": {
         "alpha": 0.05, "moments_alpha": 0.2, "history_cap": 32, "temporal": True,
@@ -99,6 +101,7 @@ PINNED: dict[str, dict[str, object]] = {
         "medium_fill_radius": 0,
         "medium_coverage_radius": 0,
         "samples_per_pixel": 1,
+        "noisy_outline_weight": 0.0,
     },
 }
 

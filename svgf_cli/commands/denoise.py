@@ -388,6 +388,9 @@ def _log_start(run: _Run, info: Any) -> None:
     if params.edge_filter == AUTO_PIXEL_FILTER:
         weight = edge_filter_weight(params.edge_filter, centre_sampled(info.attributes))
         progress.info(f"Edge filter: {weight:g} (auto, as the pixel filter)")
+    if params.noisy_outline_weight > 0.0:
+        progress.info(f"Noisy outlines: up to {params.noisy_outline_weight:g} more where over "
+                      "30 % of a 5x5 window's pixel pairs change object (a defocused G-buffer)")
 
 
 def _log_frames(run: _Run) -> None:

@@ -351,20 +351,30 @@ def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[Light
                     taken / len(emitters)).astype(F32)
 
 
+def emission_kept(light: LightLayers, emission: np.ndarray | None) -> np.ndarray:
+    """The emission passes' light as added back, (E, 3, H, W): Emit and Env are noise-free,
+    so their own values are the shares; where the filter took the emission into a signal it
+    is 0 in ``emission`` (the medium's split fills it: :func:`medium_emission`)."""
+    kept = np.zeros((len(light.emission), *light.emission[0].radiance.shape)
+                    if light.emission else (0,), dtype=F32)
+    for own, layer in zip(kept, light.emission, strict=True):
+        np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
+    return kept
+
+
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
                  outputs: dict[str, np.ndarray], albedos: dict[str, np.ndarray],
-                 light: LightLayers, medium_signal: str | None = None) -> None:
+                 light: LightLayers, medium_signal: str | None = None,
+                 kept: np.ndarray | None = None) -> None:
     """The denoised light passes and their colour passes into ``denoised.light``; the light
     they cannot carry (where their colour passes are 0: the pixel filter's spill onto the
     background, emitters' edges) goes to the emission passes, split by their shares. On
     medium pixels the emission seen through the medium was filtered with the medium's
     signal ``medium_signal``: its part goes back to the emission passes
-    (:func:`medium_emission`)."""
-    kept = np.zeros((len(light.emission), *denoised.color.shape), dtype=F32)
-    for own, layer in zip(kept, light.emission, strict=True):
-        # Emit and Env are noise-free: their own values are the shares. Where the filter took
-        # the emission into a signal it is 0 in ``emission``: the medium's split fills it.
-        np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
+    (:func:`medium_emission`). ``kept``: the emission passes' light as added back, when not
+    :func:`emission_kept` (the noisy outlines' exchanges made on it)."""
+    if kept is None:
+        kept = emission_kept(light, emission)
     if (light.emission and denoised.medium is not None and emission is not None
             and medium_signal in outputs and denoised.medium.any()):
         assert medium_signal is not None
@@ -452,7 +462,8 @@ GROUP_SETTINGS: dict[str, object] = {
     # by at most 2 % (bench/light_layers.py on cycles/production, smoke and dof: better on
     # smoke, worse on dof), for 20-35 % less time in the groups' filter at 1080p
     # (docs/performance.md#production-frames-1080p-80-channels).
-    "object_history": False, "edge_filter": 0.0, "spatial_variance_radius": 1,
+    "object_history": False, "edge_filter": 0.0, "noisy_outline_weight": 0.0,
+    "spatial_variance_radius": 1,
 }
 
 
@@ -538,6 +549,18 @@ class LayeredDenoiser:
         emission = denoised.emission  # the frame's, less what the filter took into a signal
         names = self.colour.signal_names or ()
         outputs = _planes(denoised.layers, names)
+        spill = denoised.outline_spill
+        if spill is not None:
+            # The noisy outlines' exchanges were made on the colour, emission included: made
+            # on every share and every emission pass too, the layers still add up to it.
+            # An emission pass's light where the filter took it into a signal (the medium's
+            # pixels) is that signal's: left out before the exchange, as write_passes does.
+            outputs = {name: spill.apply(plane) for name, plane in outputs.items()}
+            kept = np.stack([spill.apply(own) for own in emission_kept(light, emission)]
+                            ) if light.emission else None
+            emission = None if emission is None else spill.apply(emission)
+        else:
+            kept = None
         # The colours the diffuse-like signals were remodulated by (their temporal means);
         # glossy signals keep this frame's colour, except where a reflected light's colour
         # stands in (filters.stages.reflected_lights): their colour passes stay as read.
@@ -548,13 +571,15 @@ class LayeredDenoiser:
         if light.passes:
             medium = next((s.name for s in frame.signals
                            if frame.medium is not None and s.radiance is frame.medium), None)
-            write_passes(denoised, emission, outputs, albedos, light, medium)
+            write_passes(denoised, emission, outputs, albedos, light, medium, kept)
         if groups is not None:
             layers = self.groups.process(groups).layers
             self.groups.resident.release_workspace()
             filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
+            if spill is not None:
+                filtered = np.stack([spill.apply(group) for group in filtered])
             for layer, part in zip(light.groups, compose_groups(denoised.color, filtered,
                                                                 light.groups), strict=True):
                 _write(layer.channels, part, denoised.light)

@@ -139,6 +139,9 @@ class FrameContext:
     medium_pixels: np.ndarray | None = None
     # The index of the medium's signal in ``frame.signals`` (fill_medium); None: none.
     medium_signal: int | None = None
+    # The noisy outlines' exchanges the edge filter made (filters.edge_filter.OutlineSpill),
+    # for the light layers to make the same; None: none.
+    outline_spill: Any = None
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
     temporal: TemporalState | None = None
     reprojected: bool = False  # there was a history to reproject

@@ -73,6 +73,7 @@ class Denoiser(PipelineFilter):
         colour = ctx.output if frame.final_colour is None else frame.final_colour
         return DenoisedFrame(color=colour, layers=ctx.layers, counts=ctx.counts,
                              emission=ctx.frame.emission, medium=ctx.medium_pixels,
+                             outline_spill=ctx.outline_spill,
                              gbuffer=_used_gbuffer(ctx) if self.gbuffer_output else None)
 
 

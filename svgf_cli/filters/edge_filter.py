@@ -18,9 +18,21 @@ neighbours, rows then columns): what the pair holds is kept. Where the 1-spp G-b
 itself is noisy (a defocused region whose depth jumps from sample to sample, the surfaces
 seen through fog) every pair is an outline, and the spill is a small blur of what the
 G-buffer could not guide.
+
+:func:`noisy_outline_weights` makes that blur stronger where it is all there is: where more
+than ``DENSE_FROM`` of the pixel pairs around a pixel (its ``(2 DENSE_RADIUS + 1)^2``
+window, rows and columns) change object or meet the background, the G-buffer is noise (a
+defocused region, where each sample sees one surface or another at random: half of the
+pairs for an even mix), not geometry: a clean outline crosses a 5x5 window in one row or
+column of pairs (at most 22 % of them), a one-pixel wire in two (22 %), two outlines
+crossing about as much. The extra weight grows linearly to the full
+``noisy_outline_weight`` at ``DENSE_FULL`` and is exchanged over ``NOISY_PASSES`` passes;
+each pair uses the mean of its two pixels' weights, so what the pair holds is still kept.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
@@ -30,10 +42,18 @@ from svgf_cli.filters.params import AUTO_PIXEL_FILTER
 
 F32 = np.float32
 _ZERO = F32(0.0)
+_HALF = F32(0.5)
 # Depths further apart than this ratio are two surfaces (as filters.taa's outlines).
 DEPTH_JUMP = F32(1.05)
 # Each outline neighbour's weight for a centre-sampled frame (on top of the pixel filter's).
 CENTRE_SAMPLE_EDGE_WEIGHT = 0.05
+# Noisy outlines: the window (radius), the share of its pairs on outlines where the extra
+# weight starts and where it is full, and how many passes exchange it (measured on
+# cycles/dof and smoke, docs/algorithm.md#noisy-outlines-defocus).
+DENSE_RADIUS = 2
+DENSE_FROM = 0.3
+DENSE_FULL = 0.55
+NOISY_PASSES = 2
 
 
 def edge_filter_weight(setting: float, centre_sampled: bool) -> float:
@@ -56,28 +76,31 @@ def _outline(mesh_a: np.int32, mesh_b: np.int32, z_a: np.float32, z_b: np.float3
 
 
 @njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
-def _pair_weights(ids_a: np.ndarray, z_a: np.ndarray, ids_b: np.ndarray, z_b: np.ndarray,
-                  weight: np.float32, out: np.ndarray) -> None:
-    """``out[i] = weight`` where pixels ``a[i]`` and ``b[i]`` show two surfaces, else 0."""
+def _pair_weights(ids_a: np.ndarray, z_a: np.ndarray, w_a: np.ndarray, ids_b: np.ndarray,
+                  z_b: np.ndarray, w_b: np.ndarray, out: np.ndarray) -> None:
+    """``out[i]`` = the mean of the two pixels' weights where pixels ``a[i]`` and ``b[i]``
+    show two surfaces, else 0."""
     for i in range(out.size):
-        out[i] = weight if _outline(ids_a[i], ids_b[i], z_a[i], z_b[i]) else _ZERO
+        pair = _HALF * (w_a[i] + w_b[i])
+        out[i] = pair if _outline(ids_a[i], ids_b[i], z_a[i], z_b[i]) else _ZERO
 
 
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
 )
 def edge_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
-                weight: np.float32, out: np.ndarray) -> None:
-    """``out`` (3, H, W): ``colour`` (3, H, W) with ``weight`` of each outline neighbour's
-    colour exchanged, along rows then columns (module docstring); float32. The pairs'
-    weights are found once per row; the exchanges run over row slices."""
+                weight: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (3, H, W): ``colour`` (3, H, W) with each outline neighbour's colour
+    exchanged at the mean of the two pixels' ``weight`` (H, W), along rows then columns
+    (module docstring); float32. The pairs' weights are found once per row; the exchanges
+    run over row slices."""
     height, width = depth.shape
     rows = np.empty((3, height, width), dtype=F32)
     for y in prange(height):
-        ids, z = mesh_id[y], depth[y]
+        ids, z, w = mesh_id[y], depth[y], weight[y]
         left = np.zeros(width, dtype=F32)  # with the pixel to the left
         right = np.zeros(width, dtype=F32)
-        _pair_weights(ids[:-1], z[:-1], ids[1:], z[1:], weight, right[:-1])
+        _pair_weights(ids[:-1], z[:-1], w[:-1], ids[1:], z[1:], w[1:], right[:-1])
         left[1:] = right[:-1]
         for c in range(3):
             source, row = colour[c, y], rows[c, y]
@@ -90,13 +113,13 @@ def edge_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
                 row[width - 1] = source[width - 1] + left[width - 1] * (
                     source[width - 2] - source[width - 1])
     for y in prange(height):
-        ids, z = mesh_id[y], depth[y]
+        ids, z, w = mesh_id[y], depth[y], weight[y]
         up = np.zeros(width, dtype=F32)
         down = np.zeros(width, dtype=F32)
         if y > 0:
-            _pair_weights(ids, z, mesh_id[y - 1], depth[y - 1], weight, up)
+            _pair_weights(ids, z, w, mesh_id[y - 1], depth[y - 1], weight[y - 1], up)
         if y < height - 1:
-            _pair_weights(ids, z, mesh_id[y + 1], depth[y + 1], weight, down)
+            _pair_weights(ids, z, w, mesh_id[y + 1], depth[y + 1], weight[y + 1], down)
         above = max(y - 1, 0)
         below = min(y + 1, height - 1)
         for c in range(3):
@@ -105,3 +128,97 @@ def edge_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
             for x in range(width):
                 h = here[x]
                 target[x] = h + up[x] * (over[x] - h) + down[x] * (under[x] - h)
+
+
+def outline_share(mesh_id: np.ndarray, depth: np.ndarray, radius: int = DENSE_RADIUS
+                  ) -> np.ndarray:
+    """(H, W) float32: the share of the pixel pairs in each pixel's ``(2 radius + 1)^2``
+    window (its pixels with their right and lower neighbours in the image) whose two pixels
+    show another object or one of them the background. Depth steps do not count: a floor
+    seen at a grazing angle steps at every row."""
+    height, width = depth.shape
+    counts = np.empty((height, width), dtype=np.int32)
+    _outline_counts(mesh_id, depth, counts)
+    share = np.empty((height, width), dtype=F32)
+    _window_share(counts, np.int64(radius), share)
+    return share
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
+def _outline_counts(mesh_id: np.ndarray, depth: np.ndarray, counts: np.ndarray) -> None:
+    """``counts[y, x]``: how many of the pairs with the pixel's right and lower neighbour
+    change object or meet the background (0, 1 or 2)."""
+    height, width = depth.shape
+    for y in prange(height):
+        ids, z, row = mesh_id[y], depth[y], counts[y]
+        below = min(y + 1, height - 1)
+        for x in range(width):
+            here_bg = z[x] <= _ZERO
+            count = 0
+            if x + 1 < width and (ids[x] != ids[x + 1] or here_bg != (z[x + 1] <= _ZERO)):
+                count += 1
+            if y + 1 < height and (ids[x] != mesh_id[below, x]
+                                   or here_bg != (depth[below, x] <= _ZERO)):
+                count += 1
+            row[x] = count
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
+def _window_share(counts: np.ndarray, radius: np.int64, share: np.ndarray) -> None:
+    """``share``: the window sums of ``counts`` over the number of pairs inside the image
+    in each window (rows, then columns, as running sums)."""
+    height, width = counts.shape
+    rows = np.empty((height, width), dtype=np.int32)
+    for y in prange(height):
+        source, row = counts[y], rows[y]
+        total = 0
+        for x in range(min(radius, width)):
+            total += source[x]
+        for x in range(width):
+            if x + radius < width:
+                total += source[x + radius]
+            if x - radius - 1 >= 0:
+                total -= source[x - radius - 1]
+            row[x] = total
+    for x in prange(width):
+        total = 0
+        for y in range(min(radius, height)):
+            total += rows[y, x]
+        x0, x1 = max(x - radius, 0), min(x + radius, width - 1)
+        columns = x1 - x0 + 1
+        columns_with_right = min(x1, width - 2) - x0 + 1
+        for y in range(height):
+            if y + radius < height:
+                total += rows[y + radius, x]
+            if y - radius - 1 >= 0:
+                total -= rows[y - radius - 1, x]
+            y0, y1 = max(y - radius, 0), min(y + radius, height - 1)
+            pairs = (y1 - y0 + 1) * columns_with_right + columns * (min(y1, height - 2) - y0 + 1)
+            share[y, x] = F32(total) / F32(pairs) if pairs > 0 else _ZERO
+
+
+def noisy_outline_weights(share: np.ndarray, weight: float) -> np.ndarray:
+    """(H, W) float32: ``weight`` times how dense the outlines are, 0 below ``DENSE_FROM``
+    of the pairs and 1 from ``DENSE_FULL``, linear between (module docstring)."""
+    dense = np.clip((share - F32(DENSE_FROM)) / F32(DENSE_FULL - DENSE_FROM), 0.0, 1.0)
+    return (dense * F32(weight)).astype(F32)
+
+
+@dataclass(frozen=True)
+class OutlineSpill:
+    """The noisy outlines' exchanges made on a frame: ``weights`` (H, W), one plane per pass,
+    over the outlines of ``mesh_id`` and ``depth``. Linear and conservative, so made on each
+    light layer as on the colour they keep the layers adding up to it."""
+
+    mesh_id: np.ndarray
+    depth: np.ndarray
+    weights: tuple[np.ndarray, ...]
+
+    def apply(self, planes: np.ndarray) -> np.ndarray:
+        """``planes`` (3, H, W) with the exchanges made: a new float32 array."""
+        out = np.ascontiguousarray(planes, dtype=F32)
+        for weight in self.weights:
+            exchanged = np.empty_like(out)
+            edge_filter(out, self.mesh_id, self.depth, weight, exchanged)
+            out = exchanged
+        return out

@@ -170,10 +170,8 @@ class SVGFParams:
         4, "Below this history length the variance is estimated spatially (7x7 bilateral).",
         group="variance", valid=Range(0),
     )
-    spatial_variance_radius: int = _p(
-        3, "Radius of the spatial variance estimate (3 = 7x7).",
-        group="variance", valid=Range(0),
-    )
+    spatial_variance_radius: int = _p(3, "Radius of the spatial variance estimate (3 = 7x7).",
+                                      group="variance", valid=Range(0))
     spatial_variance_sigma_luminance: float = _p(
         10.0,
         "Weak luminance edge-stop of the spatial variance estimate, relative to the pair's"
@@ -278,18 +276,12 @@ class SVGFParams:
         " moves (the rest: the unfiltered accumulation; 1 = the paper's feedback everywhere).",
         group="atrous", valid=Range(0, 1),
     )
-    sigma_luminance: float = _p(
-        4.0, "sigma_l: luminance edge-stopping against sqrt(variance).",
-        group="atrous", valid=Range(0, low_open=True),
-    )
-    sigma_normal: float = _p(
-        128.0, "sigma_n: exponent of the normal edge-stopping weight.",
-        group="atrous", valid=Range(0, low_open=True),
-    )
-    sigma_depth: float = _p(
-        1.0, "sigma_z: depth edge-stopping against the depth gradient.",
-        group="atrous", valid=Range(0, low_open=True),
-    )
+    sigma_luminance: float = _p(4.0, "sigma_l: luminance edge-stopping against sqrt(variance).",
+                                group="atrous", valid=Range(0, low_open=True))
+    sigma_normal: float = _p(128.0, "sigma_n: exponent of the normal edge-stopping weight.",
+                             group="atrous", valid=Range(0, low_open=True))
+    sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.",
+                            group="atrous", valid=Range(0, low_open=True))
     # Demodulation (paper section 4).
     albedo_epsilon: float = _p(
         1e-3,
@@ -369,6 +361,12 @@ class SVGFParams:
         " sample through the pixel centre, else off).",
         group="output",
         valid=Range(0, 0.25, auto=AUTO_PIXEL_FILTER, shown="0..1/4", noun="a weight"),
+    )
+    noisy_outline_weight: float = _p(
+        0.0, "Where over 30 % of the pixel pairs around a pixel change object (a defocused"
+        " region: the G-buffer is noise), each such pair exchanges up to this much more of"
+        " its colour, twice (0 = off; docs/algorithm.md#noisy-outlines-defocus).",
+        group="output", valid=Range(0, 0.25, shown="0..1/4", noun="a weight"),
     )
     taa: bool = _p(
         False,
@@ -468,6 +466,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("edge_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres show"
                   " staircase outlines that crawl as they move, where the renderer's frame"
                   f" is anti-aliased: {_ALG}#outlines-of-centre-sampled-frames-edge-filter"),
+        Departure("noisy_outline_weight", 0.25, "a defocused region's 1-spp G-buffer changes"
+                  " object from pixel to pixel: the a-trous keeps its samples apart, and the"
+                  f" frame stays speckled: {_ALG}#noisy-outlines-defocus"),
         Departure("pixel_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres lack the"
                   f" renderer's pixel filter: {_ALG}"
                   "#the-pixel-filter-of-centre-sampled-frames---pixel-filter"),

@@ -1,12 +1,19 @@
 """Edge filter (optional): the renderer's pixel filter across outlines, which
-centre-sampled frames lack."""
+centre-sampled frames lack, and a stronger spill where the outlines are noise."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from svgf_cli.filters.context import FrameContext, StageBase
-from svgf_cli.filters.edge_filter import edge_filter, edge_filter_weight
+from svgf_cli.filters.edge_filter import (
+    NOISY_PASSES,
+    OutlineSpill,
+    edge_filter,
+    edge_filter_weight,
+    noisy_outline_weights,
+    outline_share,
+)
 from svgf_cli.filters.params import SVGFParams
 
 F32 = np.float32
@@ -15,8 +22,10 @@ F32 = np.float32
 class EdgeFilter(StageBase):
     """Each pair of neighbouring pixels on two surfaces exchanges ``w`` of its whole
     colour, emission included (``filters.edge_filter``; auto: only on frames sampled at
-    pixel centres). After the pixel filter, which leaves the emission and what the a-trous
-    kept apart as sharp as the samples."""
+    pixel centres), plus, where the outlines are so dense that the G-buffer is noise (a
+    defocused region), up to ``noisy_outline_weight`` more over ``NOISY_PASSES`` passes.
+    After the pixel filter, which leaves the emission and what the a-trous kept apart as
+    sharp as the samples."""
 
     name = "edge_filter"
     reads = ("output", "depth", "frame.mesh_id")
@@ -24,15 +33,28 @@ class EdgeFilter(StageBase):
     clock = "pixel_filter"
 
     def enabled(self, params: SVGFParams) -> bool:
-        return params.edge_filter != 0.0
+        return params.edge_filter != 0.0 or params.noisy_outline_weight > 0.0
 
     def run(self, ctx: FrameContext) -> bool:
         output = ctx.output
         assert output is not None
-        weight = edge_filter_weight(ctx.params.edge_filter, ctx.frame.centre_sampled)
-        if weight <= 0.0:
+        mesh_id, depth = ctx.frame.mesh_id, ctx.frame.depth
+        base = edge_filter_weight(ctx.params.edge_filter, ctx.frame.centre_sampled)
+        noisy = None
+        if ctx.params.noisy_outline_weight > 0.0:
+            noisy = noisy_outline_weights(outline_share(mesh_id, depth),
+                                          ctx.params.noisy_outline_weight)
+            if not noisy.any():
+                noisy = None
+        if base <= 0.0 and noisy is None:
             return False
-        filtered_output = np.empty_like(output)
-        edge_filter(output, ctx.frame.mesh_id, ctx.frame.depth, F32(weight), filtered_output)
-        ctx.output = filtered_output
+        if base > 0.0:
+            filtered_output = np.empty_like(output)
+            edge_filter(output, mesh_id, depth, np.full(depth.shape, base, dtype=F32),
+                        filtered_output)
+            output = filtered_output
+        if noisy is not None:
+            ctx.outline_spill = OutlineSpill(mesh_id, depth, (noisy,) * NOISY_PASSES)
+            output = ctx.outline_spill.apply(output)
+        ctx.output = output
         return True
