@@ -9,6 +9,7 @@ from synthetic import make_frame
 
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.edge_filter import (
+    OutlineSpill,
     edge_filter,
     edge_filter_weight,
     noisy_outline_weights,
@@ -154,3 +155,22 @@ def test_the_denoiser_softens_a_centre_sampled_silhouette_only() -> None:
     soft = outputs[True][:, :, 11] - outputs[True][:, :, 12]
     np.testing.assert_allclose(soft, step * (1.0 - 2 * 0.05), rtol=1e-4)
     np.testing.assert_array_equal(outputs[True][:, :, :10], outputs[False][:, :, :10])
+
+
+def test_the_spill_made_on_its_box_alone_is_the_whole_frames() -> None:
+    """``OutlineSpill.of`` crops the exchanges to the weighted pixels' box grown by one:
+    bit for bit what the whole frame gives, including a region at the image's edge."""
+    colour, mesh, depth = _speckled(2)
+    weights = noisy_outline_weights(outline_share(mesh, depth), 0.25)
+    big = np.random.default_rng(3).random((3, 40, 50)).astype(F32)
+    big_mesh = np.ones((40, 50), np.int32)
+    big_mesh[10:34, 16:50] = mesh  # the speckle inside, the wire's region at the right edge
+    big_depth = np.full((40, 50), 5.0, F32)
+    big_depth[10:34, 16:50] = depth
+    big_weights = np.zeros((40, 50), F32)
+    big_weights[10:34, 16:50] = weights
+    whole = OutlineSpill(big_mesh, big_depth, (big_weights, big_weights))
+    cropped = OutlineSpill.of(big_mesh, big_depth, (big_weights, big_weights))
+    assert cropped.mesh_id.size < 0.5 * big_mesh.size
+    np.testing.assert_array_equal(cropped.apply(big), whole.apply(big))
+    assert not np.array_equal(whole.apply(big), big)

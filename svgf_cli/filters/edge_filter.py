@@ -208,17 +208,36 @@ def noisy_outline_weights(share: np.ndarray, weight: float) -> np.ndarray:
 class OutlineSpill:
     """The noisy outlines' exchanges made on a frame: ``weights`` (H, W), one plane per pass,
     over the outlines of ``mesh_id`` and ``depth``. Linear and conservative, so made on each
-    light layer as on the colour they keep the layers adding up to it."""
+    light layer as on the colour they keep the layers adding up to it. Only the pixels
+    within one of a weighted pixel change (a pair's weight is the mean of its two pixels'):
+    the exchanges are made on that box alone."""
 
     mesh_id: np.ndarray
     depth: np.ndarray
     weights: tuple[np.ndarray, ...]
+    # Where in the frame the three planes above lie (the whole frame by default).
+    box: tuple[slice, slice] = (slice(None), slice(None))
+
+    @classmethod
+    def of(cls, mesh_id: np.ndarray, depth: np.ndarray,
+           weights: tuple[np.ndarray, ...]) -> OutlineSpill:
+        """The exchanges of ``weights`` (each 0 outside one region), cropped to the box of
+        their non-zero pixels grown by one: outside it no pair has weight."""
+        rows = np.flatnonzero(np.any([w.any(axis=1) for w in weights], axis=0))
+        columns = np.flatnonzero(np.any([w.any(axis=0) for w in weights], axis=0))
+        height, width = depth.shape
+        box = (slice(max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, height)),
+               slice(max(int(columns[0]) - 1, 0), min(int(columns[-1]) + 2, width)))
+        return cls(np.ascontiguousarray(mesh_id[box]), np.ascontiguousarray(depth[box]),
+                   tuple(np.ascontiguousarray(w[box]) for w in weights), box)
 
     def apply(self, planes: np.ndarray) -> np.ndarray:
         """``planes`` (3, H, W) with the exchanges made: a new float32 array."""
-        out = np.ascontiguousarray(planes, dtype=F32)
+        out = np.array(planes, dtype=F32, order="C")
+        crop = np.ascontiguousarray(out[(slice(None), *self.box)])
         for weight in self.weights:
-            exchanged = np.empty_like(out)
-            edge_filter(out, self.mesh_id, self.depth, weight, exchanged)
-            out = exchanged
+            exchanged = np.empty_like(crop)
+            edge_filter(crop, self.mesh_id, self.depth, weight, exchanged)
+            crop = exchanged
+        out[(slice(None), *self.box)] = crop
         return out
