@@ -1178,12 +1178,12 @@ def outline_share(mesh_id: np.ndarray, depth: np.ndarray, radius: int = 2) -> np
 def noisy_outline_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
                          base: float, noisy: float) -> np.ndarray:
     """The edge filter (``base``), then the noisy outlines' extra weight, ``noisy`` times the
-    outlines' density (0 below a share of 0.3, 1 from 0.55), in two more passes
+    outlines' density (0 below a share of 0.3, 1 from 0.55), in four more passes
     (``svgf_cli.filters.stages.edge_filter``)."""
     extra = noisy * np.clip((outline_share(mesh_id, depth) - 0.3) / 0.25, 0.0, 1.0)
     out = edge_filter(colour, mesh_id, depth, base) if base > 0.0 else colour
     if np.any(extra > 0.0):
-        for _ in range(2):
+        for _ in range(4):
             out = edge_filter(out, mesh_id, depth, extra)
     return out
 

@@ -53,7 +53,7 @@ CENTRE_SAMPLE_EDGE_WEIGHT = 0.05
 DENSE_RADIUS = 2
 DENSE_FROM = 0.3
 DENSE_FULL = 0.55
-NOISY_PASSES = 2
+NOISY_PASSES = 4
 
 
 def edge_filter_weight(setting: float, centre_sampled: bool) -> float:
