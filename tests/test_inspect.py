@@ -136,3 +136,20 @@ def test_a_centre_sampled_frame_is_named(
     code, out, _ = run_cli(["inspect", str(four)], capsys)
     assert code == 0 and "samples: 4 per pixel (header)" in out
     assert "pixel centre" not in out
+
+
+def test_check_reports_noisy_outlines(capsys: pytest.CaptureFixture[str]) -> None:
+    """A defocused Cycles frame (testdata/cycles/dof) has a region whose G-buffer changes
+    object from pixel to pixel; the same shot in focus (roll) has none."""
+    cycles = Path(__file__).resolve().parent.parent / "testdata" / "cycles"
+    code, out, _ = run_cli(["inspect", str(cycles / "dof" / "in.0003.exr"), "--preset-aovs",
+                            "cycles", "--check"], capsys)
+    assert code == 0
+    line = next(x for x in out.splitlines() if "noisy outlines:" in x)
+    assert float(line.split("noisy outlines:")[1].split("%")[0]) > 5.0
+    code, out, _ = run_cli(["inspect", str(cycles / "roll" / "in.0003.exr"), "--preset-aovs",
+                            "cycles", "--check"], capsys)
+    assert code == 0 and "noisy outlines" not in out
+    code, out, _ = run_cli(["inspect", str(cycles / "dof" / "in.0003.exr"), "--preset-aovs",
+                            "cycles", "--check", "--json"], capsys)
+    assert json.loads(out)["files"][0]["noisy_outline_pixels"] > 0.05

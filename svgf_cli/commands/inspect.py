@@ -74,6 +74,15 @@ def _plan_report(plan: SignalPlan | None, check: SumCheck | None) -> dict[str, A
     return report
 
 
+def noisy_outline_pixels(frame: Any) -> float:
+    """The share of the frame's pixels the default preset's noisy-outline exchange reaches
+    (``filters.edge_filter``: over ``DENSE_FROM`` of the pixel pairs around them change
+    object)."""
+    from svgf_cli.filters.edge_filter import DENSE_FROM, outline_share
+
+    return float(np.mean(outline_share(frame.mesh_id, frame.depth) > DENSE_FROM))
+
+
 def _report(
     info: ExrInfo,
     mapping: LayerMapping,
@@ -261,16 +270,20 @@ def command(
         resolved.requested_signals = signals
         if check and resolved.missing:
             fail(InputError(f"missing channel(s) for {', '.join(resolved.missing)}", name))
-        sum_check = None
+        sum_check = noisy = None
         if check and not resolved.missing and resolved.plan is None:
             fail(InputError(f"no signal set possible ({'; '.join(resolved.notes)})", name))
-        elif check and not resolved.missing and resolved.plan.checked:
+        elif check and not resolved.missing:
+            read = read_frame(name, mapping)
             # The light passes against the colour, as `svgf denoise` checks them on read.
-            sum_check = read_frame(name, mapping).sum_check
+            sum_check = read.sum_check if resolved.plan.checked else None
+            noisy = noisy_outline_pixels(read.frame)
         additivity = _additivity(name, mapping, info) if check and not resolved.missing else []
         if as_json:
             report = _report(info, mapping, resolved, sum_check)
             report["light_groups"] = _light_groups(info, mapping)
+            if noisy is not None:
+                report["noisy_outline_pixels"] = noisy
             report["additivity"] = [
                 {"what": a.what, "values": a.values, "failing": a.failing,
                  "worst_relative": a.worst_relative, "passed": a.passed} for a in additivity]
@@ -283,6 +296,10 @@ def command(
             if groups:
                 click.echo(f"  light groups: {', '.join(groups)} (svgf denoise writes them "
                            "denoised, adding up to the colour)")
+            if noisy is not None and noisy >= 0.0005:  # 0.05 %: a region, not a corner
+                click.echo(f"  noisy outlines: {100 * noisy:.1f} % of the pixels (the G-buffer "
+                           "changes object from pixel to pixel, as in a defocused region): the "
+                           "default preset blurs them (noisy_outline_weight)")
             for result in additivity:
                 click.echo(f"  light-layer check: {result.describe()}")
         if _denoised(info) and any(not a.passed for a in additivity):
