@@ -169,8 +169,8 @@ def test_the_spill_made_on_its_box_alone_is_the_whole_frames() -> None:
     big_depth[10:34, 16:50] = depth
     big_weights = np.zeros((40, 50), F32)
     big_weights[10:34, 16:50] = weights
-    whole = OutlineSpill(big_mesh, big_depth, (big_weights, big_weights))
-    cropped = OutlineSpill.of(big_mesh, big_depth, (big_weights, big_weights))
+    whole = OutlineSpill(big_mesh, big_depth, big_weights, 2)
+    cropped = OutlineSpill.of(big_mesh, big_depth, big_weights, 2)
     assert cropped.mesh_id.size < 0.5 * big_mesh.size
     np.testing.assert_array_equal(cropped.apply(big), whole.apply(big))
     assert not np.array_equal(whole.apply(big), big)

@@ -39,6 +39,7 @@ from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH
 from svgf_cli.filters.params import AUTO_PIXEL_FILTER
+from svgf_cli.filters.shares import row_sums
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -168,20 +169,11 @@ def _window_share(counts: np.ndarray, radius: np.int64, share: np.ndarray) -> No
     """``share``: the window sums of ``counts`` over the number of pairs inside the image
     in each window (rows, then columns, as running sums)."""
     height, width = counts.shape
-    rows = np.empty((height, width), dtype=np.int32)
+    rows = np.empty((height, width))  # whole counts: exact in float64
     for y in prange(height):
-        source, row = counts[y], rows[y]
-        total = 0
-        for x in range(min(radius, width)):
-            total += source[x]
-        for x in range(width):
-            if x + radius < width:
-                total += source[x + radius]
-            if x - radius - 1 >= 0:
-                total -= source[x - radius - 1]
-            row[x] = total
+        row_sums(counts[y], radius, rows[y])
     for x in prange(width):
-        total = 0
+        total = 0.0
         for y in range(min(radius, height)):
             total += rows[y, x]
         x0, x1 = max(x - radius, 0), min(x + radius, width - 1)
@@ -206,7 +198,7 @@ def noisy_outline_weights(share: np.ndarray, weight: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class OutlineSpill:
-    """The noisy outlines' exchanges made on a frame: ``weights`` (H, W), one plane per pass,
+    """The noisy outlines' exchanges made on a frame: ``weight`` (H, W), ``passes`` times,
     over the outlines of ``mesh_id`` and ``depth``. Linear and conservative, so made on each
     light layer as on the colour they keep the layers adding up to it. Only the pixels
     within one of a weighted pixel change (a pair's weight is the mean of its two pixels'):
@@ -214,30 +206,31 @@ class OutlineSpill:
 
     mesh_id: np.ndarray
     depth: np.ndarray
-    weights: tuple[np.ndarray, ...]
+    weight: np.ndarray
+    passes: int
     # Where in the frame the three planes above lie (the whole frame by default).
     box: tuple[slice, slice] = (slice(None), slice(None))
 
     @classmethod
-    def of(cls, mesh_id: np.ndarray, depth: np.ndarray,
-           weights: tuple[np.ndarray, ...]) -> OutlineSpill:
-        """The exchanges of ``weights`` (each 0 outside one region), cropped to the box of
-        their non-zero pixels grown by one: outside it no pair has weight."""
-        rows = np.flatnonzero(np.any([w.any(axis=1) for w in weights], axis=0))
-        columns = np.flatnonzero(np.any([w.any(axis=0) for w in weights], axis=0))
+    def of(cls, mesh_id: np.ndarray, depth: np.ndarray, weight: np.ndarray,
+           passes: int) -> OutlineSpill:
+        """The exchanges of ``weight`` (not all 0), cropped to the box of its non-zero
+        pixels grown by one: outside it no pair has weight."""
+        rows = np.flatnonzero(weight.any(axis=1))
+        columns = np.flatnonzero(weight.any(axis=0))
         height, width = depth.shape
         box = (slice(max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, height)),
                slice(max(int(columns[0]) - 1, 0), min(int(columns[-1]) + 2, width)))
         return cls(np.ascontiguousarray(mesh_id[box]), np.ascontiguousarray(depth[box]),
-                   tuple(np.ascontiguousarray(w[box]) for w in weights), box)
+                   np.ascontiguousarray(weight[box]), passes, box)
 
     def apply(self, planes: np.ndarray) -> np.ndarray:
         """``planes`` (3, H, W) with the exchanges made: a new float32 array."""
         out = np.array(planes, dtype=F32, order="C")
         crop = np.ascontiguousarray(out[(slice(None), *self.box)])
-        for weight in self.weights:
+        for _ in range(self.passes):
             exchanged = np.empty_like(crop)
-            edge_filter(crop, self.mesh_id, self.depth, weight, exchanged)
+            edge_filter(crop, self.mesh_id, self.depth, self.weight, exchanged)
             crop = exchanged
         out[(slice(None), *self.box)] = crop
         return out

@@ -26,12 +26,12 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
         rows = np.empty((ring, width), dtype=np.float64)
         columns = np.zeros(width)
         for y in range(min(radius, height)):
-            _row_sums(planes[c, y], radius, rows[y % ring])
+            row_sums(planes[c, y], radius, rows[y % ring])
             columns += rows[y % ring]
         for y in range(height):
             if y + radius < height:
                 added = rows[(y + radius) % ring]
-                _row_sums(planes[c, y + radius], radius, added)
+                row_sums(planes[c, y + radius], radius, added)
                 if y - radius - 1 >= 0:
                     removed = rows[(y - radius - 1) % ring]
                     for x in range(width):
@@ -51,7 +51,7 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
-def _row_sums(row: np.ndarray, radius: int, out: np.ndarray) -> None:
+def row_sums(row: np.ndarray, radius: int, out: np.ndarray) -> None:
     """``out[x]`` = the running sum of ``row`` over x - radius .. x + radius (float64)."""
     width = row.shape[0]
     running = 0.0

@@ -54,7 +54,7 @@ class EdgeFilter(StageBase):
                         filtered_output)
             output = filtered_output
         if noisy is not None:
-            ctx.outline_spill = OutlineSpill.of(mesh_id, depth, (noisy,) * NOISY_PASSES)
+            ctx.outline_spill = OutlineSpill.of(mesh_id, depth, noisy, NOISY_PASSES)
             output = ctx.outline_spill.apply(output)
         ctx.output = output
         return True
