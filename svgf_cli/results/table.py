@@ -34,7 +34,7 @@ OIDN_NOPREFILTER = "oidn-noprefilter"
 JOD_METHODS: tuple[str, ...] = (SVGF, BIDIRECTIONAL, OIDN, OIDN_NOPREFILTER)
 # Columns of each sequence's animation, left to right: (method or "reference", label).
 ANIMATION: tuple[tuple[str, str], ...] = (
-    (INPUT, "input (1 spp)"),
+    (INPUT, "input"),  # the noisy frames as rendered (1 spp, or 4 for cycles/roll4)
     (SVGF, "svgf"),
     (OIDN, "OIDN"),
     ("reference", "reference"),
