@@ -196,6 +196,41 @@ def test_compose_passes_weighs_a_pass_by_its_mean_over_its_colours_pixels() -> N
     np.testing.assert_array_equal(parts[0][:, :, 7:], 0.0)
 
 
+def test_compose_passes_gives_a_pass_black_in_the_whole_frame_none() -> None:
+    """Cycles writes TransDir or VolumeInd black on many shots: such a pass gets none of its
+    signal (the others split it as without it, bit for bit), and a signal with one pass
+    lit is that pass's alone, on every pixel, its own as read black or not."""
+    from svgf_cli.filters.composable import compose_passes
+    from svgf_cli.frame import LightLayer
+
+    rng = np.random.default_rng(3)
+    h, w = 10, 12
+    colour = rng.uniform(0.2, 1.0, (3, h, w)).astype(np.float32)
+
+    def layer(name: str, stored: np.ndarray, signal: str) -> LightLayer:
+        return LightLayer((f"{name}.R", f"{name}.G", f"{name}.B"), stored * colour, stored,
+                          colour, signal, ("Col.R", "Col.G", "Col.B"))
+
+    black = np.zeros((3, h, w), np.float32)
+    glossy = rng.uniform(0.0, 2.0, (3, h, w)).astype(np.float32)
+    sparse = np.where(rng.random((3, h, w)) < 0.2, 1.0, 0.0).astype(np.float32)
+    specular = rng.uniform(0.5, 3.0, (3, h, w)).astype(np.float32)
+    volume = rng.uniform(0.5, 3.0, (3, h, w)).astype(np.float32)
+    outputs = {"specular": specular, "volume": volume}
+    no_blue = sparse.copy()
+    no_blue[2] = 0.0  # a channel black in the whole frame: the lit pass still takes it all
+    passes = [layer("GlossDir", glossy, "specular"), layer("TransDir", black, "specular"),
+              layer("TransInd", sparse, "specular"), layer("VolumeDir", no_blue, "volume"),
+              layer("VolumeInd", black, "volume")]
+    light = specular + volume
+    parts = compose_passes(light, outputs, passes, emitters=True)
+    np.testing.assert_array_equal(parts[1], 0.0)
+    np.testing.assert_array_equal(parts[4], 0.0)
+    np.testing.assert_allclose(parts[3], volume, rtol=1e-6)  # where VolumeDir read 0 too
+    without = compose_passes(light, outputs, [passes[0], passes[2], passes[3]], emitters=True)
+    np.testing.assert_array_equal(parts[[0, 2, 3]].view(np.uint32), without.view(np.uint32))
+
+
 def test_fill_from_neighbours_matches_a_numpy_reference() -> None:
     """On the pixels whose colour is 0 in every channel, a pass divided by its colour is its
     4 neighbours' light over their colour (those that carry it), per channel; every other
@@ -232,6 +267,27 @@ def test_fill_from_neighbours_matches_a_numpy_reference() -> None:
 def _touching(mask: np.ndarray) -> np.ndarray:
     padded = np.pad(mask, 1)
     return padded[:-2, 1:-1] | padded[2:, 1:-1] | padded[1:-1, :-2] | padded[1:-1, 2:]
+
+
+def test_divide_where_coloured_matches_a_float64_reference() -> None:
+    """A light pass stored divided by its colour: light / colour where the colour is above
+    0 (per channel), the stored value as read elsewhere (0 and negative colours)."""
+    from svgf_cli.filters.shares import divide_where_coloured
+
+    rng = np.random.default_rng(5)
+    shape = (3, 11, 37)
+    colour = np.where(rng.random(shape) < 0.3, 0.0, rng.random(shape)).astype(np.float32)
+    colour[0, 2, :5] = -0.25
+    light = (rng.random(shape) * 4).astype(np.float32)
+    stored = (rng.random(shape) * 9).astype(np.float32)
+    coloured = colour > 0
+    want = np.where(coloured, light.astype(np.float64) / np.where(coloured, colour, 1.0),
+                    stored)
+    got = light.copy()
+    divide_where_coloured(got, colour, stored)
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    np.testing.assert_array_equal(got[~coloured], stored[~coloured])  # as read, exactly
+    assert coloured.any() and (~coloured).any()
 
 
 def test_colour_cover_bars_medium_pixels_no_sample_of_which_reached_the_surface() -> None:

@@ -34,6 +34,7 @@ from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_no
 from svgf_cli.filters.modulate import (
     DEMODULATE_COUNTERS,
     NO_HISTORY,
+    add_remodulated,
     demodulate,
     remodulate,
     remodulate_add,
@@ -263,6 +264,19 @@ def test_demodulation_round_trip_matches_reference(layout: str) -> None:
     want = sum(ref.radiance_with_background(ref.remodulate(got[i], s.albedo, EPS), s.radiance,
                                             depth) for i, s in enumerate(frame.signals))
     _close(total, want + ref.clean_value(frame.emission), 1e-6, "remodulate_add")
+    # Where each signal's own radiance is wanted too (the light layers): each remodulated
+    # alone, then summed with the emission: the same sum bit for bit, the same counts.
+    summed = np.zeros_like(frame.albedo)
+    for index, signal in enumerate(frame.signals):
+        alone = np.zeros_like(frame.albedo)
+        remodulate_add(got[index], signal.radiance, signal.albedo, depth, frame.emission,
+                       False, *RULE, alone, rows)
+        add_remodulated(alone, frame.emission, index == 0, summed, rows)
+        if index == 0:
+            assert rows.sum(axis=0).tolist() == [clean.counts["nonfinite.emission"],
+                                                 clean.counts["extreme.emission"]]
+    assert clean.counts["nonfinite.emission"] > 0  # the emission's cleaning is exercised
+    np.testing.assert_array_equal(summed.view(np.uint32), total.view(np.uint32))
 
 
 def test_mode_rule_thresholds() -> None:

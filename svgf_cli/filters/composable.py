@@ -41,6 +41,7 @@ from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.pixel_filter import pixel_filter, pixel_filter_weight
 from svgf_cli.filters.shares import (
     box_mean,
+    divide_where_coloured,
     fallback_pixels,
     fill_from_neighbours,
     split_shares,
@@ -177,7 +178,9 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
     passes, in proportion to theirs). Where no pass has light, filtered or read: none when
     the file has ``emitters`` (emission passes: they take that light), else by the passes'
     light over the frame; a signal's light where none of its passes has any, likewise among
-    them (a pass black in the whole frame, e.g. Cycles' VolumeInd or TransDir, gets none)."""
+    them. A pass black in the whole frame as read (Cycles' VolumeInd or TransDir, often)
+    gets none: its weight is 0 and not box-filtered, and a signal with one pass lit is
+    that pass's alone."""
     estimates = np.empty((len(passes), *light.shape), dtype=F32)
     covered: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # by id of a colour pass
     members: dict[str, list[int]] = {}
@@ -186,12 +189,19 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
         members.setdefault(owner, []).append(index)
     for owner, indexes in members.items():
         filtered = signal_outputs[owner] if owner else light
-        if len(indexes) == 1:  # the signal is this pass's light alone
-            estimates[indexes[0]] = filtered
+        # A pass black in the whole frame as read gets none of its signal.
+        lit = [i for i in indexes if passes[i].radiance.any()]
+        estimates[[i for i in indexes if i not in lit]] = 0.0
+        if len(lit) <= 1:  # the signal is this pass's light alone
+            if lit:
+                estimates[lit[0]] = filtered
             continue
         own = [passes[i] for i in indexes]
         weights = np.empty((len(own), *light.shape), dtype=F32)
-        for smooth, layer in zip(weights, own, strict=True):
+        for index, smooth, layer in zip(indexes, weights, own, strict=True):
+            if index not in lit:
+                smooth[...] = 0.0
+                continue
             if layer.colour is None:
                 box_filter(layer.stored, out=smooth)
                 continue
@@ -274,9 +284,7 @@ def stored_values(layer: LightLayer, radiance: np.ndarray,
     as a converged render's pixel filter spreads a pass divided by its colour one pixel past
     the 1-spp colour's edge; it still adds nothing there."""
     if colour is not None:
-        lit = colour > 0
-        np.divide(radiance, colour, out=radiance, where=lit)
-        np.copyto(radiance, layer.stored, where=~lit)
+        divide_where_coloured(radiance, colour, layer.stored)
         if cover is not None:
             fill_from_neighbours(radiance, colour, cover.source, cover.vacant)
     return radiance
@@ -555,9 +563,13 @@ class LayeredDenoiser:
             # on every share and every emission pass too, the layers still add up to it.
             # An emission pass's light where the filter took it into a signal (the medium's
             # pixels) is that signal's: left out before the exchange, as write_passes does.
-            outputs = {name: spill.apply(plane) for name, plane in outputs.items()}
-            kept = np.stack([spill.apply(own) for own in emission_kept(light, emission)]
-                            ) if light.emission else None
+            # In place where this frame's planes are not kept for the writer: the signals'
+            # outputs (fresh per frame, written only as debug layers), the emission kept.
+            outputs = {name: spill.apply(plane, None if self.debug_layers else plane)
+                       for name, plane in outputs.items()}
+            kept = emission_kept(light, emission) if light.emission else None
+            for own in kept if kept is not None else ():
+                spill.apply(own, own)
             emission = None if emission is None else spill.apply(emission)
         else:
             kept = None
@@ -579,7 +591,8 @@ class LayeredDenoiser:
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
             if spill is not None:
-                filtered = np.stack([spill.apply(group) for group in filtered])
+                for group in filtered:
+                    spill.apply(group, group)
             for layer, part in zip(light.groups, compose_groups(denoised.color, filtered,
                                                                 light.groups), strict=True):
                 _write(layer.channels, part, denoised.light)

@@ -224,9 +224,13 @@ class OutlineSpill:
         return cls(np.ascontiguousarray(mesh_id[box]), np.ascontiguousarray(depth[box]),
                    np.ascontiguousarray(weight[box]), passes, box)
 
-    def apply(self, planes: np.ndarray) -> np.ndarray:
-        """``planes`` (3, H, W) with the exchanges made: a new float32 array."""
-        out = np.array(planes, dtype=F32, order="C")
+    def apply(self, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``planes`` (3, H, W) with the exchanges made: into ``out`` (float32; may be
+        ``planes`` itself), else a new float32 array."""
+        if out is None:
+            out = np.array(planes, dtype=F32, order="C")
+        elif out is not planes:
+            np.copyto(out, planes)
         crop = np.ascontiguousarray(out[(slice(None), *self.box)])
         for _ in range(self.passes):
             exchanged = np.empty_like(crop)

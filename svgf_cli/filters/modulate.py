@@ -232,6 +232,32 @@ def remodulate_add(
 
 
 @njit(parallel=True, **_JIT)
+def add_remodulated(alone: np.ndarray, emission: np.ndarray, has_emission: bool,
+                    out: np.ndarray, counts: np.ndarray) -> None:
+    """``out += alone`` (one signal as :func:`remodulate_add` gives it into zeros), with
+    ``has_emission`` ``+= emission`` too, added as :func:`remodulate_add` adds it (to the
+    signal's value before the sum) and counted alike into ``counts`` (H, 2): the same sum,
+    bit for bit, where each signal's own radiance is wanted as well (the light layers), so
+    each signal is remodulated once."""
+    height, width = alone.shape[1], alone.shape[2]
+    for y in prange(height):
+        nonfinite = 0
+        extreme = 0
+        for c in range(3):
+            a, e, o = alone[c, y], emission[c, y], out[c, y]
+            if has_emission:
+                for x in range(width):
+                    nonfinite += is_nonfinite(e[x])
+                    extreme += is_extreme(e[x])
+                    o[x] += a[x] + clean_value(e[x])
+            else:
+                for x in range(width):
+                    o[x] += a[x]
+        counts[y, 0] = nonfinite
+        counts[y, 1] = extreme
+
+
+@njit(parallel=True, **_JIT)
 def reflected_lights(guide: np.ndarray, max_reflectance: np.float32, out_lit: np.ndarray) -> bool:
     """``out_lit[y + 1, x + 1] = max(clean(guide[:, y, x])) > max_reflectance`` (uint8, an
     (H + 2, W + 2) plane whose one-pixel border is set to 0): where the G-buffer albedo is

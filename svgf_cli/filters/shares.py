@@ -178,6 +178,18 @@ def fallback_pixels(total: np.ndarray, weights: np.ndarray, floor: float) -> int
 
 
 @njit(**_JIT)
+def divide_where_coloured(light: np.ndarray, colour: np.ndarray, stored: np.ndarray) -> None:
+    """In place, per value of (3, H, W): ``light / colour`` where ``colour > 0``, else
+    ``stored`` (a light pass stored divided by its colour: where that is 0, as read)."""
+    channels, height, width = light.shape
+    for job in prange(channels * height):
+        c, y = job // height, job % height
+        row, col, old = light[c, y], colour[c, y], stored[c, y]
+        for x in range(width):
+            row[x] = row[x] / col[x] if col[x] > 0.0 else old[x]
+
+
+@njit(**_JIT)
 def touching(mask: np.ndarray, out: np.ndarray) -> None:
     """``out`` (H, W) bool: whether one of the pixel's 4 neighbours (up, down, left, right;
     inside the image) is in ``mask`` (H, W) bool."""

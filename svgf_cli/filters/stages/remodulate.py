@@ -34,17 +34,21 @@ class Remodulate(StageBase):
         rows = np.zeros((height, 2), dtype=np.int64)
         for index, signal in enumerate(frame.signals):
             add_emission = has_emission and index == 0
-            modulate.remodulate_add(spatial.illumination[index], signal.radiance,
-                                    signal.albedo, depth, emission_plane, add_emission,
-                                    *rules[signal.guide_albedo], radiance, rows)
+            if ctx.setup.debug_layers or ctx.setup.signal_outputs:
+                # Each signal's own radiance is wanted too: remodulated once, then summed
+                # (the same sum, bit for bit).
+                alone = (debug_layers(ctx, index, emission_plane, rows)
+                         if ctx.setup.debug_layers
+                         else signal_output(ctx, index, emission_plane, rows, albedo=True))
+                modulate.add_remodulated(alone, emission_plane, add_emission, radiance, rows)
+            else:
+                modulate.remodulate_add(spatial.illumination[index], signal.radiance,
+                                        signal.albedo, depth, emission_plane, add_emission,
+                                        *rules[signal.guide_albedo], radiance, rows)
             if add_emission:
                 total = rows.sum(axis=0)
                 add_count(counts, "nonfinite", "emission", int(total[0]))
                 add_count(counts, "extreme", "emission", int(total[1]))
-            if ctx.setup.debug_layers:
-                debug_layers(ctx, index, emission_plane, rows)
-            elif ctx.setup.signal_outputs:
-                signal_output(ctx, index, emission_plane, rows, albedo=True)
         ctx.output = radiance
 
 
@@ -68,20 +72,21 @@ def signal_output(ctx: FrameContext, index: int, emission_plane: np.ndarray,
 
 
 def debug_layers(ctx: FrameContext, index: int, emission_plane: np.ndarray,
-                 rows: np.ndarray) -> None:
+                 rows: np.ndarray) -> np.ndarray:
     """Signal ``index``'s own remodulated radiance, variance, history length, mode and
-    anti-lag weight as debug layers."""
+    anti-lag weight as debug layers; returns that radiance."""
     spatial, signal, mode = ctx.spatial, ctx.frame.signals[index], ctx.mode
     assert spatial is not None
     height, width = ctx.depth.shape
     name, layers = signal.name, ctx.layers
-    signal_output(ctx, index, emission_plane, rows, albedo=ctx.setup.signal_outputs)
+    alone = signal_output(ctx, index, emission_plane, rows, albedo=ctx.setup.signal_outputs)
     layers[f"variance.{name}"] = spatial.variance[index].copy()
     layers[f"history_length.{name}"] = spatial.history_length[index].copy()
     layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
     if ctx.params.antilag:
         layers[f"antilag.{name}"] = cells_to_pixels(
             ctx.work["antilag_lambda"][index], height, width)
+    return alone
 
 
 def cells_to_pixels(cells: np.ndarray, height: int, width: int) -> np.ndarray:
