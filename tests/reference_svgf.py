@@ -1175,12 +1175,48 @@ def outline_share(mesh_id: np.ndarray, depth: np.ndarray, radius: int = 2) -> np
     return share
 
 
+def isolated_samples(mesh_id: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Per pixel: every one of its 4 neighbours in the image (two at least) shows another
+    object or, of the two, one the background."""
+    ids = np.asarray(mesh_id)
+    background = np.asarray(depth) <= 0.0
+    height, width = ids.shape
+    out = np.zeros((height, width), dtype=bool)
+    for y in range(height):
+        for x in range(width):
+            inside = [(v, u) for v, u in ((y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1))
+                      if 0 <= v < height and 0 <= u < width]
+            out[y, x] = len(inside) >= 2 and all(
+                ids[v, u] != ids[y, x] or background[v, u] != background[y, x]
+                for v, u in inside)
+    return out
+
+
+def near(pixels: np.ndarray, radius: int = 2) -> np.ndarray:
+    """Per pixel: one of ``pixels`` within its (2r+1)^2 window."""
+    height, width = pixels.shape
+    out = np.zeros((height, width), dtype=bool)
+    for y in range(height):
+        for x in range(width):
+            out[y, x] = bool(pixels[max(y - radius, 0):y + radius + 1,
+                                    max(x - radius, 0):x + radius + 1].any())
+    return out
+
+
 def noisy_outline_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
-                         base: float, noisy: float) -> np.ndarray:
+                         base: float, noisy: float, medium: np.ndarray | None = None
+                         ) -> np.ndarray:
     """The edge filter (``base``), then the noisy outlines' extra weight, ``noisy`` times the
-    outlines' density (0 below a share of 0.3, 1 from 0.55), in four more passes
+    outlines' density (0 below a share of 0.3, 1 from 0.55; 1 on an isolated sample whose
+    share is 0.15 or more, not near a ``medium`` pixel), in four more passes
     (``svgf_cli.filters.stages.edge_filter``)."""
-    extra = noisy * np.clip((outline_share(mesh_id, depth) - 0.3) / 0.25, 0.0, 1.0)
+    share = outline_share(mesh_id, depth)
+    dense = np.clip((share - 0.3) / 0.25, 0.0, 1.0)
+    lone = isolated_samples(mesh_id, depth) & (share >= 0.15)
+    if medium is not None:
+        lone &= ~near(medium)
+    dense[lone] = 1.0
+    extra = noisy * dense
     out = edge_filter(colour, mesh_id, depth, base) if base > 0.0 else colour
     if np.any(extra > 0.0):
         for _ in range(4):

@@ -12,6 +12,8 @@ from svgf_cli.filters.edge_filter import (
     OutlineSpill,
     edge_filter,
     edge_filter_weight,
+    isolated_samples,
+    near,
     noisy_outline_weights,
     outline_share,
 )
@@ -174,3 +176,66 @@ def test_the_spill_made_on_its_box_alone_is_the_whole_frames() -> None:
     assert cropped.mesh_id.size < 0.5 * big_mesh.size
     np.testing.assert_array_equal(cropped.apply(big), whole.apply(big))
     assert not np.array_equal(whole.apply(big), big)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_isolated_samples_and_near_match_float64_references(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    height, width = 13, 17
+    mesh = np.where(rng.random((height, width)) < 0.15, 2, 1).astype(np.int32)
+    depth = np.where(rng.random((height, width)) < 0.1, 0.0, 4.0).astype(F32)
+    got = np.empty((height, width), dtype=bool)
+    isolated_samples(mesh, depth, got)
+    want = ref.isolated_samples(mesh, depth)
+    np.testing.assert_array_equal(got, want)
+    assert want.any() and not want.all()
+    pixels = rng.random((height, width)) < 0.05
+    np.testing.assert_array_equal(near(pixels), ref.near(pixels))
+    np.testing.assert_array_equal(near(pixels, 1), ref.near(pixels, 1))
+
+
+def _sparse_speckle() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 30x40 frame: on the left a defocused edge's sparse speckle (one sample in eleven
+    sees the ball, id 2, the rest the floor: too few outlines for the density ramp), on the right
+    the clean floor with one lone pixel of a small object in focus (id 3)."""
+    height, width = 30, 40
+    mesh = np.ones((height, width), np.int32)
+    y, x = np.mgrid[:height, :16]
+    mesh[:, :16] = np.where((7 * y + 3 * x) % 11 == 0, 2, 1)
+    mesh[15, 30] = 3
+    depth = np.where(mesh == 2, 3.0, 5.0).astype(F32)
+    depth[mesh == 3] = 4.0
+    colour = np.where(mesh == 1, 0.5, 4.0).astype(F32)[None].repeat(3, axis=0)
+    return colour, mesh, depth
+
+
+def test_sparse_speckle_is_blurred_and_a_lone_object_in_focus_is_not() -> None:
+    """Lone samples where the window holds outlines (sparse defocus speckle) take the full
+    noisy-outline weight although the density ramp gives them none; a lone pixel on a clean
+    floor (a small object in focus) keeps its colour, as does a lone sample next to a medium
+    pixel (filters.stages.fill_medium's); the stage matches the float64 reference."""
+    colour, mesh, depth = _sparse_speckle()
+    share = outline_share(mesh, depth)
+    lone = np.empty(depth.shape, dtype=bool)
+    isolated_samples(mesh, depth, lone)
+    speckle = lone[:, 2:14] & (share[:, 2:14] >= 0.15)
+    assert speckle.sum() > 10 and share[:, 2:14].max() < 0.3  # below the ramp
+    assert lone[15, 30] and share[15, 30] < 0.15
+    assert not noisy_outline_weights(share, 0.25)[:, 2:14].any()
+    weights = noisy_outline_weights(share, 0.25, lone)
+    np.testing.assert_array_equal(weights[:, 2:14][speckle], F32(0.25))
+    assert not weights[:, 20:].any()
+    frame = make_frame(40, 30, illumination=0.0, albedo=0.5, emission=colour, depth=depth)
+    frame.mesh_id[:] = mesh
+    params = resolve_params("paper", temporal=False, atrous_iterations=0)
+    plain = Denoiser(params).process(frame).color
+    noisy = Denoiser(params.replace(noisy_outline_weight=0.25)).process(frame).color
+    assert noisy[:, :, :14].std() < 0.7 * plain[:, :, :14].std()
+    np.testing.assert_array_equal(noisy[:, :, 20:], plain[:, :, 20:])
+    np.testing.assert_allclose(noisy.sum(), plain.sum(), rtol=1e-5)
+    np.testing.assert_allclose(noisy, ref.noisy_outline_filter(frame.emission, mesh, depth,
+                                                               0.0, 0.25),
+                               rtol=1e-5, atol=1e-5)
+    medium = np.zeros(depth.shape, dtype=bool)
+    medium[:, :16] = True
+    assert not (lone & ~near(medium) & (share >= 0.15))[:, :14].any()

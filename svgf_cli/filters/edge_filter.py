@@ -55,6 +55,11 @@ DENSE_RADIUS = 2
 DENSE_FROM = 0.3
 DENSE_FULL = 0.55
 NOISY_PASSES = 4
+# A pixel whose sample saw a surface none of its 4 neighbours saw is noise too where its
+# window's share of outlines is this or more (sparse defocus speckle); below it (a clean
+# region: one such pixel's own 4 pairs are 10 % of a 5x5 window's 40) it may be a small
+# object in focus and stays as sharp.
+ISOLATED_FROM = 0.15
 
 
 def edge_filter_weight(setting: float, centre_sampled: bool) -> float:
@@ -189,11 +194,54 @@ def _window_share(counts: np.ndarray, radius: np.int64, share: np.ndarray) -> No
             share[y, x] = F32(total) / F32(pairs) if pairs > 0 else _ZERO
 
 
-def noisy_outline_weights(share: np.ndarray, weight: float) -> np.ndarray:
+def noisy_outline_weights(share: np.ndarray, weight: float,
+                          isolated: np.ndarray | None = None) -> np.ndarray:
     """(H, W) float32: ``weight`` times how dense the outlines are, 0 below ``DENSE_FROM``
-    of the pairs and 1 from ``DENSE_FULL``, linear between (module docstring)."""
+    of the pairs and 1 from ``DENSE_FULL``, linear between (module docstring); the full
+    ``weight`` on the ``isolated`` pixels (H, W) bool whose share is ``ISOLATED_FROM`` or
+    more (:func:`isolated_samples`)."""
     dense = np.clip((share - F32(DENSE_FROM)) / F32(DENSE_FULL - DENSE_FROM), 0.0, 1.0)
+    if isolated is not None:
+        dense[isolated & (share >= F32(ISOLATED_FROM))] = 1.0
     return (dense * F32(weight)).astype(F32)
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
+def isolated_samples(mesh_id: np.ndarray, depth: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (H, W) bool: the pixels whose every neighbour in the image (up, down, left,
+    right; at least two) shows another object or, of the two, one the background: a sample
+    that saw a surface none of its neighbours saw."""
+    height, width = depth.shape
+    for y in prange(height):
+        ids, z = mesh_id[y], depth[y]
+        for x in range(width):
+            here_bg = z[x] <= _ZERO
+            alone = True
+            seen = 0
+            for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                yy, xx = y + dy, x + dx
+                if 0 <= yy < height and 0 <= xx < width:
+                    seen += 1
+                    if ids[x] == mesh_id[yy, xx] and here_bg == (depth[yy, xx] <= _ZERO):
+                        alone = False
+            out[y, x] = alone and seen >= 2
+
+
+def near(pixels: np.ndarray, radius: int = DENSE_RADIUS) -> np.ndarray:
+    """(H, W) bool: the pixels with one of ``pixels`` (H, W) bool within their
+    ``(2 radius + 1)^2`` window."""
+    counts = np.ascontiguousarray(pixels, dtype=np.int32)
+    rows = np.empty(counts.shape)
+    _row_window_sums(counts, np.int64(radius), rows)
+    columns = np.empty(rows.shape[::-1])
+    _row_window_sums(np.ascontiguousarray(rows.T), np.int64(radius), columns)
+    return columns.T > 0.0
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
+def _row_window_sums(values: np.ndarray, radius: np.int64, out: np.ndarray) -> None:
+    for y in prange(values.shape[0]):
+        row_sums(values[y], radius, out[y])
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,8 @@ from svgf_cli.filters.edge_filter import (
     OutlineSpill,
     edge_filter,
     edge_filter_weight,
+    isolated_samples,
+    near,
     noisy_outline_weights,
     outline_share,
 )
@@ -42,8 +44,14 @@ class EdgeFilter(StageBase):
         base = edge_filter_weight(ctx.params.edge_filter, ctx.frame.centre_sampled)
         noisy = None
         if ctx.params.noisy_outline_weight > 0.0:
-            noisy = noisy_outline_weights(outline_share(mesh_id, depth),
-                                          ctx.params.noisy_outline_weight)
+            share = outline_share(mesh_id, depth)
+            isolated = np.empty(depth.shape, dtype=np.bool_)
+            isolated_samples(mesh_id, depth, isolated)
+            if ctx.medium_pixels is not None and ctx.medium_pixels.any():
+                # Through a medium a lone sample is the surface seen between scatterings,
+                # its colour already the medium's filtered light (filters.stages.fill_medium).
+                isolated &= ~near(ctx.medium_pixels)
+            noisy = noisy_outline_weights(share, ctx.params.noisy_outline_weight, isolated)
             if not noisy.any():
                 noisy = None
         if base <= 0.0 and noisy is None:
