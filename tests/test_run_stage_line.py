@@ -35,3 +35,27 @@ def test_stage_line_of_a_filter_made_of_pipelines_names_each() -> None:
 def test_stage_line_is_empty_for_other_filters() -> None:
     assert stage_line(object()) == ""
     assert stage_line(_Slotted()) == ""
+
+
+def test_a_layered_denoiser_reports_its_light_layers_after_its_filters() -> None:
+    """The real LayeredDenoiser on two frames of the production shot: the colour's and the
+    groups' stages, then the light layers' own parts."""
+    from pathlib import Path
+
+    from svgf_cli.filters.composable import LayeredDenoiser
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.layers import build_mapping
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    shot = Path(__file__).resolve().parents[1] / "testdata/cycles/production"
+    mapping, _ = fix_signal_set(shot / "in.0001.exr", build_mapping("cycles"))
+    layered = LayeredDenoiser(PRESETS["default"])
+    for frame in (1, 2):
+        result = read_frame(shot / f"in.{frame:04d}.exr", mapping)
+        result.frame.light = read_light_layers(result, "cycles")
+        layered.process(result.frame)
+        line = stage_line(layered)
+        colour, groups, layers = line.split("; ")
+        assert colour.startswith("colour: values ") and groups.startswith("groups: values ")
+        assert layers.startswith("layers: passes ") and ", groups " in layers

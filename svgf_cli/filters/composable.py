@@ -32,6 +32,7 @@ passes.
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -502,6 +503,16 @@ def group_frame(frame: Frame, groups: list[LightLayer],
                                final_colour=None)
 
 
+@dataclasses.dataclass
+class LayerClock:
+    """The wall seconds of the light layers' own work on the last frame, by part: the
+    light passes' shares (``passes``), the light groups' (``groups``: their pixel filter,
+    the outlines' exchanges and the split; their filter has its own stages). `svgf denoise
+    -v` prints them after the inner filters' stages."""
+
+    stage_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
 class LayeredDenoiser:
     """The causal Denoiser plus the light layers of its frames (`Frame.light`): the colour as
     the Denoiser alone gives it, and every light pass and light group denoised, adding up to
@@ -518,6 +529,7 @@ class LayeredDenoiser:
         self.colour.gbuffer_output = True
         self.groups = Denoiser(group_params(params))
         self.groups.setup = dataclasses.replace(self.groups.setup, signal_outputs=True)
+        self.layers = LayerClock()
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -580,13 +592,18 @@ class LayeredDenoiser:
                                                  if not s.glossy), ".albedo")
         denoised.layers = ({k: v for k, v in denoised.layers.items() if ".albedo." not in k}
                            if self.debug_layers else {})
+        clock = self.layers.stage_seconds
+        clock.clear()
         if light.passes:
+            started = time.perf_counter()
             medium = next((s.name for s in frame.signals
                            if frame.medium is not None and s.radiance is frame.medium), None)
             write_passes(denoised, emission, outputs, albedos, light, medium, kept)
+            clock["passes"] = time.perf_counter() - started
         if groups is not None:
             layers = self.groups.process(groups).layers
             self.groups.resident.release_workspace()
+            started = time.perf_counter()
             filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
@@ -596,4 +613,5 @@ class LayeredDenoiser:
             for layer, part in zip(light.groups, compose_groups(denoised.color, filtered,
                                                                 light.groups), strict=True):
                 _write(layer.channels, part, denoised.light)
+            clock["groups"] = time.perf_counter() - started
         return denoised
