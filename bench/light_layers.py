@@ -10,6 +10,8 @@ and the temporal error (as `svgf evaluate` computes them, over every frame; the 
 error from the second frame on) of the input and of the output, and their ratio; then the
 additivity of every output frame (`svgf inspect --check`'s check). Exit 1 when a light layer
 misses the issue's target (relMSE <= 0.3x the input's, FLIP and temporal error below it).
+``--min-coverage 0.01`` shows how much of a divided pass's relMSE is the reference's own
+noise where its colour barely covers a pixel (`scores`).
 """
 
 from __future__ import annotations
@@ -47,12 +49,27 @@ def layers_of(path: Path) -> dict[str, np.ndarray]:
     return out
 
 
+# Cycles' light passes stored divided by a colour pass (the reference's, for --min-coverage).
+COLOUR_OF = {f"{lobe}{part}": f"{lobe}Col" for lobe in ("Diff", "Gloss", "Trans")
+             for part in ("Dir", "Ind")}
+
+
 def scores(frames: list[dict[str, np.ndarray]], refs: list[dict[str, np.ndarray]],
-           layer: str) -> tuple[float, float, float]:
+           layer: str, min_coverage: float = 0.0) -> tuple[float, float, float]:
+    """relMSE (trimmed), FLIP and temporal error of ``layer``; with ``min_coverage`` the
+    relMSE of a pass stored divided by its colour leaves out the pixels where the
+    reference's colour pass is above 0 but below it in every channel (a ratio of the few
+    samples that reached that surface: the reference's own noise)."""
     rel, fl, temporal = [], [], []
     previous = None
     for x, r in zip(frames, refs, strict=True):
-        rel.append(relmse_trimmed(x[layer], r[layer]))
+        colour = r.get(COLOUR_OF.get(layer, ""))
+        if min_coverage > 0.0 and colour is not None:
+            cover = colour.max(axis=0)
+            keep = ~((cover > 0.0) & (cover < min_coverage))
+            rel.append(relmse_trimmed(x[layer][:, keep], r[layer][:, keep]))
+        else:
+            rel.append(relmse_trimmed(x[layer], r[layer]))
         xd, rd = tone_map(x[layer]), tone_map(r[layer])
         fl.append(flip(xd, rd)[0])
         if previous is not None:
@@ -66,6 +83,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("sequence", type=Path, help="folder of in.####.exr and ref.####.exr")
     parser.add_argument("--output", type=Path, help="denoised outputs (default: denoise now)")
     parser.add_argument("--svgf-args", default="", help="extra `svgf denoise` options")
+    parser.add_argument("--min-coverage", type=float, default=0.0,
+                        help="score a pass stored divided by its colour only where the "
+                             "reference's colour is 0 or at least this (e.g. 0.01)")
     args = parser.parse_args(argv)
     inputs = sorted(args.sequence.glob("in.*.exr"))
     output = args.output
@@ -86,7 +106,8 @@ def main(argv: list[str]) -> int:
             # Black in every input and output frame (TransDir: no direct light through the
             # glass at 1 spp; the references hold a few 1e-6 values): nothing to score.
             continue
-        a, b = scores(ins, refs, name), scores(outs, refs, name)
+        a = scores(ins, refs, name, args.min_coverage)
+        b = scores(outs, refs, name, args.min_coverage)
         ratio = b[0] / a[0] if a[0] else float("nan")
         print(f"{name:<16} {a[0]:>10.4f} {b[0]:>9.4f} {ratio:>6.3f} {a[1]:>8.4f} {b[1]:>7.4f} "
               f"{a[2]:>11.4f} {b[2]:>8.4f}")
