@@ -227,6 +227,18 @@ def test_auto_iterations_grow_with_the_shorter_side(height: int, width: int, cou
     assert atrous_iterations_for(auto, height, width) == count
 
 
+@pytest.mark.parametrize(("samples", "fewer"), [(1, 0), (2, 0), (3, 0), (4, 1), (15, 1),
+                                                (16, 2), (64, 3), (4096, 6)])
+def test_auto_iterations_fall_by_one_per_factor_four_of_samples(samples: int,
+                                                                fewer: int) -> None:
+    auto = PRESETS["default"]
+    assert atrous_iterations_for(auto, 1080, 1920, samples) == max(1, 5 - fewer)
+    assert atrous_iterations_for(auto, 72, 128, samples) == max(1, 3 - fewer)
+    # A count set by hand, or one sample said by the settings, keeps the image's count.
+    assert atrous_iterations_for(auto.replace(samples_per_pixel=1), 1080, 1920, samples) == 5
+    assert atrous_iterations_for(auto.replace(atrous_iterations=4), 1080, 1920, samples) == 4
+
+
 @pytest.mark.parametrize("explicit", [0, 1, 5, 12])
 def test_an_explicit_iteration_count_is_kept(explicit: int) -> None:
     params = PRESETS["default"].replace(atrous_iterations=explicit)

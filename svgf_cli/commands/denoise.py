@@ -369,7 +369,7 @@ def _log_start(run: _Run, info: Any) -> None:
     """Version, threads, preset, every parameter, and what auto resolved to on ``info``."""
     from svgf_cli.filters.edge_filter import edge_filter_weight
     from svgf_cli.filters.pixel_filter import pixel_filter_weight
-    from svgf_cli.io.exr import centre_sampled
+    from svgf_cli.io.exr import centre_sampled, samples_per_pixel
 
     params, progress = run.params, run.progress
     progress.info(f"svgf {__version__} denoise")
@@ -377,8 +377,10 @@ def _log_start(run: _Run, info: Any) -> None:
     progress.info(f"Preset: {run.options['preset']}")
     progress.info(f"Parameters: {describe_params(params)}")
     if params.atrous_iterations == AUTO_ITERATIONS:
-        count = atrous_iterations_for(params, info.height, info.width)
-        progress.info(f"A-trous: {count} iterations (auto, for {info.width}x{info.height})")
+        samples = samples_per_pixel(info.attributes)
+        count = atrous_iterations_for(params, info.height, info.width, samples)
+        at = f" at {samples} samples per pixel" if samples > 1 else ""
+        progress.info(f"A-trous: {count} iterations (auto, for {info.width}x{info.height}{at})")
     if params.pixel_filter == AUTO_PIXEL_FILTER:
         centre = centre_sampled(info.attributes)
         weight = pixel_filter_weight(params.pixel_filter, centre)

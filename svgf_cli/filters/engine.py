@@ -100,7 +100,8 @@ class PipelineFilter:
         return FrameContext(frame, names, self._setup_for(frame.samples_per_pixel), resident,
                             work,
                             float32_weights(frame.luminance_weights),
-                            atrous_iterations_for(self.params, frame.height, frame.width),
+                            atrous_iterations_for(self.params, frame.height, frame.width,
+                                                  frame.samples_per_pixel),
                             **fields)
 
     def _setup_for(self, samples_per_pixel: int) -> Setup:

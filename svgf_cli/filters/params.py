@@ -261,7 +261,7 @@ class SVGFParams:
         5,
         "Number of a-trous iterations (steps 1, 2, 4, ...); 0 = none; auto (-1 in"
         " svgf/params) = from the image's shorter side: 3 below 160 pixels, 4 below 320,"
-        " else 5.",
+        " else 5; one fewer per whole factor of 4 of the frame's samples per pixel.",
         group="atrous", valid=Range(
             0, 12, auto=AUTO_ITERATIONS, shown="0..12", noun="a number of iterations"
         ),
@@ -493,20 +493,33 @@ PRESETS: dict[str, SVGFParams] = {
 _ITERATION_SIDES = ((320, 5), (160, 4), (0, 3))
 
 
-def atrous_iterations_for(params: SVGFParams, height: int, width: int) -> int:
-    """The a-trous iteration count for an image of ``height`` x ``width``.
+def atrous_iterations_for(params: SVGFParams, height: int, width: int,
+                          samples_per_pixel: int = 1) -> int:
+    """The a-trous iteration count for an image of ``height`` x ``width`` whose frames hold
+    ``samples_per_pixel`` samples (the header's; ``params.samples_per_pixel`` wins when
+    not auto).
 
     An explicit count is kept. ``AUTO_ITERATIONS`` grows the filter's reach with the image:
     the reach doubles with each iteration (about 2^(N+1) pixels), while 1-spp noise per pixel
     does not change with the resolution and scene detail covers more pixels as it grows.
     Measured on the lag sequences rendered at 72, 144 and 288 rows, the best count rose by
     one per doubling (2-3, 3-4, 4): 3 below 160 rows, 4 below 320, and from 320 on the
-    paper's 5 (tuned at 720p; more would cost speed at 1080p for little).
+    paper's 5 (tuned at 720p; more would cost speed at 1080p for little). A frame of N
+    samples needs 1/N of the area for the same noise, half the reach per factor 4: one
+    iteration fewer per whole factor of 4 (4-15 spp: one, 16-63: two), at least one
+    (measured on cycles/roll at 4 spp: docs/algorithm.md#frames-of-several-samples).
     """
     if params.atrous_iterations != AUTO_ITERATIONS:
         return params.atrous_iterations
     side = min(height, width)
-    return next(count for smallest, count in _ITERATION_SIDES if side >= smallest)
+    count = next(count for smallest, count in _ITERATION_SIDES if side >= smallest)
+    samples = (samples_per_pixel if params.samples_per_pixel == AUTO_SAMPLES
+               else params.samples_per_pixel)
+    fewer = 0
+    while samples >= 4:
+        fewer += 1
+        samples //= 4
+    return max(1, count - fewer)
 
 
 def medium_coverage_radius_for(params: SVGFParams, height: int, width: int) -> int:

@@ -424,8 +424,15 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "auto-iterations-fixed", "filters", "auto a-trous iterations always run the paper's 5",
         "svgf_cli/filters/params.py",
-        (("    return next(count for smallest, count in _ITERATION_SIDES if side >= smallest)",
-          "    return 5"),),
+        (("    count = next(count for smallest, count in _ITERATION_SIDES if side >= smallest)",
+          "    count = 5"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "auto-iterations-ignore-samples", "filters",
+        "frames of several samples per pixel get the one-sample a-trous count",
+        "svgf_cli/filters/params.py",
+        (("    return max(1, count - fewer)", "    return count"),),
         FILTER_TESTS,
     ),
     Mutant(
