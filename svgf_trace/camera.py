@@ -100,15 +100,22 @@ class Camera:
         """Linear view depth: distance along the forward axis."""
         return (np.asarray(points, float) - np.asarray(self.position, float)) @ self.forward
 
-    def primary_rays(self) -> tuple[np.ndarray, np.ndarray]:
+    def primary_rays(self, jitter: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Unit directions ``(H*W, 3)`` float64 through every pixel centre, row-major from the
-        top-left pixel, and the eye position ``(3,)``."""
+        top-left pixel, and the eye position ``(3,)``. With ``jitter`` ``(H, W, 2)`` in
+        [0, 1) (x, y from the pixel's top-left corner) through those positions instead."""
         tan_x, tan_y = self.tan_half_fov
         right, up, forward = self.basis()
-        xs = ((np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0) * tan_x
-        ys = (1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * tan_y
-        # (H, 1, 3) + (1, W, 3): one row term and one column term per pixel.
-        dirs = (ys[:, None, None] * up + forward)[:, :, :] + xs[None, :, None] * right
+        if jitter is None:
+            xs = ((np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0) * tan_x
+            ys = (1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * tan_y
+            # (H, 1, 3) + (1, W, 3): one row term and one column term per pixel.
+            dirs = (ys[:, None, None] * up + forward)[:, :, :] + xs[None, :, None] * right
+        else:
+            x = (np.arange(self.width)[None, :] + jitter[..., 0]) / self.width
+            y = (np.arange(self.height)[:, None] + jitter[..., 1]) / self.height
+            dirs = (((1.0 - y * 2.0) * tan_y)[..., None] * up + forward
+                    + ((x * 2.0 - 1.0) * tan_x)[..., None] * right)
         dirs = dirs.reshape(-1, 3)
         dirs /= np.sqrt(np.einsum("ij,ij->i", dirs, dirs))[:, None]
         return dirs, np.asarray(self.position, dtype=np.float64)

@@ -20,6 +20,7 @@ from svgf_trace.scene import Scene
 from svgf_trace.tracing import (
     STREAM_GRADIENT,
     STREAM_INPUT,
+    STREAM_JITTER,
     STREAM_REFERENCE,
     EmbreeTracer,
     FrameGeometry,
@@ -43,6 +44,7 @@ from svgf_trace.tracing import (
 __all__ = [
     "STREAM_GRADIENT",
     "STREAM_INPUT",
+    "STREAM_JITTER",
     "STREAM_REFERENCE",
     "EmbreeTracer",
     "FrameGeometry",
@@ -96,8 +98,14 @@ def render_frame(
     motion_next: bool = False,
     gradient_samples: bool = False,
     reference_supersample: int = 1,
+    jitter: bool = False,
 ) -> tuple[FrameResult, FrameResult | None]:
     """Render one frame (and its reference when ``reference_spp`` > 0).
+
+    ``jitter``: the input's primary ray (and so its G-buffer and its samples) goes through a
+    uniformly random position in each pixel, a new one every frame (:func:`pixel_jitter`),
+    as Mitsuba's and most renderers' one-sample frames do, instead of the pixel centre; the
+    reference then wants ``reference_supersample`` > 1 (its hits are the input's otherwise).
 
     ``reference_supersample`` k > 1: the reference averages a k x k grid of positions in
     each pixel (a box pixel filter; ``reference_spp / k^2`` samples each, at least 1)
@@ -110,7 +118,7 @@ def render_frame(
     """
     geo = prepare_frame(scene, animation, frame, width, height, threads=threads, stats=stats)
     try:
-        hits = trace_primary(geo)
+        hits = trace_primary(geo, pixel_jitter(seed, frame, width, height) if jitter else None)
         next_frame = None
         if motion_next:
             next_v, _ = world_vertices(scene, animation, frame + 1)
@@ -147,6 +155,14 @@ def render_frame(
     finally:
         geo.tracer.close()
     return result, reference
+
+
+def pixel_jitter(seed: int, frame: int, width: int, height: int) -> np.ndarray:
+    """The input's sample position in each pixel of ``frame``, (H, W, 2) float64 in [0, 1)
+    from the pixel's top-left corner (x, y): uniform (a box pixel filter), from the frame's
+    own random stream."""
+    return np.random.default_rng(int(frame_key(seed, frame, STREAM_JITTER))).random(
+        (height, width, 2))
 
 
 def _reference(

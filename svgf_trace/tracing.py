@@ -40,6 +40,7 @@ MIN_RAYS_PER_THREAD = 16384
 STREAM_INPUT = 0
 STREAM_REFERENCE = 1
 STREAM_GRADIENT = 2
+STREAM_JITTER = 3
 
 
 @dataclass
@@ -372,8 +373,10 @@ class Radiance(NamedTuple):
     lobes: np.ndarray | None
 
 
-def trace_primary(geo: FrameGeometry) -> PrimaryHits:
-    dirs, eye = geo.camera.primary_rays()
+def trace_primary(geo: FrameGeometry, jitter: np.ndarray | None = None) -> PrimaryHits:
+    """The primary hits through every pixel centre, or through the ``jitter`` positions
+    (``Camera.primary_rays``)."""
+    dirs, eye = geo.camera.primary_rays(jitter)
     directions = np.ascontiguousarray(dirs, dtype=np.float32)
     origins = np.ascontiguousarray(np.broadcast_to(eye.astype(np.float32), directions.shape))
     prim, u, v, t = geo.tracer.intersect(origins, directions)

@@ -240,3 +240,40 @@ def test_a_supersampled_reference_averages_the_pixel(
     assert abs(float(boxed["R"].sum()) / float(centre["R"].sum()) - 1.0) < 0.3
     assert spec.getattribute("svgf/reference/supersample") == 2
     assert coarse_spec.getattribute("svgf/reference/supersample") is None
+
+
+def test_jittered_samples_go_through_their_frames_positions(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--jitter: each pixel's primary hit projects to the frame's own random position in the
+    pixel (``render.pixel_jitter``), a new one every frame; without it, to the pixel centre.
+    The header says so, and gradient samples (which re-trace pixel centres) refuse it."""
+    scene = load_obj(Path(SCENE))
+    anim = Animation()
+    width, height = 20, 12
+    positions = {}
+    for jitter in (False, True):
+        for frame in (1, 2):
+            result, _ = render.render_frame(scene, anim, frame, width, height, 1, 1, 7,
+                                            jitter=jitter)
+            hit = np.isfinite(result.layers["Z"]) & (result.layers["Z"] > 0)
+            assert hit.mean() > 0.2
+            where = result.camera.project(result.layers["P"].astype(np.float64))
+            grid = np.stack(np.meshgrid(np.arange(width), np.arange(height)), axis=-1)
+            positions[jitter, frame] = np.where(hit[..., None], where - grid, np.nan)
+    centre = positions[False, 1]
+    np.testing.assert_allclose(centre[np.isfinite(centre)], 0.5, atol=2e-3)
+    for frame in (1, 2):
+        offsets = positions[True, frame]
+        want = render.pixel_jitter(7, frame, width, height)
+        seen = np.isfinite(offsets)
+        np.testing.assert_allclose(offsets[seen], want[seen], atol=2e-3)
+    assert np.nanmean(np.abs(positions[True, 1] - positions[True, 2])) > 0.2
+    code, _, _ = run(small(str(tmp_path / "j.####.exr"), "--frames", "1", "--jitter", "-q"),
+                     capsys)
+    assert code == 0
+    _, spec = read_exr(tmp_path / "j.0001.exr")
+    assert spec.getattribute("svgf/jitter") == "box"
+    code, _, err = run(small(str(tmp_path / "g.####.exr"), "--frames", "2", "--jitter",
+                             "--gradient-samples"), capsys)
+    assert code == 2 and "--jitter" in err

@@ -75,6 +75,11 @@ def resolve_threads(threads: int) -> int:
               help="Average each reference pixel over a KxK grid of positions (a box pixel "
                    "filter, --reference-spp / K^2 samples each), as a production renderer's "
                    "converged frame does; 1: the pixel centre, as the input.")
+@click.option("--jitter", is_flag=True,
+              help="Trace each input pixel's primary ray through a random position in the "
+                   "pixel, a new one every frame (a box pixel filter, as Mitsuba's and most "
+                   "renderers' one-sample frames), so the G-buffer is that sample's; pair it "
+                   "with --reference-supersample.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 @click.option("--float", "float_radiance", is_flag=True,
               help="Write radiance layers as float instead of half.")
@@ -113,6 +118,7 @@ def command(
     reference: str | None,
     reference_spp: int,
     reference_supersample: int,
+    jitter: bool,
     overwrite: bool,
     float_radiance: bool,
     lobes: bool,
@@ -129,16 +135,17 @@ def command(
 
     Each frame holds R,G,B = direct + indirect, direct.*, indirect.*, emission.*, albedo.*,
     N.*, Z, P.*, motion.X/Y (backward, pixels) and id; primary rays go through pixel centres
-    so the G-buffer is noise-free. Optional: lobe passes (--lobes), motion to the next
-    frame (--motion-next), A-SVGF gradient samples (--gradient-samples). See docs/trace.md.
+    so the G-buffer is noise-free (--jitter: through a random position in each pixel).
+    Optional: lobe passes (--lobes), motion to the next frame (--motion-next), A-SVGF
+    gradient samples (--gradient-samples). See docs/trace.md.
     """
     width, height = parse_resolution(resolution)
     try:
         frame_list = parse_frame_spec(frames)
     except ValueError as exc:
         raise UsageError(f"--frames: {exc}") from exc
-    if reference is None and (reference_half or reference_layers != "full"):
-        raise UsageError("--reference-half and --reference-channels need --reference")
+    _check_combinations(reference is not None, reference_half or reference_layers != "full",
+                        jitter, gradient_samples)
     out_paths, ref_paths = _claim_outputs(output, reference, frame_list, overwrite)
 
     # Heavy imports only once the arguments are known to be good.
@@ -153,8 +160,9 @@ def command(
     settings = _TraceSettings(
         width=width, height=height, spp=spp, max_depth=max_depth, seed=seed,
         reference_spp=reference_spp if reference else 0,
-        reference_supersample=reference_supersample, float_radiance=float_radiance,
-        lobes=lobes, motion_next=motion_next, gradient_samples=gradient_samples,
+        reference_supersample=reference_supersample, jitter=jitter,
+        float_radiance=float_radiance, lobes=lobes, motion_next=motion_next,
+        gradient_samples=gradient_samples,
         skip_layers=skip_layers, compression=compression, reference_layers=reference_layers,
         reference_half=reference_half, threads=resolve_threads(threads),
     )  # fmt: skip
@@ -176,6 +184,16 @@ def command(
         + (f" and references to {reference}" if reference else "")
         + f" in {elapsed:.1f} s ({stats.rays / max(elapsed, 1e-9) / 1e6:.2f} Mrays/s)"
     )
+
+
+def _check_combinations(reference: bool, reference_options: bool, jitter: bool,
+                        gradient_samples: bool) -> None:
+    """UsageError for options that need another or exclude one another."""
+    if not reference and reference_options:
+        raise UsageError("--reference-half and --reference-channels need --reference")
+    if jitter and gradient_samples:
+        raise UsageError("--gradient-samples re-traces the previous frame's pixel centres: "
+                         "not with --jitter")
 
 
 def _claim_outputs(
@@ -206,6 +224,7 @@ class _TraceSettings:
     seed: int
     reference_spp: int  # 0: no reference
     reference_supersample: int
+    jitter: bool
     float_radiance: bool
     lobes: bool
     motion_next: bool
@@ -224,7 +243,8 @@ def _summary(scene: Path, loaded: Scene, settings: _TraceSettings) -> str:
         f"Tracing {scene} ({loaded.triangle_count} triangles, {len(loaded.objects)} objects) "
         f"at {s.width}x{s.height}, {s.spp} spp, max depth {s.max_depth}, seed {s.seed}"
         + (f", reference {s.reference_spp} spp" if s.reference_spp else "")
-        + "".join(f", {name}" for name, on in (("lobe passes", s.lobes),
+        + "".join(f", {name}" for name, on in (("jittered samples", s.jitter),
+                                                ("lobe passes", s.lobes),
                   ("motion_next", s.motion_next), ("gradient samples", s.gradient_samples))
                   if on)
         + f"; using {s.threads} threads on cpu"
@@ -255,12 +275,14 @@ def _trace_frame(
         loaded, anim, frame, s.width, s.height, s.spp, s.max_depth, s.seed,
         reference_spp=s.reference_spp, threads=s.threads, stats=stats, lobes=s.lobes,
         motion_next=s.motion_next, gradient_samples=s.gradient_samples,
-        reference_supersample=s.reference_supersample,
+        reference_supersample=s.reference_supersample, jitter=s.jitter,
     )  # fmt: skip
     channels, half = input_channels(result, half_radiance=not s.float_radiance,
                                     skip=s.skip_layers)  # fmt: skip
     extra = input_attributes(lobes=s.lobes, motion_next=s.motion_next,
                              gradient_samples=s.gradient_samples)  # fmt: skip
+    if s.jitter:
+        extra["svgf/jitter"] = "box"
     attrs = frame_attributes(
         result, frame=frame, spp=s.spp, seed=s.seed, max_depth=s.max_depth, kind="input",
         extra=extra,

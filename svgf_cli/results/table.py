@@ -164,6 +164,14 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         inputs="../seq/in.####.exr",
     ),
     SequenceSpec(
+        "testdata/seq_jit",
+        "testdata/seq traced with jittered samples (svgf trace --jitter: each pixel's one "
+        "sample, G-buffer included, at a random position in the pixel, a new one every "
+        "frame, as Mitsuba's 1-spp frames), against seq_box's box-filtered references.",
+        _STATIC | {"camera-motion", "moving-objects"},
+        references="../seq_box/ref.####.exr",
+    ),
+    SequenceSpec(
         "testdata/lag/light_slide_dim",
         "The ceiling light slides 16 mm a frame right to left (static camera) and dims to 45% "
         "at frame 10 (16 frames; 2048-spp references).",
