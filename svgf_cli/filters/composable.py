@@ -270,9 +270,22 @@ def medium_colours(colours: dict[tuple[str, str, str], np.ndarray],
     on the others (Cycles), which the mean over the neighbours estimates."""
     read = {layer.colour_channels: layer.colour for layer in passes
             if layer.colour_channels is not None and layer.colour is not None}
+    crop = _medium_box(medium)
+    inside = medium[crop]
     for key, colour in colours.items():
         if key in read:
-            colour[:, medium] = box_filter(read[key])[:, medium]
+            colour[:, medium] = box_filter(read[key][(slice(None), *crop)])[:, inside]
+
+
+def _medium_box(pixels: np.ndarray) -> tuple[slice, slice]:
+    """The bounding box of the (H, W) ``pixels`` (some set) grown by the share window's
+    radius: a box mean over it is the whole frame's on those pixels (their windows lie in
+    it, or are clipped by the image's edge alike)."""
+    rows, columns = np.nonzero(pixels)
+    height, width = pixels.shape
+    return (slice(max(rows.min() - SHARE_RADIUS, 0), min(rows.max() + SHARE_RADIUS + 1, height)),
+            slice(max(columns.min() - SHARE_RADIUS, 0),
+                  min(columns.max() + SHARE_RADIUS + 1, width)))
 
 
 def stored_values(layer: LightLayer, radiance: np.ndarray,
@@ -332,12 +345,8 @@ def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[Light
     between its own passes and the emission passes in proportion to their box-filtered input
     light, and among the emission passes likewise (equal parts where they are all 0). Two box
     means of sums (and one per emission pass where several hold light there), each over the
-    medium pixels' bounding box grown by the box radius: the same means on those pixels."""
-    rows, columns = np.nonzero(pixels)
-    height, width = pixels.shape
-    crop = (slice(max(rows.min() - SHARE_RADIUS, 0), min(rows.max() + SHARE_RADIUS + 1, height)),
-            slice(max(columns.min() - SHARE_RADIUS, 0),
-                  min(columns.max() + SHARE_RADIUS + 1, width)))
+    medium pixels' box (:func:`_medium_box`): the same means on those pixels."""
+    crop = _medium_box(pixels)
     inside = pixels[crop]
 
     def smooth(planes: list[np.ndarray]) -> np.ndarray:
