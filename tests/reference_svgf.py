@@ -1178,18 +1178,16 @@ def outline_share(mesh_id: np.ndarray, depth: np.ndarray, radius: int = 2) -> np
 def isolated_samples(mesh_id: np.ndarray, depth: np.ndarray) -> np.ndarray:
     """Per pixel: every one of its 4 neighbours in the image (two at least) shows another
     object or, of the two, one the background."""
-    ids = np.asarray(mesh_id)
-    background = np.asarray(depth) <= 0.0
-    height, width = ids.shape
-    out = np.zeros((height, width), dtype=bool)
-    for y in range(height):
-        for x in range(width):
-            inside = [(v, u) for v, u in ((y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1))
-                      if 0 <= v < height and 0 <= u < width]
-            out[y, x] = len(inside) >= 2 and all(
-                ids[v, u] != ids[y, x] or background[v, u] != background[y, x]
-                for v, u in inside)
-    return out
+    ids, background = np.asarray(mesh_id), np.asarray(depth) <= 0.0
+
+    def alone(y: int, x: int) -> bool:
+        inside = [(v, u) for v, u in ((y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1))
+                  if 0 <= v < ids.shape[0] and 0 <= u < ids.shape[1]]
+        return len(inside) >= 2 and all(
+            ids[v, u] != ids[y, x] or background[v, u] != background[y, x] for v, u in inside)
+
+    return np.array([[alone(y, x) for x in range(ids.shape[1])] for y in range(ids.shape[0])],
+                    dtype=bool).reshape(ids.shape)
 
 
 def near(pixels: np.ndarray, radius: int = 2) -> np.ndarray:
