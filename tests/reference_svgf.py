@@ -1202,18 +1202,19 @@ def near(pixels: np.ndarray, radius: int = 2) -> np.ndarray:
 
 
 def noisy_outline_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
-                         base: float, noisy: float, medium: np.ndarray | None = None
-                         ) -> np.ndarray:
+                         base: float, noisy: float, medium: np.ndarray | None = None,
+                         centre_sampled: bool = True) -> np.ndarray:
     """The edge filter (``base``), then the noisy outlines' extra weight, ``noisy`` times the
-    outlines' density (0 below a share of 0.3, 1 from 0.55; 1 on an isolated sample whose
-    share is 0.15 or more, not near a ``medium`` pixel), in four more passes
-    (``svgf_cli.filters.stages.edge_filter``)."""
+    outlines' density (0 below a share of 0.3, 1 from 0.55; on a ``centre_sampled`` frame 1
+    on an isolated sample whose share is 0.15 or more, not near a ``medium`` pixel), in four
+    more passes (``svgf_cli.filters.stages.edge_filter``)."""
     share = outline_share(mesh_id, depth)
     dense = np.clip((share - 0.3) / 0.25, 0.0, 1.0)
-    lone = isolated_samples(mesh_id, depth) & (share >= 0.15)
-    if medium is not None:
-        lone &= ~near(medium)
-    dense[lone] = 1.0
+    if centre_sampled:
+        lone = isolated_samples(mesh_id, depth) & (share >= 0.15)
+        if medium is not None:
+            lone &= ~near(medium)
+        dense[lone] = 1.0
     extra = noisy * dense
     out = edge_filter(colour, mesh_id, depth, base) if base > 0.0 else colour
     if np.any(extra > 0.0):

@@ -365,7 +365,8 @@ class SVGFParams:
     noisy_outline_weight: float = _p(
         0.0, "Where over 30 % of the pixel pairs around a pixel change object (a defocused"
         " region: the G-buffer is noise), each such pair exchanges up to this much more of"
-        " its colour, four times; all of it at a lone sample among such pairs (0 = off;"
+        " its colour, four times; all of it at a lone sample among such pairs on a"
+        " centre-sampled frame (0 = off;"
         " docs/algorithm.md#noisy-outlines-defocus).",
         group="output", valid=Range(0, 0.25, shown="0..1/4", noun="a weight"),
     )

@@ -45,12 +45,18 @@ class EdgeFilter(StageBase):
         noisy = None
         if ctx.params.noisy_outline_weight > 0.0:
             share = outline_share(mesh_id, depth)
-            isolated = np.empty(depth.shape, dtype=np.bool_)
-            isolated_samples(mesh_id, depth, isolated)
-            if ctx.medium_pixels is not None and ctx.medium_pixels.any():
-                # Through a medium a lone sample is the surface seen between scatterings,
-                # its colour already the medium's filtered light (filters.stages.fill_medium).
-                isolated &= ~near(ctx.medium_pixels)
+            isolated = None
+            if ctx.frame.centre_sampled:
+                # Only where every sample went through its pixel's centre: in a jittered
+                # frame a lone sample is as often an outline's other surface, which the
+                # history averages (testdata/seq_jit: video JOD 8.636 -> 8.621 with it).
+                isolated = np.empty(depth.shape, dtype=np.bool_)
+                isolated_samples(mesh_id, depth, isolated)
+                if ctx.medium_pixels is not None and ctx.medium_pixels.any():
+                    # Through a medium a lone sample is the surface seen between
+                    # scatterings, its colour already the medium's filtered light
+                    # (filters.stages.fill_medium).
+                    isolated &= ~near(ctx.medium_pixels)
             noisy = noisy_outline_weights(share, ctx.params.noisy_outline_weight, isolated)
             if not noisy.any():
                 noisy = None
