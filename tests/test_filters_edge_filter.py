@@ -13,6 +13,7 @@ from svgf_cli.filters.edge_filter import (
     edge_filter,
     edge_filter_weight,
     isolated_samples,
+    lone_samples,
     near,
     noisy_outline_weights,
     outline_share,
@@ -246,4 +247,6 @@ def test_sparse_speckle_is_blurred_and_a_lone_object_in_focus_is_not() -> None:
                                rtol=1e-5, atol=1e-5)
     medium = np.zeros(depth.shape, dtype=bool)
     medium[:, :16] = True
-    assert not (lone & ~near(medium) & (share >= 0.15))[:, :14].any()
+    np.testing.assert_array_equal(lone_samples(mesh, depth), lone)
+    beside_medium = lone_samples(mesh, depth, medium)
+    assert not beside_medium[:, :18].any() and beside_medium[15, 30]

@@ -39,7 +39,7 @@ from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH
 from svgf_cli.filters.params import AUTO_PIXEL_FILTER
-from svgf_cli.filters.shares import row_sums
+from svgf_cli.filters.shares import box_mean, row_sums
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -229,19 +229,22 @@ def isolated_samples(mesh_id: np.ndarray, depth: np.ndarray, out: np.ndarray) ->
 
 def near(pixels: np.ndarray, radius: int = DENSE_RADIUS) -> np.ndarray:
     """(H, W) bool: the pixels with one of ``pixels`` (H, W) bool within their
-    ``(2 radius + 1)^2`` window."""
-    counts = np.ascontiguousarray(pixels, dtype=np.int32)
-    rows = np.empty(counts.shape)
-    _row_window_sums(counts, np.int64(radius), rows)
-    columns = np.empty(rows.shape[::-1])
-    _row_window_sums(np.ascontiguousarray(rows.T), np.int64(radius), columns)
-    return columns.T > 0.0
+    ``(2 radius + 1)^2`` window (its box mean above 0: ``filters.shares.box_mean``)."""
+    mean = np.empty((1, *pixels.shape), dtype=F32)
+    box_mean(np.ascontiguousarray(pixels[None], dtype=F32), int(radius), mean)
+    return mean[0] > 0.0
 
 
-@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False)
-def _row_window_sums(values: np.ndarray, radius: np.int64, out: np.ndarray) -> None:
-    for y in prange(values.shape[0]):
-        row_sums(values[y], radius, out[y])
+def lone_samples(mesh_id: np.ndarray, depth: np.ndarray,
+                 medium: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) bool: :func:`isolated_samples` not within ``DENSE_RADIUS`` of a ``medium``
+    pixel (through a medium a lone sample is the surface seen between scatterings, its
+    light already the medium's filtered signal: ``filters.stages.fill_medium``)."""
+    lone = np.empty(depth.shape, dtype=np.bool_)
+    isolated_samples(mesh_id, depth, lone)
+    if medium is not None and medium.any():
+        lone &= ~near(medium)
+    return lone
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,7 @@ from svgf_cli.filters.edge_filter import (
     OutlineSpill,
     edge_filter,
     edge_filter_weight,
-    isolated_samples,
-    near,
+    lone_samples,
     noisy_outline_weights,
     outline_share,
 )
@@ -45,19 +44,12 @@ class EdgeFilter(StageBase):
         noisy = None
         if ctx.params.noisy_outline_weight > 0.0:
             share = outline_share(mesh_id, depth)
-            isolated = None
-            if ctx.frame.centre_sampled:
-                # Only where every sample went through its pixel's centre: in a jittered
-                # frame a lone sample is as often an outline's other surface, which the
-                # history averages (testdata/seq_jit: video JOD 8.636 -> 8.621 with it).
-                isolated = np.empty(depth.shape, dtype=np.bool_)
-                isolated_samples(mesh_id, depth, isolated)
-                if ctx.medium_pixels is not None and ctx.medium_pixels.any():
-                    # Through a medium a lone sample is the surface seen between
-                    # scatterings, its colour already the medium's filtered light
-                    # (filters.stages.fill_medium).
-                    isolated &= ~near(ctx.medium_pixels)
-            noisy = noisy_outline_weights(share, ctx.params.noisy_outline_weight, isolated)
+            # Lone samples only where every sample went through its pixel's centre: in a
+            # jittered frame one is as often an outline's other surface, which the history
+            # averages (testdata/seq_jit: video JOD 8.636 -> 8.621 with them).
+            lone = (lone_samples(mesh_id, depth, ctx.medium_pixels)
+                    if ctx.frame.centre_sampled else None)
+            noisy = noisy_outline_weights(share, ctx.params.noisy_outline_weight, lone)
             if not noisy.any():
                 noisy = None
         if base <= 0.0 and noisy is None:
