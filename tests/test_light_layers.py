@@ -404,6 +404,55 @@ def test_box_filter_is_bit_identical_to_its_running_sums(radius: int,
                           box_running_sums(planes, radius).view(np.uint32))
 
 
+@pytest.mark.parametrize(("radius", "shape"), [(3, (7, 150)), (1, (20, 64)), (4, (3, 2))])
+def test_covered_mean_is_the_numpy_steps_bit_for_bit(radius: int,
+                                                     shape: tuple[int, int]) -> None:
+    """filters.shares.covered_mean in one pass: the box mean of the stored light times the
+    colour's surface (float64 running sums, once rounded), over the surface's own box mean
+    where that is above 0, times the colour; each step rounded to float32 as the numpy
+    expression rounds it. Windows with no coloured pixel keep their 0."""
+    from svgf_cli.filters.shares import covered_mean
+
+    rng = np.random.default_rng(radius)
+    stored = (rng.random((3, *shape)) * 10.0 ** rng.integers(-4, 4, (3, *shape))).astype(
+        np.float32)
+    colour = np.where(rng.random((3, *shape)) < 0.6, 0.0, rng.random((3, *shape))).astype(
+        np.float32)
+    colour[:, :, : shape[1] // 3] = 0.0  # a band wider than the window: coverage 0 there
+    surface = (colour > 0).any(axis=0).astype(np.float32)
+    coverage = box_running_sums(surface[None], radius)[0]
+    want = box_running_sums(stored * surface, radius)
+    np.divide(want, coverage, out=want, where=coverage > 0)
+    want *= colour
+    got = np.empty_like(stored)
+    covered_mean(stored, surface, coverage, colour, radius, got)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert not got[:, :, : shape[1] // 3 - radius].any()
+
+
+def test_light_layer_helper_kernels_match_numpy() -> None:
+    """The small kernels the light passes use in place of numpy expressions (on both cores,
+    no frame-sized temporaries) give numpy's bits: ``residual -= stored x colour``, the
+    colour's surface, ``any``."""
+    from svgf_cli.filters.shares import any_nonzero, coloured, subtract_product
+
+    rng = np.random.default_rng(3)
+    residual = rng.standard_normal((3, 11, 29)).astype(np.float32)
+    stored = rng.standard_normal((3, 11, 29)).astype(np.float32)
+    colour = np.where(rng.random((3, 11, 29)) < 0.5, 0.0, rng.standard_normal((3, 11, 29))
+                      ).astype(np.float32)
+    want = residual - stored * colour
+    subtract_product(residual, stored, colour)
+    assert np.array_equal(residual.view(np.uint32), want.view(np.uint32))
+    surface = np.empty((11, 29), bool)
+    coloured(colour, surface)
+    np.testing.assert_array_equal(surface, (colour > 0).any(axis=0))
+    dark = np.zeros((3, 11, 29), np.float32)
+    assert not any_nonzero(dark)
+    dark[2, 10, 28] = -1e-30
+    assert any_nonzero(dark)
+
+
 def test_split_by_shares_in_place_and_stacked_as_from_a_list() -> None:
     """The weights given stacked, and the parts written over them, give the parts of a list
     of weights bit for bit, with and without the fallback."""
@@ -478,8 +527,11 @@ def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
     process = layered.groups.process
 
     def keep(frame: Frame) -> DenoisedFrame:
-        taken.append(process(frame))
-        return taken[-1]
+        # The layered filter composes the groups in its filter's output planes: keep copies.
+        denoised = process(frame)
+        taken.append(dataclasses.replace(
+            denoised, layers={k: v.copy() for k, v in denoised.layers.items()}))
+        return denoised
 
     layered.groups.process = keep  # type: ignore[method-assign]
     for frame in (1, 2, 3):

@@ -41,11 +41,15 @@ from svgf_cli.filters.medium import MEDIUM_DEPTH
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.pixel_filter import pixel_filter, pixel_filter_weight
 from svgf_cli.filters.shares import (
+    any_nonzero,
     box_mean,
+    coloured,
+    covered_mean,
     divide_where_coloured,
-    fallback_pixels,
     fill_from_neighbours,
+    split_plain_rows,
     split_shares,
+    subtract_product,
     touching,
 )
 from svgf_cli.frame import DenoisedFrame, Frame, LightLayer, LightLayers, Signal
@@ -114,8 +118,13 @@ def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = Non
         np.copyto(parts[0], total)
         return parts
     total = np.ascontiguousarray(total, dtype=F32)
+    pending = np.empty(total.shape[0] * total.shape[1], np.uint8)
+    needed = split_plain_rows(total, weights, SHARE_FLOOR, parts, pending)
+    jobs = np.flatnonzero(pending)
+    if not len(jobs):
+        return parts
     backup, rest, bits = weights, None, np.empty((0, 0), np.uint64)
-    if fallback_pixels(total, weights, SHARE_FLOOR):
+    if needed:
         if fallback is not None:
             backup = _stacked(fallback() if callable(fallback) else fallback)
             if excluded:
@@ -124,7 +133,8 @@ def split_by_shares(total: np.ndarray, weights: Planes, fallback: Fallback = Non
             rest = np.asarray(last() if callable(last) else last, dtype=np.float64)
     if rest is None:
         rest = np.ones(weights.shape[:2])
-    split_shares(total, weights, backup, backup is not weights, bits, rest, SHARE_FLOOR, parts)
+    split_shares(total, weights, backup, backup is not weights, bits, rest, SHARE_FLOOR, parts,
+                 jobs)
     return parts
 
 
@@ -191,7 +201,7 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
     for owner, indexes in members.items():
         filtered = signal_outputs[owner] if owner else light
         # A pass black in the whole frame as read gets none of its signal.
-        lit = [i for i in indexes if passes[i].radiance.any()]
+        lit = [i for i in indexes if _lit(passes[i].radiance)]
         estimates[[i for i in indexes if i not in lit]] = 0.0
         if len(lit) <= 1:  # the signal is this pass's light alone
             if lit:
@@ -212,9 +222,8 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
             if id(layer.colour) not in covered:
                 covered[id(layer.colour)] = _coverage(layer.colour)
             surface, coverage = covered[id(layer.colour)]
-            box_filter(np.multiply(layer.stored, surface, dtype=F32), out=smooth)
-            np.divide(smooth, coverage, out=smooth, where=coverage > 0)
-            smooth *= layer.colour
+            covered_mean(np.ascontiguousarray(layer.stored, dtype=F32), surface, coverage,
+                         np.ascontiguousarray(layer.colour, dtype=F32), SHARE_RADIUS, smooth)
         estimates[indexes] = split_by_shares(
             filtered, weights, [p.radiance for p in own], out=weights,
             last=lambda own=own: frame_totals([p.radiance for p in own]))
@@ -231,9 +240,21 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
 
 def _coverage(colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where a colour pass (3, H, W) is not 0 in some channel, (H, W) float32 1/0, and that
-    mask's mean over the share window, (1, H, W)."""
-    surface = (colour > 0).any(axis=0).astype(F32)
-    return surface, box_filter(surface[None])
+    mask's mean over the share window, (H, W)."""
+    surface = _surface(colour).astype(F32)
+    return surface, box_filter(surface[None])[0]
+
+
+def _surface(colour: np.ndarray) -> np.ndarray:
+    """(H, W) bool: where a colour pass (3, H, W) is above 0 in some channel."""
+    out = np.empty(colour.shape[1:], dtype=bool)
+    coloured(np.ascontiguousarray(colour, dtype=F32), out)
+    return out
+
+
+def _lit(planes: np.ndarray) -> bool:
+    """Whether a (3, H, W) layer has light somewhere (``any``, on both cores)."""
+    return any_nonzero(np.ascontiguousarray(planes, dtype=F32))
 
 
 def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
@@ -270,11 +291,11 @@ def medium_colours(colours: dict[tuple[str, str, str], np.ndarray],
     on the others (Cycles), which the mean over the neighbours estimates."""
     read = {layer.colour_channels: layer.colour for layer in passes
             if layer.colour_channels is not None and layer.colour is not None}
-    crop = _medium_box(medium)
-    inside = medium[crop]
+    crop = (slice(None), *_medium_box(medium))
+    inside = medium[crop[1:]]
     for key, colour in colours.items():
         if key in read:
-            colour[:, medium] = box_filter(read[key][(slice(None), *crop)])[:, inside]
+            colour[crop][:, inside] = box_filter(read[key][crop])[:, inside]
 
 
 def _medium_box(pixels: np.ndarray) -> tuple[slice, slice]:
@@ -328,7 +349,7 @@ def colour_cover(colour: np.ndarray, medium: np.ndarray | None) -> Cover:
     medium none may, and a pass divided by a colour averaged from samples a few pixels away
     is a light divided by a colour near 0 (a converged render's is 0 there: no surface in
     the pixel). Next to a pixel whose sample reached it, the converged colour is not 0."""
-    surface = (colour > 0).any(axis=0)
+    surface = _surface(colour)
     if medium is None:
         return Cover(surface, None, surface)
     reached = np.empty_like(surface)
@@ -346,18 +367,17 @@ def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[Light
     light, and among the emission passes likewise (equal parts where they are all 0). Two box
     means of sums (and one per emission pass where several hold light there), each over the
     medium pixels' box (:func:`_medium_box`): the same means on those pixels."""
-    crop = _medium_box(pixels)
-    inside = pixels[crop]
+    crop = (slice(None), *_medium_box(pixels))
+    inside = pixels[crop[1:]]
 
     def smooth(planes: list[np.ndarray]) -> np.ndarray:
-        return box_filter(np.sum([p[(slice(None), *crop)] for p in planes], axis=0,
-                                 dtype=F32))[:, inside]
+        return box_filter(np.sum([p[crop] for p in planes], axis=0, dtype=F32))[:, inside]
 
     through = smooth([layer.radiance for layer in emitters])
     total = through + smooth([layer.radiance for layer in passes]) if passes else through
     share = np.divide(through, total, out=np.zeros_like(through), where=total > SHARE_FLOOR)
-    taken = filtered[:, pixels] * share
-    lit = [k for k, layer in enumerate(emitters) if layer.radiance[:, pixels].any()]
+    taken = filtered[crop][:, inside] * share
+    lit = [k for k, layer in enumerate(emitters) if layer.radiance[crop][:, inside].any()]
     if len(lit) == 1:
         out = np.zeros((len(emitters), *taken.shape), dtype=F32)
         out[lit[0]] = taken
@@ -400,11 +420,14 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
         through = medium_emission(outputs[medium_signal], pixels,
                                   [p for p in light.passes if p.signal == medium_signal],
                                   light.emission)
-        kept[:, :, pixels] += through
+        # The medium pixels by their flat indexes (row-major: the boolean mask's order), so
+        # each update touches those pixels only, not a frame-sized mask.
+        flat = np.flatnonzero(pixels)
+        kept.reshape(*kept.shape[:2], -1)[:, :, flat] += through
         taken = through.sum(axis=0)
         medium_light, emission = outputs[medium_signal].copy(), emission.copy()
-        medium_light[:, pixels] -= taken
-        emission[:, pixels] += taken
+        medium_light.reshape(3, -1)[:, flat] -= taken
+        emission.reshape(3, -1)[:, flat] += taken
         outputs = {**outputs, medium_signal: medium_light}
     residual = denoised.color.copy() if emission is None else denoised.color - emission
     colours = remodulated_colours(light.passes, albedos)
@@ -429,12 +452,14 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     # than negative light; the emission passes take the difference.
     light_only = np.maximum(residual, 0.0) if light.emission else residual
     parts = compose_passes(light_only, outputs, light.passes, barred, bool(light.emission))
-    lit = np.empty_like(residual)  # a pass's light as written: stored x colour
     for layer, part, colour in zip(light.passes, parts, written, strict=True):
         stored = stored_values(layer, part, colour,
                                None if colour is None else covers[id(colour)])
         _write(layer.channels, stored, denoised.light)
-        residual -= stored if colour is None else np.multiply(stored, colour, out=lit)
+        if colour is None:
+            residual -= stored
+        else:
+            subtract_product(residual, stored, colour)
     for channels, colour in colours.items():
         _write(channels, colour, denoised.light)
     if not light.emission:
@@ -613,7 +638,8 @@ class LayeredDenoiser:
             layers = self.groups.process(groups).layers
             self.groups.resident.release_workspace()
             started = time.perf_counter()
-            filtered = np.stack([_rgb(layers, s.name) for s in groups.signals])
+            # A view of the filter's outputs (side by side: filters.stages.remodulate).
+            filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
             if spill is not None:

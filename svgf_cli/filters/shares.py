@@ -20,33 +20,75 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     along each row, then down each column, each in the same order. One job per channel
     keeps only the 2 radius + 2 row sums the column sums still need (a ring of rows): a
     frame-sized float64 temporary made this memory-bound."""
-    channels, height, width = planes.shape
+    for c in prange(planes.shape[0]):
+        _box_channel(planes[c], planes[c], False, planes[c], planes[c], radius, out[c])
+
+
+@njit(**_JIT)
+def covered_mean(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
+                 colour: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """``out`` = :func:`box_mean` of ``stored x surface`` (3, H, W) x (H, W) 1/0, divided
+    by ``coverage`` (the surface's own box mean, (H, W)) where that is above 0, times
+    ``colour`` (3, H, W): a pass stored divided by its colour, averaged over the window's
+    pixels that have that colour, back in the colour's units. Each step rounds to float32
+    as the numpy expression of the same steps does."""
+    for c in prange(stored.shape[0]):
+        _box_channel(stored[c], surface, True, coverage, colour[c], radius, out[c])
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, coverage: np.ndarray,
+                 colour: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """One channel (H, W) of :func:`box_mean` (``covered`` False: the other planes are not
+    read) or of :func:`covered_mean`."""
+    height, width = plane.shape
     ring = 2 * radius + 2  # rows y - radius - 1 .. y + radius
-    for c in prange(channels):
-        rows = np.empty((ring, width), dtype=np.float64)
-        columns = np.zeros(width)
-        for y in range(min(radius, height)):
-            row_sums(planes[c, y], radius, rows[y % ring])
-            columns += rows[y % ring]
-        for y in range(height):
-            if y + radius < height:
-                added = rows[(y + radius) % ring]
-                row_sums(planes[c, y + radius], radius, added)
-                if y - radius - 1 >= 0:
-                    removed = rows[(y - radius - 1) % ring]
-                    for x in range(width):
-                        columns[x] = columns[x] + added[x] - removed[x]
-                else:
-                    for x in range(width):
-                        columns[x] += added[x]
-            elif y - radius - 1 >= 0:
+    rows = np.empty((ring, width), dtype=np.float64)
+    masked = np.empty(width if covered else 0, dtype=np.float32)
+    columns = np.zeros(width)
+    for y in range(min(radius, height)):
+        _row_sums_of(plane, surface, covered, masked, y, radius, rows[y % ring])
+        columns += rows[y % ring]
+    for y in range(height):
+        if y + radius < height:
+            added = rows[(y + radius) % ring]
+            _row_sums_of(plane, surface, covered, masked, y + radius, radius, added)
+            if y - radius - 1 >= 0:
                 removed = rows[(y - radius - 1) % ring]
                 for x in range(width):
-                    columns[x] -= removed[x]
-            rows_covered = min(y + radius + 1, height) - max(y - radius, 0)
+                    columns[x] = columns[x] + added[x] - removed[x]
+            else:
+                for x in range(width):
+                    columns[x] += added[x]
+        elif y - radius - 1 >= 0:
+            removed = rows[(y - radius - 1) % ring]
             for x in range(width):
-                cover = rows_covered * (min(x + radius + 1, width) - max(x - radius, 0))
-                out[c, y, x] = columns[x] / cover
+                columns[x] -= removed[x]
+        rows_covered = min(y + radius + 1, height) - max(y - radius, 0)
+        row = out[y]
+        for x in range(width):
+            cover = rows_covered * (min(x + radius + 1, width) - max(x - radius, 0))
+            row[x] = columns[x] / cover
+        if covered:
+            share, tint = coverage[y], colour[y]
+            for x in range(width):
+                mean = row[x] / share[x] if share[x] > 0.0 else row[x]
+                row[x] = mean * tint[x]
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _row_sums_of(plane: np.ndarray, surface: np.ndarray, covered: bool, masked: np.ndarray,
+                 y: int, radius: int, out: np.ndarray) -> None:
+    """:func:`row_sums` of row ``y`` of ``plane``, times ``surface``'s when ``covered``."""
+    if covered:
+        values, mask = plane[y], surface[y]
+        for x in range(masked.shape[0]):
+            masked[x] = values[x] * mask[x]
+        row_sums(masked, radius, out)
+    else:
+        row_sums(plane[y], radius, out)
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
@@ -76,27 +118,51 @@ def _positive_sum(weights: np.ndarray, c: int, y: int, x: int) -> float:
 
 
 @njit(**_JIT)
-def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
-                 use_fallback: bool, excluded: np.ndarray, last: np.ndarray, floor: float,
-                 out: np.ndarray) -> None:
+def split_plain_rows(total: np.ndarray, weights: np.ndarray, floor: float, out: np.ndarray,
+                     pending: np.ndarray) -> int:
     """``out[k]`` = ``total`` x ``weights[k] / sum_j weights[j]`` per pixel and channel
-    (negative weights count as 0); where that sum is at most ``floor``, the same with
-    ``fallback`` (when ``use_fallback``; ``excluded``, (H, W) uint64 or empty: bit k set
-    where ``fallback[k]`` counts as 0), and where that is too, with the (K, C) ``last``
-    (one weight per part and channel for the whole image: ones for equal parts), and where
-    those are all 0, no parts (0: the caller gives that total to someone else). ``out`` may
-    be ``weights``: a value's weights are all read before its parts are written. Whole-row
-    loops that choose per value (they vectorize: 30-97 % of a real frame's values may take
-    the fallback)."""
+    (negative weights count as 0) on every (channel, row) whose values all have a sum above
+    ``floor``; the others are left for :func:`split_shares` and marked in ``pending``
+    (C x H, 1: left). Returns how many values of those rows need its fallback (``total``
+    not 0, the sum at most ``floor``): 0, and it needs none. ``out`` may be ``weights``
+    (a left row is not written)."""
     count, channels, height, width = weights.shape
+    found = np.zeros(channels * height, np.int64)
     for job in prange(channels * height):
         c, y = job // height, job % height
         sums = np.empty(width)
         _row_positive_sums(weights, c, y, sums)
         if _all_above(sums, floor):
+            pending[job] = 0
             for k in range(count):
                 _split_row(total[c, y], weights[k, c, y], sums, out[k, c, y])
             continue
+        pending[job] = 1
+        row = total[c, y]
+        for x in range(width):
+            found[job] += (sums[x] <= floor) & (row[x] != 0.0)
+    return int(found.sum())
+
+
+@njit(**_JIT)
+def split_shares(total: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
+                 use_fallback: bool, excluded: np.ndarray, last: np.ndarray, floor: float,
+                 out: np.ndarray, jobs: np.ndarray) -> None:
+    """The (channel, row) ``jobs`` (``c x H + y``) that :func:`split_plain_rows` left:
+    ``out[k]`` = ``total`` x ``weights[k] / sum_j weights[j]`` per value (negative weights
+    count as 0); where that sum is at most ``floor``, the same with ``fallback`` (when
+    ``use_fallback``; ``excluded``, (H, W) uint64 or empty: bit k set where ``fallback[k]``
+    counts as 0), and where that is too, with the (K, C) ``last`` (one weight per part and
+    channel for the whole image: ones for equal parts), and where those are all 0, no parts
+    (0: the caller gives that total to someone else). ``out`` may be ``weights``: a value's
+    weights are all read before its parts are written. Whole-row loops that choose per
+    value (they vectorize: 30-97 % of a real frame's values may take the fallback)."""
+    count, channels, height, width = weights.shape
+    for i in prange(jobs.shape[0]):
+        job = jobs[i]
+        c, y = job // height, job % height
+        sums = np.empty(width)
+        _row_positive_sums(weights, c, y, sums)
         backup = np.zeros(width)  # the fallback's sums (0: not used)
         bits = np.zeros(width, np.uint64)
         if use_fallback and excluded.shape[0] > 0:
@@ -161,23 +227,6 @@ def _split_row(total: np.ndarray, weights: np.ndarray, sums: np.ndarray,
 
 
 @njit(**_JIT)
-def fallback_pixels(total: np.ndarray, weights: np.ndarray, floor: float) -> int:
-    """How many (pixel, channel) values :func:`split_shares` would take from its fallback:
-    ``total`` not 0 where the weights (negative as 0) sum to at most ``floor``; the same
-    sum as there, so 0 means the fallback changes nothing."""
-    _, channels, height, width = weights.shape
-    found = np.zeros(channels * height, np.int64)
-    for job in prange(channels * height):
-        c, y = job // height, job % height
-        sums = np.empty(width)
-        _row_positive_sums(weights, c, y, sums)
-        row = total[c, y]
-        for x in range(width):
-            found[job] += (sums[x] <= floor) & (row[x] != 0.0)
-    return int(found.sum())
-
-
-@njit(**_JIT)
 def divide_where_coloured(light: np.ndarray, colour: np.ndarray, stored: np.ndarray) -> None:
     """In place, per value of (3, H, W): ``light / colour`` where ``colour > 0``, else
     ``stored`` (a light pass stored divided by its colour: where that is 0, as read)."""
@@ -229,3 +278,40 @@ def fill_from_neighbours(stored: np.ndarray, colour: np.ndarray, source: np.ndar
             if found:
                 filled[y] += 1
     return int(filled.sum())
+
+
+@njit(**_JIT)
+def subtract_product(residual: np.ndarray, stored: np.ndarray, colour: np.ndarray) -> None:
+    """In place, per value of (3, H, W): ``residual -= stored x colour`` (a light pass's
+    light as written: its stored value times its colour pass)."""
+    channels, height, width = residual.shape
+    for job in prange(channels * height):
+        c, y = job // height, job % height
+        row, values, tint = residual[c, y], stored[c, y], colour[c, y]
+        for x in range(width):
+            row[x] -= values[x] * tint[x]
+
+
+@njit(**_JIT)
+def coloured(colour: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (H, W) bool: where a colour pass (3, H, W) is above 0 in some channel."""
+    _, height, width = colour.shape
+    for y in prange(height):
+        r, g, b, row = colour[0, y], colour[1, y], colour[2, y], out[y]
+        for x in range(width):
+            row[x] = (r[x] > 0.0) | (g[x] > 0.0) | (b[x] > 0.0)
+
+
+@njit(**_JIT)
+def any_nonzero(planes: np.ndarray) -> bool:
+    """Whether some value of the (C, H, W) planes is not 0 (``ndarray.any``)."""
+    channels, height, width = planes.shape
+    found = np.zeros(channels * height, np.bool_)
+    for job in prange(channels * height):
+        c, y = job // height, job % height
+        row = planes[c, y]
+        hit = False
+        for x in range(width):
+            hit |= row[x] != 0.0
+        found[job] = hit
+    return bool(found.any())

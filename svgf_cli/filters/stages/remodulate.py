@@ -32,14 +32,20 @@ class Remodulate(StageBase):
         # Without emission any (3, H, W) float32 plane will do: the kernel never reads it.
         emission_plane = emission if emission is not None else radiance
         rows = np.zeros((height, 2), dtype=np.int64)
+        # Each signal's own radiance, when wanted, side by side in one block: the light
+        # layers take them all as one (S, 3, H, W) array without a copy.
+        alone_all = (np.zeros((len(frame.signals), 3, height, width), dtype=F32)
+                     if ctx.setup.debug_layers or ctx.setup.signal_outputs else None)
         for index, signal in enumerate(frame.signals):
             add_emission = has_emission and index == 0
-            if ctx.setup.debug_layers or ctx.setup.signal_outputs:
+            if alone_all is not None:
                 # Each signal's own radiance is wanted too: remodulated once, then summed
                 # (the same sum, bit for bit).
-                alone = (debug_layers(ctx, index, emission_plane, rows)
-                         if ctx.setup.debug_layers
-                         else signal_output(ctx, index, emission_plane, rows, albedo=True))
+                alone = alone_all[index]
+                if ctx.setup.debug_layers:
+                    debug_layers(ctx, index, emission_plane, rows, alone)
+                else:
+                    signal_output(ctx, index, emission_plane, rows, alone, albedo=True)
                 modulate.add_remodulated(alone, emission_plane, add_emission, radiance, rows)
             else:
                 modulate.remodulate_add(spatial.illumination[index], signal.radiance,
@@ -53,14 +59,13 @@ class Remodulate(StageBase):
 
 
 def signal_output(ctx: FrameContext, index: int, emission_plane: np.ndarray,
-                  rows: np.ndarray, albedo: bool = False) -> np.ndarray:
-    """Signal ``index``'s own remodulated radiance (no emission), also as the layers
-    ``<signal>.R/G/B``; with ``albedo`` also the colour it was remodulated by (the temporal
-    albedo's running mean when that stage runs) as ``<signal>.albedo.R/G/B``."""
+                  rows: np.ndarray, alone: np.ndarray, albedo: bool = False) -> np.ndarray:
+    """Signal ``index``'s own remodulated radiance (no emission) into ``alone`` ((3, H, W)
+    zeros), also as the layers ``<signal>.R/G/B``; with ``albedo`` also the colour it was
+    remodulated by (the temporal albedo's running mean when that stage runs) as
+    ``<signal>.albedo.R/G/B``."""
     spatial, signal = ctx.spatial, ctx.frame.signals[index]
     assert spatial is not None
-    height, width = ctx.depth.shape
-    alone = np.zeros((3, height, width), dtype=F32)
     modulate.remodulate_add(spatial.illumination[index], signal.radiance, signal.albedo,
                             ctx.depth, emission_plane, False,
                             *ctx.setup.rules[signal.guide_albedo], alone, rows)
@@ -72,14 +77,14 @@ def signal_output(ctx: FrameContext, index: int, emission_plane: np.ndarray,
 
 
 def debug_layers(ctx: FrameContext, index: int, emission_plane: np.ndarray,
-                 rows: np.ndarray) -> np.ndarray:
-    """Signal ``index``'s own remodulated radiance, variance, history length, mode and
-    anti-lag weight as debug layers; returns that radiance."""
+                 rows: np.ndarray, alone: np.ndarray) -> np.ndarray:
+    """Signal ``index``'s own remodulated radiance (into ``alone``), variance, history
+    length, mode and anti-lag weight as debug layers; returns that radiance."""
     spatial, signal, mode = ctx.spatial, ctx.frame.signals[index], ctx.mode
     assert spatial is not None
     height, width = ctx.depth.shape
     name, layers = signal.name, ctx.layers
-    alone = signal_output(ctx, index, emission_plane, rows, albedo=ctx.setup.signal_outputs)
+    signal_output(ctx, index, emission_plane, rows, alone, albedo=ctx.setup.signal_outputs)
     layers[f"variance.{name}"] = spatial.variance[index].copy()
     layers[f"history_length.{name}"] = spatial.history_length[index].copy()
     layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
