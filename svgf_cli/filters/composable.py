@@ -38,13 +38,16 @@ from collections.abc import Callable
 import numpy as np
 
 from svgf_cli.filters.medium import MEDIUM_DEPTH
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import SVGFParams, params_for_samples
+from svgf_cli.filters.pass_shares import PassShares
 from svgf_cli.filters.pixel_filter import pixel_filter, pixel_filter_weight
 from svgf_cli.filters.shares import (
     any_nonzero,
     box_mean,
     coloured,
+    covered_average,
     covered_mean,
+    covered_spread,
     divide_where_coloured,
     fill_from_neighbours,
     split_plain_rows,
@@ -62,6 +65,11 @@ F32 = np.float32
 SHARE_RADIUS = 3
 # A share's denominator at or below this (absolute, per channel) is "no light": fallback.
 SHARE_FLOOR = 1e-8
+# How far a pass's averaged stored light from last frame may lie from this frame's: this
+# many standard errors of this frame's average (filters.pass_shares; bench/light_layers.py
+# on cycles/production, smoke and dof: 0.5 leaves more flicker, 2 lets a reflection's old
+# place linger on dof's rolling metal ball, GlossDir relMSE +8 % against +2 % at 1).
+SHARE_HISTORY_REACH = 1.0
 
 
 def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS,
@@ -180,9 +188,13 @@ def spill_groups(filtered: np.ndarray, weight: float) -> None:
         pixel_filter(group, zero, F32(weight), group)
 
 
+# A pass's averaged stored light (in place) and how far its history may lie from it.
+Blend = Callable[[int, np.ndarray, np.ndarray], None]
+
+
 def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
                    passes: list[LightLayer], barred: dict[int, np.ndarray] | None = None,
-                   emitters: bool = False) -> np.ndarray:
+                   emitters: bool = False, blend: Blend | None = None) -> np.ndarray:
     """The denoised light passes, (P, 3, H, W), in the colour's units (light x colour
     pass), adding up to ``light`` (the colour less the emission). ``barred`` maps a pass's
     index to the (H, W) pixels where it carries no light (its part there goes to the other
@@ -191,7 +203,8 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
     light over the frame; a signal's light where none of its passes has any, likewise among
     them. A pass black in the whole frame as read (Cycles' VolumeInd or TransDir, often)
     gets none: its weight is 0 and not box-filtered, and a signal with one pass lit is
-    that pass's alone."""
+    that pass's alone. ``blend(index, average)``: each pass's averaged stored light, before
+    it is multiplied by its colour, blended with its history (``filters.pass_shares``)."""
     estimates = np.empty((len(passes), *light.shape), dtype=F32)
     covered: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # by id of a colour pass
     members: dict[str, list[int]] = {}
@@ -222,8 +235,17 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
             if id(layer.colour) not in covered:
                 covered[id(layer.colour)] = _coverage(layer.colour)
             surface, coverage = covered[id(layer.colour)]
-            covered_mean(np.ascontiguousarray(layer.stored, dtype=F32), surface, coverage,
-                         np.ascontiguousarray(layer.colour, dtype=F32), SHARE_RADIUS, smooth)
+            colour = np.ascontiguousarray(layer.colour, dtype=F32)
+            stored = np.ascontiguousarray(layer.stored, dtype=F32)
+            if blend is None:
+                covered_mean(stored, surface, coverage, colour, SHARE_RADIUS, smooth)
+                continue
+            covered_average(stored, surface, coverage, SHARE_RADIUS, smooth)
+            spread = np.empty_like(smooth)
+            covered_spread(stored, surface, coverage, smooth, SHARE_RADIUS,
+                           SHARE_HISTORY_REACH, spread)
+            blend(index, smooth, spread)
+            smooth *= colour
         estimates[indexes] = split_by_shares(
             filtered, weights, [p.radiance for p in own], out=weights,
             last=lambda own=own: frame_totals([p.radiance for p in own]))
@@ -403,14 +425,15 @@ def emission_kept(light: LightLayers, emission: np.ndarray | None) -> np.ndarray
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
                  outputs: dict[str, np.ndarray], albedos: dict[str, np.ndarray],
                  light: LightLayers, medium_signal: str | None = None,
-                 kept: np.ndarray | None = None) -> None:
+                 kept: np.ndarray | None = None, blend: Blend | None = None) -> None:
     """The denoised light passes and their colour passes into ``denoised.light``; the light
     they cannot carry (where their colour passes are 0: the pixel filter's spill onto the
     background, emitters' edges) goes to the emission passes, split by their shares. On
     medium pixels the emission seen through the medium was filtered with the medium's
     signal ``medium_signal``: its part goes back to the emission passes
     (:func:`medium_emission`). ``kept``: the emission passes' light as added back, when not
-    :func:`emission_kept` (the noisy outlines' exchanges made on it)."""
+    :func:`emission_kept` (the noisy outlines' exchanges made on it). ``blend``: as
+    :func:`compose_passes`'."""
     if kept is None:
         kept = emission_kept(light, emission)
     if (light.emission and denoised.medium is not None and emission is not None
@@ -451,7 +474,8 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     # colour is smooth, the emission passes are not), the light passes get no light rather
     # than negative light; the emission passes take the difference.
     light_only = np.maximum(residual, 0.0) if light.emission else residual
-    parts = compose_passes(light_only, outputs, light.passes, barred, bool(light.emission))
+    parts = compose_passes(light_only, outputs, light.passes, barred, bool(light.emission),
+                           blend)
     for layer, part, colour in zip(light.passes, parts, written, strict=True):
         stored = stored_values(layer, part, colour,
                                None if colour is None else covers[id(colour)])
@@ -564,6 +588,7 @@ class LayeredDenoiser:
         self.groups = Denoiser(group_params(params))
         self.groups.setup = dataclasses.replace(self.groups.setup, signal_outputs=True)
         self.layers = LayerClock()
+        self.shares = PassShares()  # the light passes' shares over time
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -579,12 +604,14 @@ class LayeredDenoiser:
     def reset(self) -> None:
         self.colour.reset()
         self.groups.reset()
+        self.shares.reset()
 
     def state(self) -> dict[str, np.ndarray]:
         return self.colour.state()
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
         self.colour.load_state(state)
+        self.shares.reset()
 
     def process(self, frame: Frame) -> DenoisedFrame:
         """Denoise the next frame and its light layers. The light groups' filter takes the
@@ -624,7 +651,9 @@ class LayeredDenoiser:
         # stands in (filters.stages.reflected_lights): their colour passes stay as read.
         albedos = _planes(denoised.layers, tuple(s.name for s in frame.signals
                                                  if not s.glossy), ".albedo")
-        denoised.layers = ({k: v for k, v in denoised.layers.items() if ".albedo." not in k}
+        lengths = {name: denoised.layers.get(f"{name}.history_length") for name in names}
+        denoised.layers = ({k: v for k, v in denoised.layers.items()
+                            if ".albedo." not in k and not k.endswith(".history_length")}
                            if self.debug_layers else {})
         clock = self.layers.stage_seconds
         clock.clear()
@@ -632,7 +661,14 @@ class LayeredDenoiser:
             started = time.perf_counter()
             medium = next((s.name for s in frame.signals
                            if frame.medium is not None and s.radiance is frame.medium), None)
-            write_passes(denoised, emission, outputs, albedos, light, medium, kept)
+            alpha = params_for_samples(self.params, frame.samples_per_pixel).alpha
+
+            def blend(index: int, mean: np.ndarray, spread: np.ndarray) -> None:
+                self.shares.blend(index, mean, spread, gbuffer.motion, gbuffer.mesh_id,
+                                  lengths.get(light.passes[index].signal), alpha)
+
+            write_passes(denoised, emission, outputs, albedos, light, medium, kept, blend)
+            self.shares.advance(gbuffer.mesh_id)
             clock["passes"] = time.perf_counter() - started
         if groups is not None:
             layers = self.groups.process(groups).layers

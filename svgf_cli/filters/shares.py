@@ -21,7 +21,8 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     keeps only the 2 radius + 2 row sums the column sums still need (a ring of rows): a
     frame-sized float64 temporary made this memory-bound."""
     for c in prange(planes.shape[0]):
-        _box_channel(planes[c], planes[c], False, planes[c], planes[c], radius, out[c])
+        _box_channel(planes[c], planes[c], False, False, planes[c], planes[c], False, radius,
+                     out[c])
 
 
 @njit(**_JIT)
@@ -33,27 +34,58 @@ def covered_mean(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
     pixels that have that colour, back in the colour's units. Each step rounds to float32
     as the numpy expression of the same steps does."""
     for c in prange(stored.shape[0]):
-        _box_channel(stored[c], surface, True, coverage, colour[c], radius, out[c])
+        _box_channel(stored[c], surface, True, False, coverage, colour[c], True, radius,
+                     out[c])
+
+
+@njit(**_JIT)
+def covered_average(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
+                    radius: int, out: np.ndarray) -> None:
+    """:func:`covered_mean` before its product with the colour: the average of ``stored``
+    over the window's pixels that have the colour."""
+    for c in prange(stored.shape[0]):
+        _box_channel(stored[c], surface, True, False, coverage, coverage, False, radius,
+                     out[c])
+
+
+@njit(**_JIT)
+def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
+                   average: np.ndarray, radius: int, reach: float, out: np.ndarray) -> None:
+    """``out`` = ``reach`` standard errors of :func:`covered_average` ``average``: the
+    values' spread about it, ``sqrt(max(mean(stored^2) - average^2, 0))`` over the same
+    pixels, over the square root of how many they were (``coverage`` x the window's area,
+    at least 1)."""
+    area = (2 * radius + 1) ** 2
+    for c in prange(stored.shape[0]):
+        _box_channel(stored[c], surface, True, True, coverage, coverage, False, radius,
+                     out[c])
+        for y in range(stored.shape[1]):
+            row, mean, share = out[c, y], average[c, y], coverage[y]
+            for x in range(row.shape[0]):
+                count = max(share[x] * area, 1.0)
+                row[x] = reach * np.sqrt(max(row[x] - mean[x] * mean[x], 0.0) / count)
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
-def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, coverage: np.ndarray,
-                 colour: np.ndarray, radius: int, out: np.ndarray) -> None:
+def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared: bool,
+                 coverage: np.ndarray, colour: np.ndarray, tinted: bool, radius: int,
+                 out: np.ndarray) -> None:
     """One channel (H, W) of :func:`box_mean` (``covered`` False: the other planes are not
-    read) or of :func:`covered_mean`."""
+    read), or of the mean of ``plane`` (``squared``: of its squares) times ``surface`` over
+    ``coverage``, times ``colour`` when ``tinted`` (:func:`covered_mean`)."""
     height, width = plane.shape
     ring = 2 * radius + 2  # rows y - radius - 1 .. y + radius
     rows = np.empty((ring, width), dtype=np.float64)
     masked = np.empty(width if covered else 0, dtype=np.float32)
     columns = np.zeros(width)
     for y in range(min(radius, height)):
-        _row_sums_of(plane, surface, covered, masked, y, radius, rows[y % ring])
+        _row_sums_of(plane, surface, covered, squared, masked, y, radius, rows[y % ring])
         columns += rows[y % ring]
     for y in range(height):
         if y + radius < height:
             added = rows[(y + radius) % ring]
-            _row_sums_of(plane, surface, covered, masked, y + radius, radius, added)
+            _row_sums_of(plane, surface, covered, squared, masked, y + radius, radius, added)
             if y - radius - 1 >= 0:
                 removed = rows[(y - radius - 1) % ring]
                 for x in range(width):
@@ -74,18 +106,20 @@ def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, coverage
             share, tint = coverage[y], colour[y]
             for x in range(width):
                 mean = row[x] / share[x] if share[x] > 0.0 else row[x]
-                row[x] = mean * tint[x]
+                row[x] = mean * tint[x] if tinted else mean
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
-def _row_sums_of(plane: np.ndarray, surface: np.ndarray, covered: bool, masked: np.ndarray,
-                 y: int, radius: int, out: np.ndarray) -> None:
-    """:func:`row_sums` of row ``y`` of ``plane``, times ``surface``'s when ``covered``."""
+def _row_sums_of(plane: np.ndarray, surface: np.ndarray, covered: bool, squared: bool,
+                 masked: np.ndarray, y: int, radius: int, out: np.ndarray) -> None:
+    """:func:`row_sums` of row ``y`` of ``plane`` (``squared``: of its squares), times
+    ``surface``'s when ``covered``."""
     if covered:
         values, mask = plane[y], surface[y]
         for x in range(masked.shape[0]):
-            masked[x] = values[x] * mask[x]
+            value = values[x] * values[x] if squared else values[x]
+            masked[x] = value * mask[x]
         row_sums(masked, radius, out)
     else:
         row_sums(plane[y], radius, out)
@@ -315,3 +349,33 @@ def any_nonzero(planes: np.ndarray) -> bool:
             hit |= row[x] != 0.0
         found[job] = hit
     return bool(found.any())
+
+
+@njit(**_JIT)
+def blend_previous(mean: np.ndarray, spread: np.ndarray, previous: np.ndarray,
+                   motion: np.ndarray, mesh_id: np.ndarray, previous_mesh: np.ndarray,
+                   length: np.ndarray, alpha: float) -> None:
+    """In place, per pixel and channel of ``mean`` (3, H, W): ``lerp(p, mean, max(alpha,
+    1 / length))`` (paper equation 6's blend, with the history length the colour's filter
+    gave the pixel), ``p`` being ``previous`` at the nearest pixel to ``(x + motion.x, y +
+    motion.y)`` clamped to ``mean +- spread`` (what this frame's mean allows: a reflection
+    does not move with the surface it is seen on), where that pixel lies in the image and
+    had the same mesh id last frame; elsewhere, and where ``length`` is at most 1 (no
+    history), ``mean`` as it is."""
+    _, height, width = mean.shape
+    for y in prange(height):
+        for x in range(width):
+            h = length[y, x]
+            if h <= 1.0:
+                continue
+            px = int(np.floor(x + motion[0, y, x] + 0.5))
+            py = int(np.floor(y + motion[1, y, x] + 0.5))
+            if px < 0 or py < 0 or px >= width or py >= height:
+                continue
+            if previous_mesh[py, px] != mesh_id[y, x]:
+                continue
+            a = max(alpha, 1.0 / h)
+            for c in range(3):
+                now, reach = mean[c, y, x], spread[c, y, x]
+                kept = min(max(previous[c, py, px], now - reach), now + reach)
+                mean[c, y, x] = kept + a * (now - kept)

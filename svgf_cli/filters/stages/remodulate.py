@@ -63,7 +63,7 @@ def signal_output(ctx: FrameContext, index: int, emission_plane: np.ndarray,
     """Signal ``index``'s own remodulated radiance (no emission) into ``alone`` ((3, H, W)
     zeros), also as the layers ``<signal>.R/G/B``; with ``albedo`` also the colour it was
     remodulated by (the temporal albedo's running mean when that stage runs) as
-    ``<signal>.albedo.R/G/B``."""
+    ``<signal>.albedo.R/G/B`` and its history length as ``<signal>.history_length``."""
     spatial, signal = ctx.spatial, ctx.frame.signals[index]
     assert spatial is not None
     modulate.remodulate_add(spatial.illumination[index], signal.radiance, signal.albedo,
@@ -73,6 +73,8 @@ def signal_output(ctx: FrameContext, index: int, emission_plane: np.ndarray,
         ctx.layers[f"{signal.name}.{channel}"] = alone[c]
         if albedo:
             ctx.layers[f"{signal.name}.albedo.{channel}"] = signal.albedo[c]
+    if albedo:  # and the history length its blend used (the light passes' shares blend so)
+        ctx.layers[f"{signal.name}.history_length"] = spatial.history_length[index]
     return alone
 
 
