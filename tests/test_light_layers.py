@@ -528,6 +528,43 @@ def test_pass_shares_steady_a_flickering_share_and_start_over() -> None:
     assert (mean == 7.0).all()
 
 
+def test_covered_pixel_filter_blends_only_coloured_pixels() -> None:
+    """A colour pass written anew gets the colour's pixel filter over its pixels above 0:
+    a texture edge inside a surface blends (a converged colour pass is filtered as its
+    colour is), a flat surface stays flat up to its silhouette (no darkening by the zeros
+    beyond) and a pixel with no colour stays 0."""
+    from svgf_cli.filters.composable import covered_pixel_filter
+
+    colour = np.zeros((3, 5, 8), np.float32)
+    colour[:, :, 2:5] = 0.2
+    colour[:, :, 5:] = 0.8  # a texture edge between columns 4 and 5
+    kept = colour.copy()
+    covered_pixel_filter(colour, 0.0)
+    assert np.array_equal(colour, kept)  # weight 0: none
+    covered_pixel_filter(colour, 0.05)
+    assert not colour[:, :, :2].any()  # no colour: stays 0
+    np.testing.assert_allclose(colour[:, :, 2:4], 0.2, rtol=1e-6)  # flat to the silhouette
+    np.testing.assert_allclose(colour[:, :, 4], 0.2 * 0.9 + 0.8 * 0.05 + 0.2 * 0.05,
+                               rtol=1e-6)
+    np.testing.assert_allclose(colour[:, :, 5], 0.8 * 0.95 + 0.2 * 0.05, rtol=1e-6)
+    np.testing.assert_allclose(colour[:, :, 6:], 0.8, rtol=1e-6)
+    # Random: the float64 ratio of the separable kernel over colour x mask and over the mask.
+    rng = np.random.default_rng(2)
+    colour = np.where(rng.random((3, 9, 13)) < 0.3, 0.0, rng.random((3, 9, 13))).astype(
+        np.float32)
+    mask = (colour > 0).any(axis=0).astype(np.float64)
+
+    def kernel(plane: np.ndarray) -> np.ndarray:
+        padded = np.pad(plane, 1, mode="edge")
+        rows = 0.9 * padded[:, 1:-1] + 0.05 * (padded[:, :-2] + padded[:, 2:])
+        return 0.9 * rows[1:-1] + 0.05 * (rows[:-2] + rows[2:])
+
+    want = np.array([np.where(mask > 0, kernel(c * mask) / np.where(mask > 0, kernel(mask), 1),
+                              c) for c in colour.astype(np.float64)])
+    covered_pixel_filter(colour, 0.05)
+    np.testing.assert_allclose(colour, want, rtol=1e-5, atol=1e-7)
+
+
 def test_light_layer_helper_kernels_match_numpy() -> None:
     """The small kernels the light passes use in place of numpy expressions (on both cores,
     no frame-sized temporaries) give numpy's bits: ``residual -= stored x colour``, the
@@ -758,7 +795,7 @@ def test_denoised_layer_relmse_at_most_a_third_of_the_input(outputs: dict[str, P
     assert out <= 0.3 * noisy
 
 
-@pytest.mark.parametrize(("name", "bound"), [("Combined_env", 0.25), ("DiffDir", 0.27),
+@pytest.mark.parametrize(("name", "bound"), [("Combined_env", 0.25), ("DiffDir", 0.21),
                                            ("TransInd", 0.30)])
 def test_layer_errors_measured_on_the_production_shot(outputs: dict[str, Path], name: str,
                                                       bound: float) -> None:
@@ -767,7 +804,8 @@ def test_layer_errors_measured_on_the_production_shot(outputs: dict[str, Path], 
     before a pass divided by its colour reached one pixel past the colour's edge), TransInd
     0.30x (0.51x before that and the shares' means over the colour's pixels). With the
     edge filter in default: Combined_env 0.200x, DiffDir 0.263x, TransInd 0.303x; with the
-    passes' shares blended over time (filters.pass_shares): TransInd 0.293x."""
+    passes' shares blended over time (filters.pass_shares): TransInd 0.293x; with the
+    colour's pixel filter on the DiffCol written (covered_pixel_filter): DiffDir 0.181x."""
     out, noisy = _layer_relmse(outputs, name)
     assert out <= bound * noisy, (out, noisy)
 

@@ -47,6 +47,7 @@ from svgf_cli.filters.shares import (
     coloured,
     covered_average,
     covered_mean,
+    covered_pixel_filter_kernel,
     covered_spread,
     divide_where_coloured,
     fill_from_neighbours,
@@ -279,6 +280,17 @@ def _lit(planes: np.ndarray) -> bool:
     return any_nonzero(np.ascontiguousarray(planes, dtype=F32))
 
 
+def covered_pixel_filter(colour: np.ndarray, weight: float) -> None:
+    """In place: the renderer's pixel filter (``filters.pixel_filter``, neighbour
+    ``weight``; 0: none) on a colour pass (3, H, W) written anew, over its pixels above 0
+    only (each divided by the kernel's weight on those): a converged render's colour pass
+    is filtered as its colour is, so texture edges blend as the light does, while a pixel
+    with no colour stays 0 (spread there, the passes would divide their light by a sliver
+    of colour)."""
+    if weight > 0.0:
+        covered_pixel_filter_kernel(colour, float(weight))
+
+
 def remodulated_colours(passes: list[LightLayer], albedos: dict[str, np.ndarray]
                         ) -> dict[tuple[str, str, str], np.ndarray]:
     """The colour passes as the filter remodulated by, per colour pass (its channels): the
@@ -425,7 +437,8 @@ def emission_kept(light: LightLayers, emission: np.ndarray | None) -> np.ndarray
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
                  outputs: dict[str, np.ndarray], albedos: dict[str, np.ndarray],
                  light: LightLayers, medium_signal: str | None = None,
-                 kept: np.ndarray | None = None, blend: Blend | None = None) -> None:
+                 kept: np.ndarray | None = None, blend: Blend | None = None,
+                 pixel_weight: float = 0.0) -> None:
     """The denoised light passes and their colour passes into ``denoised.light``; the light
     they cannot carry (where their colour passes are 0: the pixel filter's spill onto the
     background, emitters' edges) goes to the emission passes, split by their shares. On
@@ -433,7 +446,9 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     signal ``medium_signal``: its part goes back to the emission passes
     (:func:`medium_emission`). ``kept``: the emission passes' light as added back, when not
     :func:`emission_kept` (the noisy outlines' exchanges made on it). ``blend``: as
-    :func:`compose_passes`'."""
+    :func:`compose_passes`'. ``pixel_weight``: the colour's pixel filter (its neighbour
+    weight; 0: none), applied to the colour passes written anew
+    (:func:`covered_pixel_filter`)."""
     if kept is None:
         kept = emission_kept(light, emission)
     if (light.emission and denoised.medium is not None and emission is not None
@@ -457,6 +472,8 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     medium = denoised.medium if denoised.medium is not None and denoised.medium.any() else None
     if medium is not None:
         medium_colours(colours, light.passes, medium)
+    for colour in colours.values():
+        covered_pixel_filter(colour, pixel_weight)
     written: list[np.ndarray | None] = []  # each pass's colour pass as written
     covers: dict[int, Cover] = {}  # by id of the colour written
     for layer in light.passes:
@@ -667,7 +684,8 @@ class LayeredDenoiser:
                 self.shares.blend(index, mean, spread, gbuffer.motion, gbuffer.mesh_id,
                                   lengths.get(light.passes[index].signal), alpha)
 
-            write_passes(denoised, emission, outputs, albedos, light, medium, kept, blend)
+            write_passes(denoised, emission, outputs, albedos, light, medium, kept, blend,
+                         pixel_filter_weight(self.params.pixel_filter, frame.centre_sampled))
             self.shares.advance(gbuffer.mesh_id)
             clock["passes"] = time.perf_counter() - started
         if groups is not None:

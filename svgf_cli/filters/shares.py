@@ -379,3 +379,37 @@ def blend_previous(mean: np.ndarray, spread: np.ndarray, previous: np.ndarray,
                 now, reach = mean[c, y, x], spread[c, y, x]
                 kept = min(max(previous[c, py, px], now - reach), now + reach)
                 mean[c, y, x] = kept + a * (now - kept)
+
+
+@njit(**_JIT)
+def covered_pixel_filter_kernel(colour: np.ndarray, weight: float) -> None:
+    """In place on ``colour`` (3, H, W): on its pixels above 0 in some channel, the
+    separable kernel ``[w, 1 - 2 w, w]`` (rows, then columns, edges replicated) over those
+    pixels only, divided by the kernel's weight on them; other pixels as they are."""
+    _, height, width = colour.shape
+    centre = 1.0 - 2.0 * weight
+    mask = np.empty((height, width), dtype=np.float32)
+    for y in prange(height):
+        for x in range(width):
+            mask[y, x] = 1.0 if (colour[0, y, x] > 0.0) | (colour[1, y, x] > 0.0) | (
+                colour[2, y, x] > 0.0) else 0.0
+    rows = np.empty((4, height, width), dtype=np.float32)  # 3 channels, then the weight
+    for y in prange(height):
+        m = mask[y]
+        last = width - 1
+        for x in range(width):
+            left, right = max(x - 1, 0), min(x + 1, last)
+            rows[3, y, x] = centre * m[x] + weight * (m[left] + m[right])
+            for c in range(3):
+                v = colour[c, y]
+                rows[c, y, x] = (centre * v[x] * m[x]
+                                 + weight * (v[left] * m[left] + v[right] * m[right]))
+    for y in prange(height):
+        up, down = max(y - 1, 0), min(y + 1, height - 1)
+        for x in range(width):
+            if mask[y, x] == 0.0:
+                continue
+            total = centre * rows[3, y, x] + weight * (rows[3, up, x] + rows[3, down, x])
+            for c in range(3):
+                colour[c, y, x] = (centre * rows[c, y, x]
+                                   + weight * (rows[c, up, x] + rows[c, down, x])) / total
