@@ -405,13 +405,14 @@ def test_box_filter_is_bit_identical_to_its_running_sums(radius: int,
 
 
 @pytest.mark.parametrize(("radius", "shape"), [(3, (7, 150)), (1, (20, 64)), (4, (3, 2))])
-def test_covered_mean_is_the_numpy_steps_bit_for_bit(radius: int,
-                                                     shape: tuple[int, int]) -> None:
-    """filters.shares.covered_mean in one pass: the box mean of the stored light times the
-    colour's surface (float64 running sums, once rounded), over the surface's own box mean
-    where that is above 0, times the colour; each step rounded to float32 as the numpy
-    expression rounds it. Windows with no coloured pixel keep their 0."""
-    from svgf_cli.filters.shares import covered_mean
+def test_covered_average_is_the_numpy_steps_bit_for_bit(radius: int,
+                                                         shape: tuple[int, int]) -> None:
+    """filters.shares.covered_average in one pass, then the colour (compose_passes): the box
+    mean of the stored light times the colour's surface (float64 running sums, once
+    rounded), over the surface's own box mean where that is above 0, times the colour;
+    each step rounded to float32 as the numpy expression rounds it. Windows with no
+    coloured pixel keep their 0."""
+    from svgf_cli.filters.shares import covered_average
 
     rng = np.random.default_rng(radius)
     stored = (rng.random((3, *shape)) * 10.0 ** rng.integers(-4, 4, (3, *shape))).astype(
@@ -425,17 +426,18 @@ def test_covered_mean_is_the_numpy_steps_bit_for_bit(radius: int,
     np.divide(want, coverage, out=want, where=coverage > 0)
     want *= colour
     got = np.empty_like(stored)
-    covered_mean(stored, surface, coverage, colour, radius, got)
+    covered_average(stored, surface, coverage, radius, got)
+    got *= colour
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
     assert not got[:, :, : shape[1] // 3 - radius].any()
 
 
 def test_covered_average_and_spread_match_float64_references() -> None:
-    """filters.shares.covered_average is covered_mean before the colour (bit for bit: the
-    same float64 sums, once rounded, over the coverage); covered_spread is the standard
+    """filters.shares.covered_average is the covered box mean (bit for bit: the same
+    float64 sums, once rounded, over the coverage); covered_spread is the standard
     error of that average: the spread of the covered values about it over the square root
     of their count (float64 reference, float32 tolerance)."""
-    from svgf_cli.filters.shares import covered_average, covered_mean, covered_spread
+    from svgf_cli.filters.shares import covered_average, covered_spread
 
     rng = np.random.default_rng(11)
     shape, radius = (13, 40), 3
@@ -447,9 +449,9 @@ def test_covered_average_and_spread_match_float64_references() -> None:
     coverage = box_running_sums(surface[None], radius)[0]
     average = np.empty_like(stored)
     covered_average(stored, surface, coverage, radius, average)
-    tinted = np.empty_like(stored)
-    covered_mean(stored, surface, coverage, np.ones_like(stored), radius, tinted)
-    assert np.array_equal(average.view(np.uint32), tinted.view(np.uint32))
+    want_average = box_running_sums(stored * surface, radius)
+    np.divide(want_average, coverage, out=want_average, where=coverage > 0)
+    assert np.array_equal(average.view(np.uint32), want_average.view(np.uint32))
     spread = np.empty_like(stored)
     covered_spread(stored, surface, coverage, average, radius, 2.0, spread)
     pad = np.pad(stored.astype(np.float64), ((0, 0), (radius, radius), (radius, radius)))

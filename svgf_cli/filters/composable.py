@@ -46,7 +46,6 @@ from svgf_cli.filters.shares import (
     box_mean,
     coloured,
     covered_average,
-    covered_mean,
     covered_pixel_filter_kernel,
     covered_spread,
     divide_where_coloured,
@@ -236,17 +235,14 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
             if id(layer.colour) not in covered:
                 covered[id(layer.colour)] = _coverage(layer.colour)
             surface, coverage = covered[id(layer.colour)]
-            colour = np.ascontiguousarray(layer.colour, dtype=F32)
             stored = np.ascontiguousarray(layer.stored, dtype=F32)
-            if blend is None:
-                covered_mean(stored, surface, coverage, colour, SHARE_RADIUS, smooth)
-                continue
             covered_average(stored, surface, coverage, SHARE_RADIUS, smooth)
-            spread = np.empty_like(smooth)
-            covered_spread(stored, surface, coverage, smooth, SHARE_RADIUS,
-                           SHARE_HISTORY_REACH, spread)
-            blend(index, smooth, spread)
-            smooth *= colour
+            if blend is not None:
+                spread = np.empty_like(smooth)
+                covered_spread(stored, surface, coverage, smooth, SHARE_RADIUS,
+                               SHARE_HISTORY_REACH, spread)
+                blend(index, smooth, spread)
+            smooth *= layer.colour
         estimates[indexes] = split_by_shares(
             filtered, weights, [p.radiance for p in own], out=weights,
             last=lambda own=own: frame_totals([p.radiance for p in own]))

@@ -21,31 +21,18 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     keeps only the 2 radius + 2 row sums the column sums still need (a ring of rows): a
     frame-sized float64 temporary made this memory-bound."""
     for c in prange(planes.shape[0]):
-        _box_channel(planes[c], planes[c], False, False, planes[c], planes[c], False, radius,
-                     out[c])
-
-
-@njit(**_JIT)
-def covered_mean(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
-                 colour: np.ndarray, radius: int, out: np.ndarray) -> None:
-    """``out`` = :func:`box_mean` of ``stored x surface`` (3, H, W) x (H, W) 1/0, divided
-    by ``coverage`` (the surface's own box mean, (H, W)) where that is above 0, times
-    ``colour`` (3, H, W): a pass stored divided by its colour, averaged over the window's
-    pixels that have that colour, back in the colour's units. Each step rounds to float32
-    as the numpy expression of the same steps does."""
-    for c in prange(stored.shape[0]):
-        _box_channel(stored[c], surface, True, False, coverage, colour[c], True, radius,
-                     out[c])
+        _box_channel(planes[c], planes[c], False, False, planes[c], radius, out[c])
 
 
 @njit(**_JIT)
 def covered_average(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
                     radius: int, out: np.ndarray) -> None:
-    """:func:`covered_mean` before its product with the colour: the average of ``stored``
-    over the window's pixels that have the colour."""
+    """``out`` = :func:`box_mean` of ``stored x surface`` (3, H, W) x (H, W) 1/0, divided
+    by ``coverage`` (the surface's own box mean, (H, W)) where that is above 0: a pass
+    stored divided by its colour, averaged over the window's pixels that have that colour.
+    Each step rounds to float32 as the numpy expression of the same steps does."""
     for c in prange(stored.shape[0]):
-        _box_channel(stored[c], surface, True, False, coverage, coverage, False, radius,
-                     out[c])
+        _box_channel(stored[c], surface, True, False, coverage, radius, out[c])
 
 
 @njit(**_JIT)
@@ -57,8 +44,7 @@ def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray
     at least 1)."""
     area = (2 * radius + 1) ** 2
     for c in prange(stored.shape[0]):
-        _box_channel(stored[c], surface, True, True, coverage, coverage, False, radius,
-                     out[c])
+        _box_channel(stored[c], surface, True, True, coverage, radius, out[c])
         for y in range(stored.shape[1]):
             row, mean, share = out[c, y], average[c, y], coverage[y]
             for x in range(row.shape[0]):
@@ -69,11 +55,10 @@ def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
 def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared: bool,
-                 coverage: np.ndarray, colour: np.ndarray, tinted: bool, radius: int,
-                 out: np.ndarray) -> None:
+                 coverage: np.ndarray, radius: int, out: np.ndarray) -> None:
     """One channel (H, W) of :func:`box_mean` (``covered`` False: the other planes are not
     read), or of the mean of ``plane`` (``squared``: of its squares) times ``surface`` over
-    ``coverage``, times ``colour`` when ``tinted`` (:func:`covered_mean`)."""
+    ``coverage`` (:func:`covered_average`)."""
     height, width = plane.shape
     ring = 2 * radius + 2  # rows y - radius - 1 .. y + radius
     rows = np.empty((ring, width), dtype=np.float64)
@@ -103,10 +88,9 @@ def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared:
             cover = rows_covered * (min(x + radius + 1, width) - max(x - radius, 0))
             row[x] = columns[x] / cover
         if covered:
-            share, tint = coverage[y], colour[y]
+            share = coverage[y]
             for x in range(width):
-                mean = row[x] / share[x] if share[x] > 0.0 else row[x]
-                row[x] = mean * tint[x] if tinted else mean
+                row[x] = row[x] / share[x] if share[x] > 0.0 else row[x]
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
