@@ -466,10 +466,10 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     residual = denoised.color.copy() if emission is None else denoised.color - emission
     colours = remodulated_colours(light.passes, albedos)
     medium = denoised.medium if denoised.medium is not None and denoised.medium.any() else None
-    if medium is not None:
-        medium_colours(colours, light.passes, medium)
     for colour in colours.values():
         covered_pixel_filter(colour, pixel_weight)
+    if medium is not None:
+        medium_colours(colours, light.passes, medium)
     written: list[np.ndarray | None] = []  # each pass's colour pass as written
     covers: dict[int, Cover] = {}  # by id of the colour written
     for layer in light.passes:
