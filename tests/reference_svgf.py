@@ -36,7 +36,8 @@ history guard           :func:`reset_nonfinite_history`                         
 + despike               :func:`despike`                                          despike
 5 remodulation          :func:`remodulate`, :func:`radiance_with_background`,    modulate
                         emission added once
-+ TAA                   :func:`taa_resolve`                                      taa
++ TAA                   :func:`taa_resolve`; on jittered frames                  taa
+                        (:func:`jittered_samples`, :func:`plane_triples`)        jitter
 ======================  =======================================================  ===========
 
 Shapes follow ``svgf_cli.frame``: colour-like planes ``(3, H, W)``, several signals
@@ -1028,7 +1029,7 @@ def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
 
 # --------------------------------------------------------------------------- TAA
 TAA_DEPTH_JUMP = 1.05
-TAA_CLIP_SIGMA = 0.75
+TAA_CLIP_SIGMA = 0.5
 
 
 def taa_outline(depth: np.ndarray) -> np.ndarray:
@@ -1052,6 +1053,46 @@ def taa_outline(depth: np.ndarray) -> np.ndarray:
     return outline
 
 
+JITTER_RATIO = 0.1
+JITTER_MIN_SLOPE = 1e-4
+JITTER_PLANE_NORMAL = 1e-3
+
+
+def plane_triples(depth: np.ndarray, normal: np.ndarray,
+                  mesh_id: np.ndarray) -> tuple[int, int]:
+    """(tested, jittered) (``svgf_cli.filters.jitter``): over the row and column triples
+    centred on every 4th row from row 1, of surface pixels of one mesh id whose normals
+    agree within 1e-3 per component, with ``u = 1 / depth`` and slope ``g = |u[+1] -
+    u[-1]| / 2`` above ``1e-4 u[0]``: the count, and how many have ``|u[-1] - 2 u[0] +
+    u[+1]| > 0.1 g``."""
+    z = np.asarray(depth, dtype=F64)
+    n = np.asarray(normal, dtype=F64)
+    height, width = z.shape
+    tested = jittered = 0
+    centres = range(1, height - 1, 4)  # every 4th row from row 1
+    triples = [((y, x - 1), (y, x), (y, x + 1)) for y in centres for x in range(1, width - 1)]
+    triples += [((y - 1, x), (y, x), (y + 1, x)) for y in centres for x in range(width)]
+    for a, b, c in triples:
+        if min(z[a], z[b], z[c]) <= 0 or not mesh_id[a] == mesh_id[b] == mesh_id[c]:
+            continue
+        if (np.abs(n[:, a[0], a[1]] - n[:, b[0], b[1]]).max() > JITTER_PLANE_NORMAL
+                or np.abs(n[:, c[0], c[1]] - n[:, b[0], b[1]]).max() > JITTER_PLANE_NORMAL):
+            continue
+        u0, u1, u2 = 1.0 / z[a], 1.0 / z[b], 1.0 / z[c]
+        slope = abs(u2 - u0) / 2.0
+        if not slope > JITTER_MIN_SLOPE * u1:
+            continue
+        tested += 1
+        jittered += int(abs(u0 - 2.0 * u1 + u2) > JITTER_RATIO * slope)
+    return tested, jittered
+
+
+def jittered_samples(depth: np.ndarray, normal: np.ndarray, mesh_id: np.ndarray) -> bool:
+    """At least 64 plane triples, half of them off their line (:func:`plane_triples`)."""
+    tested, jittered = plane_triples(depth, normal, mesh_id)
+    return tested >= 64 and jittered >= 0.5 * tested
+
+
 def _catmull_rom(t: float) -> np.ndarray:
     return np.array([t * (-0.5 + t * (1 - t / 2)), 1 + t * t * (-2.5 + 1.5 * t),
                      t * (0.5 + t * (2 - 1.5 * t)), t * t * (-0.5 + t / 2)])
@@ -1065,11 +1106,11 @@ def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
     On :func:`taa_outline` pixels whose backprojected position ``P = (x + motion.x,
     y + motion.y)`` lies in ``[-0.5, size - 0.5]``: ``h`` = the Catmull-Rom fetch of the
     previous output at ``P`` (4x4 taps, indices clamped, negatives to 0); in the tonemapped
-    space ``T(c) = c / (1 + l(c))`` it is clipped per channel to ``mu +- 0.75 sigma`` of the
+    space ``T(c) = c / (1 + l(c))`` it is clipped per channel to ``mu +- 0.5 sigma`` of the
     current 3x3 (population sigma, in-image pixels), widened to hold the pixel's own
     ``T(c)``, and taken back by ``c = T / (1 - l(T))``
-    (``l(T)`` at most 0.999); then ``out = (a c + b h) / (a + b)``, ``a = alpha / (1 + l(c))``,
-    ``b = (1 - alpha) / (1 + l(h))``. Everywhere else the current value.
+    (``l(T)`` at most 0.999); then ``out = alpha c + (1 - alpha) h``. Everywhere else the
+    current value.
     """
     cur = np.asarray(current, dtype=F64)
     prev = np.asarray(previous, dtype=F64)
@@ -1102,9 +1143,7 @@ def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
                               np.minimum(mean - TAA_CLIP_SIGMA * sigma, centre),
                               np.maximum(mean + TAA_CLIP_SIGMA * sigma, centre))
             history = np.maximum(clipped, 0.0) / (1.0 - min(luma(clipped), 0.999))
-            a = alpha / (1.0 + luma(cur[:, y, x]))
-            b = (1.0 - alpha) / (1.0 + luma(history))
-            out[:, y, x] = (a * cur[:, y, x] + b * history) / (a + b)
+            out[:, y, x] = alpha * cur[:, y, x] + (1.0 - alpha) * history
     return out
 
 
@@ -1583,11 +1622,14 @@ class ReferenceDenoiser:
         if p.despike > 0.0:
             output, counts["despiked_lone"] = despike_lone(
                 output, clean.emission, radiance_mode, geom.depth, p.despike, clean.weights)
-        if p.taa:
+        if p.taa or (p.taa_jittered and not clean.centre_sampled
+                     and jittered_samples(geom.depth, clean.normal, clean.mesh_id)):
             if self.taa_previous is not None:
                 output = taa_resolve(output, self.taa_previous, clean.motion, geom.depth,
                                      clean.weights, p.taa_alpha)
             self.taa_previous = output
+        else:
+            self.taa_previous = None
         weight = p.pixel_filter
         if weight == -1.0:  # auto: the header says the frame is centre-sampled
             weight = 0.05 if clean.centre_sampled else 0.0

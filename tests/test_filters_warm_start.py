@@ -8,6 +8,7 @@ from moving_scene import scene_frame, scene_sequence
 
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
+from svgf_cli.filters.taa import taa_resolve
 from svgf_cli.filters.two_pass import denoise_bidirectional
 from svgf_cli.filters.warm_start import denoise_warm_start
 
@@ -54,3 +55,33 @@ def test_no_warm_frames_is_the_causal_run_and_short_shots_are_looked_ahead_whole
     np.testing.assert_array_equal(short[2], causal[2])
     with pytest.raises(ValueError, match="warm"):
         next(denoise_warm_start(frames, PARAMS, warm=5, lookahead=4))
+
+
+def test_taa_anti_aliases_the_warm_colours_and_carries_on_from_them() -> None:
+    """With TAA (forced; the default gives it jittered frames) the warm colours go through
+    the causal run's TAA: the first as it is (no history yet), the next blended with it at
+    the outlines (the kernel's blend of the two warm colours), nowhere else."""
+    import reference_svgf as ref
+
+    # (No noisy outlines' exchanges after TAA: they would carry its change a pixel on.)
+    params = PARAMS.replace(taa=True, noisy_outline_weight=0.0)
+    frames = scene_sequence(6)
+    got = [o.color for o in denoise_warm_start(frames, params, warm=3, lookahead=6)]
+    warm = [o.color for o in denoise_bidirectional(frames, params.replace(taa=False))[:3]]
+    np.testing.assert_array_equal(got[0], warm[0])
+    frame = frames[1]
+    want = np.empty_like(warm[1])
+    taa_resolve(warm[1], warm[0], frame.motion, frame.depth,
+                np.array(frame.luminance_weights, dtype=np.float32),
+                np.float32(params.taa_alpha), want)
+    np.testing.assert_array_equal(got[1], want)
+    near = ref.taa_resolve(warm[1], warm[0], frame.motion, frame.depth,
+                           frame.luminance_weights, params.taa_alpha)
+    np.testing.assert_allclose(got[1], near, rtol=1e-3, atol=1e-5)  # float32 clip bounds
+    outline = ref.taa_outline(frame.depth)
+    assert np.any(got[1] != warm[1]) and np.array_equal(got[1][:, ~outline], warm[1][:, ~outline])
+    # From frame 3 on the causal output, anti-aliased with the warm frames as its history.
+    plain = [o.color for o in denoise_warm_start(frames, params.replace(taa=False), warm=0)]
+    assert not np.array_equal(got[3], plain[3])
+    np.testing.assert_array_equal(got[3][:, ~ref.taa_outline(frames[3].depth)],
+                                  plain[3][:, ~ref.taa_outline(frames[3].depth)])

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 import pytest
+import reference_svgf as ref
 from test_cli_support import exit_code, reference_run, sequence_folder
 
 from svgf_cli.farm.plan import plan_chunks
@@ -196,13 +197,19 @@ def test_a_bad_frame_in_the_look_ahead_leaves_the_frames_before_it_causal(
         assert np.array_equal(colour(out / f"o.{f:04d}.exr"), colour(cold[f])), f
 
 
-def test_no_warm_start_with_taa(tmp_path: Path, sequence: Path) -> None:
-    """TAA's output filter is causal: the run is the causal one, frame for frame."""
+def test_taa_anti_aliases_the_warm_frames(tmp_path: Path, sequence: Path) -> None:
+    """TAA (forced) with a warm start: the warm colours go through the causal run's TAA.
+    The first frame is the warm colour itself; the second differs from the run without TAA
+    only on the outlines' pixels."""
     out = {}
-    for warm in (0, 3):
-        folder = tmp_path / f"w{warm}"
+    for taa in ("true", "false"):
+        folder = tmp_path / f"taa-{taa}"
         assert exit_code(["denoise", sequence / "in.####.exr", "-o", folder / "o.####.exr",
-                          "-q", "--frames", "1-2", "--set", "taa=true", "--warm-start",
-                          warm]) == 0
-        out[warm] = [colour(folder / f"o.{f:04d}.exr") for f in (1, 2)]
-    assert all(np.array_equal(a, b) for a, b in zip(out[0], out[3], strict=True))
+                          "-q", "--frames", "1-3", "--set", f"taa={taa}", "--warm-start", 3,
+                          "--float", "--colour-only"]) == 0
+        out[taa] = [colour(folder / f"o.{f:04d}.exr") for f in (1, 2)]
+    np.testing.assert_array_equal(out["true"][0], out["false"][0])
+    depth = pixels(sequence / "in.0002.exr")["Z"].astype(np.float64)
+    depth[~np.isfinite(depth)] = 0.0
+    changed = np.any(out["true"][1] != out["false"][1], axis=0)
+    assert changed.any() and not changed[~ref.taa_outline(depth)].any()

@@ -70,7 +70,9 @@ class Denoiser(PipelineFilter):
         """Denoise the next frame of the sequence."""
         ctx = self._run(frame)
         assert ctx.output is not None
-        colour = ctx.output if frame.final_colour is None else frame.final_colour
+        # A colour decided elsewhere (the warm start) as the stages left it (TAA's).
+        final = ctx.frame.final_colour
+        colour = ctx.output if final is None else final
         return DenoisedFrame(color=colour, layers=ctx.layers, counts=ctx.counts,
                              emission=ctx.frame.emission, medium=ctx.medium_pixels,
                              outline_spill=ctx.outline_spill,

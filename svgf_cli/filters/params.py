@@ -370,18 +370,15 @@ class SVGFParams:
         " docs/algorithm.md#noisy-outlines-defocus).",
         group="output", valid=Range(0, 0.25, shown="0..1/4", noun="a weight"),
     )
-    taa: bool = _p(
-        False,
-        "Temporal anti-aliasing of the output at object outlines (the paper's last step):"
-        " the previous output, Catmull-Rom resampled and clipped to the current 3x3, blended"
-        " in where a jittered sample flips between two surfaces.",
-        group="output",
-    )
-    taa_alpha: float = _p(
-        0.5,
-        "The current output's share in the TAA blend (before the luminance weighting).",
-        group="output", valid=Range(0, 1, low_open=True),
-    )
+    taa: bool = _p(False, "Temporal anti-aliasing of the output at object outlines (the"
+                   " paper's last step): the previous output, Catmull-Rom resampled and clipped"
+                   " to the current 3x3, blended in where a jittered sample flips between two"
+                   " surfaces.", group="output")
+    taa_jittered: bool = _p(False, "taa on the frames whose G-buffer shows jittered samples (a"
+                            " plane's depth off the line of pixel centres) unless the header"
+                            " says centre-sampled.", group="output")
+    taa_alpha: float = _p(0.5, "The current output's share in the TAA blend.", group="output",
+                          valid=Range(0, 1, low_open=True))
 
     def to_json(self) -> str:
         """Stable JSON of every field (sorted keys), stored in output metadata."""
@@ -465,6 +462,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   " fog's edge: docs/algorithm.md#the-mediums-coverage"),
         Departure("atrous_iterations", AUTO_ITERATIONS, "the filter's reach grows with the"
                   f" image (atrous_iterations_for): {_ALG}#the-filters-reach-grows-with-the-image"),
+        Departure("taa_jittered", True, "a jittered frame's outline pixel shows one surface"
+                  " or the other from frame to frame, the reference their mix: outlines crawl"
+                  " and flicker: docs/stability.md#jittered-outlines"),
         Departure("edge_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres show"
                   " staircase outlines that crawl as they move, where the renderer's frame"
                   f" is anti-aliased: {_ALG}#outlines-of-centre-sampled-frames-edge-filter"),

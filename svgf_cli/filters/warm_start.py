@@ -18,6 +18,7 @@ evaluation over frames in memory.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Iterator
 from itertools import islice
 
@@ -45,10 +46,16 @@ def denoise_warm_start(
         raise ValueError(f"warm ({warm}) must be in 0 .. lookahead ({lookahead})")
     remaining = iter(frames)
     head = list(islice(remaining, lookahead))
-    warmed = denoise_bidirectional(head, params)[:warm] if warm and head else []
+    warmed = (denoise_bidirectional(head, params.replace(taa=False))[:warm]
+              if warm and head else [])
     causal = Denoiser(params)
     for index, frame in enumerate(head):
-        output = causal.process(frame)
-        yield warmed[index] if index < len(warmed) else output
+        if index >= len(warmed):
+            yield causal.process(frame)
+            continue
+        # The warm colour as the causal run's final colour: its TAA (jittered frames)
+        # anti-aliases it and starts its history there, as the file driver's run does.
+        output = causal.process(dataclasses.replace(frame, final_colour=warmed[index].color))
+        yield dataclasses.replace(warmed[index], color=output.color)
     for frame in remaining:
         yield causal.process(frame)

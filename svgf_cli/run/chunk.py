@@ -57,8 +57,7 @@ def run_sequence(
 
         return run_bidirectional(tasks, config, progress, stop=stop,
                                  on_first_frame=on_first_frame, read=read)
-    # TAA filters the output causally: it has no bidirectional run to warm from.
-    warm_start = 0 if history is not None or config.params.taa else config.params.warm_start
+    warm_start = 0 if history is not None else config.params.warm_start
     head = warm_head(tasks, warm_start)
     warm: dict[int, np.ndarray] = {}
     head_stats = RunStats()

@@ -63,7 +63,9 @@ def warm_colours(
         colours[task.frame] = np.stack(planes).astype(np.float32, copy=False)
         return []
 
-    lean = replace(config, params=config.params.replace(bidirectional=True), colour_only=True,
+    # TAA is causal: the causal run anti-aliases the warm colours (filters.stages.taa).
+    lean = replace(config, params=config.params.replace(bidirectional=True, taa=False),
+                   colour_only=True,
                    float_colour=True, light_layers="as-read", debug_aovs=False)
     silent = Progress("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())
     try:
