@@ -1012,3 +1012,20 @@ def test_passes_carry_no_negative_light_where_the_colour_is_below_the_emission()
         rebuilt += stored * layer.colour
     rebuilt += np.stack([out[f"Env.{c}"] for c in "RGB"])
     np.testing.assert_allclose(rebuilt, colour, rtol=1e-5, atol=1e-6)
+
+
+def test_jittered_frames_layers_add_up_to_their_anti_aliased_colour(tmp_path: Path) -> None:
+    """Cycles with a sample offset (jittered: the default's TAA runs on them): the light
+    passes compose to the colour TAA wrote, and TAA did change it."""
+    offset = ROOT / "testdata/cycles/offset/roll"
+    for taa in ("true", "false"):
+        assert exit_code(["denoise", "--preset-aovs", "cycles", "-q", offset / "in.####.exr",
+                          "-o", f"{tmp_path / taa}/", "--set", f"taa_jittered={taa}"]) == 0
+    mapping = build_mapping("cycles")
+    for frame in (2, 3):
+        name = f"in.{frame:04d}.exr"
+        checks = file_additivity(str(tmp_path / "true" / name), mapping)
+        assert [c.what for c in checks] == ["the light passes"]
+        assert checks[0].passed, checks[0].describe()
+        on, off = channels(tmp_path / "true" / name), channels(tmp_path / "false" / name)
+        assert not np.array_equal(on["ViewLayer.Combined.R"], off["ViewLayer.Combined.R"])
