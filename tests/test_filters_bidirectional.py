@@ -331,7 +331,25 @@ def test_a_reverse_pass_holds_no_combination_buffers_between_frames() -> None:
     assert reverse.held_bytes() - held[-1] == combination
 
 
-def test_bidirectional_refuses_taa() -> None:
-    frames = scene_sequence(2)
-    with pytest.raises(ValueError, match="TAA"):
-        denoise_bidirectional(frames, resolve_params("paper", taa=True))
+def test_bidirectional_taa_runs_backwards_in_time() -> None:
+    """TAA in a bidirectional run: on the reverse pass's output frames, its history the
+    frame after (in time), fetched with the motion to it. The last frame is the run's own
+    output; earlier ones differ from the run without TAA only at the outlines, and are the
+    kernel's blend of the two runs' outputs there."""
+    import reference_svgf as ref
+
+    from svgf_cli.filters.taa import taa_resolve
+
+    frames = scene_sequence(4, motion_next=True)
+    params = resolve_params("paper", taa=True)
+    plain = [o.color for o in denoise_bidirectional(frames, params.replace(taa=False))]
+    got = [o.color for o in denoise_bidirectional(frames, params)]
+    np.testing.assert_array_equal(got[3], plain[3])
+    want = np.empty_like(plain[2])
+    taa_resolve(plain[2], got[3], frames[2].motion_next, frames[2].depth,
+                np.array(frames[2].luminance_weights, dtype=np.float32),
+                np.float32(params.taa_alpha), want)
+    np.testing.assert_array_equal(got[2], want)
+    outline = ref.taa_outline(frames[2].depth)
+    assert np.any(got[2] != plain[2])
+    np.testing.assert_array_equal(got[2][:, ~outline], plain[2][:, ~outline])

@@ -40,7 +40,7 @@ DEFAULT_TEMPORAL = ["values", "fill_medium", "medium_coverage", "gradients",
     ("default", "reverse", [*DEFAULT_TEMPORAL, "combine", "accumulate", "temporal_albedo",
                             "combine_albedo", "pass_history", "variance", "atrous",
                             "store_history", "despike", "remodulate", "despike_lone",
-                            "pixel_filter", "edge_filter", "release_combination"]),
+                            "taa", "pixel_filter", "edge_filter", "release_combination"]),
 ])
 def test_stage_order_per_preset(preset: str, kind: str, expected: list[str]) -> None:
     assert stage_names(PRESETS[preset], kind) == expected
@@ -77,7 +77,8 @@ def test_bidirectional_passes_have_their_own_stages() -> None:
     params = PRESETS["default"]
     assert ForwardPass(params).stages == tuple(stage_names(params, "forward"))
     assert ReversePass(params).stages == tuple(stage_names(params, "reverse"))
-    assert "taa" not in stage_names(params.replace(taa=True), "reverse")
+    assert "taa" in stage_names(params, "reverse")  # on its output frames, backwards
+    assert "taa" not in stage_names(params.replace(taa_jittered=False), "forward")
     with pytest.raises(ValueError, match="unknown pipeline"):
         build(params, "sideways")
 

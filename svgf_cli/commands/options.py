@@ -242,9 +242,6 @@ def params_from_options(preset: str, kwargs: Mapping[str, Any]) -> SVGFParams:
 
 def _check_combinations(params: SVGFParams) -> None:
     """The checks a range cannot make: they involve two parameters."""
-    if params.bidirectional and params.taa:
-        raise UsageError("--taa filters the output causally; it cannot be combined with "
-                         "--bidirectional")
     # With auto, the smallest count any image gets (that of a 1x1 image) bounds the index.
     iterations = atrous_iterations_for(params, 1, 1)
     if not -1 <= params.feedback_iteration < max(iterations, 1):

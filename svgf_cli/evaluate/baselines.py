@@ -180,7 +180,7 @@ def baseline_params(name: str, params: SVGFParams) -> SVGFParams:
     if name == "forward":
         return params.replace(bidirectional=False)
     if name == "bidirectional":
-        return params.replace(bidirectional=True, taa=False)
+        return params.replace(bidirectional=True)
     raise ValueError(f"{name!r} is not an SVGF-derived baseline")
 
 

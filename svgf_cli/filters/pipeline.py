@@ -109,6 +109,7 @@ def reverse() -> list[Stage]:
         output_frame(Atrous()),
         StoreHistory(),
         *(output_frame(stage) for stage in composition()),
+        output_frame(TAA()),  # taa, taa_jittered: backwards in time
         output_frame(PixelFilter()),  # pixel_filter
         output_frame(EdgeFilter()),  # edge_filter
         output_frame(ReleaseCombination()),

@@ -117,8 +117,6 @@ class ReversePass(PipelineFilter):
     def process(self, frame: Frame, forward: SideHistory | None) -> DenoisedFrame | None:
         """The next frame (going backwards in time); the output when ``forward`` is given
         (best given in :meth:`forward_buffers`), None for a warm-up frame."""
-        if self.params.taa:
-            raise ValueError("TAA filters the output causally; it cannot run bidirectionally")
         reverse = dataclasses.replace(
             frame,
             motion=self.motion_to_next(frame),

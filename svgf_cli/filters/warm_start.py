@@ -46,7 +46,7 @@ def denoise_warm_start(
         raise ValueError(f"warm ({warm}) must be in 0 .. lookahead ({lookahead})")
     remaining = iter(frames)
     head = list(islice(remaining, lookahead))
-    warmed = (denoise_bidirectional(head, params.replace(taa=False))[:warm]
+    warmed = (denoise_bidirectional(head, params.replace(taa=False, taa_jittered=False))[:warm]
               if warm and head else [])
     causal = Denoiser(params)
     for index, frame in enumerate(head):

@@ -63,8 +63,9 @@ def warm_colours(
         colours[task.frame] = np.stack(planes).astype(np.float32, copy=False)
         return []
 
-    # TAA is causal: the causal run anti-aliases the warm colours (filters.stages.taa).
-    lean = replace(config, params=config.params.replace(bidirectional=True, taa=False),
+    # The causal run anti-aliases the warm colours (filters.stages.taa): not twice.
+    lean = replace(config, params=config.params.replace(bidirectional=True, taa=False,
+                                                        taa_jittered=False),
                    colour_only=True,
                    float_colour=True, light_layers="as-read", debug_aovs=False)
     silent = Progress("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())

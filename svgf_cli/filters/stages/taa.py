@@ -21,7 +21,9 @@ class TAA(StageBase):
     ``taa_jittered`` (and not ``taa``) only on frames whose G-buffer shows jittered samples
     and whose header does not say centre-sampled (``filters.jitter``); another frame
     lets the history go. A frame given its colour (``Frame.final_colour``: the look-ahead
-    warm start) is anti-aliased in its place: the warm frames start the history."""
+    warm start) is anti-aliased in its place: the warm frames start the history. In a
+    bidirectional run's reverse pass (its output frames) the history is the frame after,
+    the motion the motion to it: TAA backwards in time."""
 
     name = "taa"
     reads = ("output", "frame.final_colour", "taa_previous", "motion", "depth", "normal_in",
