@@ -154,3 +154,12 @@ def test_a_centre_sampled_header_wins_over_a_jittered_looking_g_buffer() -> None
     unsaid = [dataclasses.replace(f, centre_sampled=False) for f in frames]
     assert not np.array_equal(_outputs(params, unsaid)[2],
                               _outputs(params.replace(taa_jittered=False), unsaid)[2])
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 5), (3, 2), (5, 1)])
+def test_tiny_frames_have_few_triples_and_are_not_jittered(shape: tuple[int, int]) -> None:
+    depth, normal, mesh = _plane(*shape, 0.5)
+    tested, jittered = plane_triples(depth, normal, mesh)
+    assert 0 <= jittered <= tested <= 2 * shape[0] * shape[1]
+    assert (tested, jittered) == ref.plane_triples(depth, normal, mesh)
+    assert not jittered_samples(depth, normal, mesh)
