@@ -80,7 +80,7 @@ PINNED: dict[str, dict[str, object]] = {
         "guide_albedo_floor": 0.1, "temporal_albedo": True, "albedo_catmull_rom": True,
         "firefly_clamp": 0.0, "spread_fireflies": 10.0, "history_clamp": 3.0, "despike": 2.0,
         "pixel_filter": -1.0, "edge_filter": -1.0, "taa": False,
-        "taa_jittered": True, "taa_alpha": 0.5,
+        "taa_jittered": True, "taa_alpha": 0.65,
         "warm_start": 4,
         "medium_fill_radius": 4,
         "medium_coverage_radius": -1,

@@ -465,6 +465,8 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("taa_jittered", True, "a jittered frame's outline pixel shows one surface"
                   " or the other from frame to frame, the reference their mix: outlines crawl"
                   " and flicker: docs/stability.md#jittered-outlines"),
+        Departure("taa_alpha", 0.65, "TAA's history lags a moving shadow or light by a frame"
+                  " more at 0.5: docs/stability.md#jittered-outlines"),
         Departure("edge_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres show"
                   " staircase outlines that crawl as they move, where the renderer's frame"
                   f" is anti-aliased: {_ALG}#outlines-of-centre-sampled-frames-edge-filter"),
