@@ -48,6 +48,8 @@ LAG = HERE / "lag"
 FRAMES = "1-16"
 RESOLUTION = "128x72"
 REFERENCE_SPP = 2048
+# Jittered sequences: 64 samples at each of 4x4 positions per pixel (--reference-supersample).
+JITTER_REFERENCE_SPP = 64
 MAX_DEPTH = 5
 LIGHT_DROP = 1.0  # mm below the ceiling
 SPHERE_RADIUS = 50.0
@@ -220,11 +222,15 @@ def write_inputs() -> None:
 
 
 def trace_command(name: str, svgf: str, resolution: str = RESOLUTION,
-                  out: Path | None = None, seed: int = 0, reference: bool = True) -> list[str]:
+                  out: Path | None = None, seed: int = 0, reference: bool = True,
+                  jitter: bool = False) -> list[str]:
     """The `svgf trace` command of one sequence; ``out`` (default: ``testdata/lag``) holds its
     folder, so larger renders for validation stay out of the fixtures. Another ``seed`` is
     another noise realisation of the same frames (``bench/bias_variance.py``), which needs no
-    ``reference`` of its own."""
+    ``reference`` of its own. ``jitter``: each pixel's sample (G-buffer included) at a random
+    position in the pixel, as Mitsuba's one-sample frames, without gradient samples (they
+    re-trace pixel centres), against references averaged over 4x4 positions of 64 samples
+    each (a box pixel filter, 1024 samples)."""
     spec = SEQUENCES[name]
     rel = Path("testdata") / "lag"
     frames = (out if out is not None else rel) / name
@@ -233,11 +239,15 @@ def trace_command(name: str, svgf: str, resolution: str = RESOLUTION,
         "--frames", FRAMES, "--resolution", resolution, "--spp", "1",
         "--max-depth", str(MAX_DEPTH), "--seed", str(seed),
         "--animation", str(rel / name / "anim.json"),
-        "--motion-next", "--gradient-samples", "--compression", "zip", "--overwrite", "-q",
+        "--motion-next", "--compression", "zip", "--overwrite", "-q",
     ]  # fmt: skip
+    command += ["--jitter"] if jitter else ["--gradient-samples"]
     if reference:
         command += ["--reference", str(frames / "ref.####.exr"), "--reference-spp",
-                    str(REFERENCE_SPP), "--reference-channels", "rgb", "--reference-half"]
+                    str(JITTER_REFERENCE_SPP if jitter else REFERENCE_SPP),
+                    "--reference-channels", "rgb", "--reference-half"]
+        if jitter:
+            command += ["--reference-supersample", "4"]
     for layer in SKIP_LAYERS:
         command += ["--skip-layer", layer]
     if spec.get("lobes"):
@@ -252,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", nargs="*", choices=sorted(SEQUENCES), default=None)
     parser.add_argument("--resolution", default=RESOLUTION, metavar="WxH",
                         help=f"render size (default {RESOLUTION}, the fixtures')")
+    parser.add_argument("--jitter", action="store_true",
+                        help="jittered samples and box-filtered references, into "
+                        "testdata/lag_jit/<name>/ (the committed: camera)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="render into DIR/<name>/ instead of testdata/lag/<name>/ (e.g. a "
                         "larger validation set: --resolution 256x144 --out /tmp/lag256)")
@@ -261,9 +274,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     for name in args.only or list(SEQUENCES):
         out = args.out.resolve() if args.out is not None else None
+        if out is None and args.jitter:
+            out = HERE / "lag_jit"
         if out is not None:
             (out / name).mkdir(parents=True, exist_ok=True)
-        command = ["nice", "-n", "10", *trace_command(name, args.svgf, args.resolution, out)]
+        command = ["nice", "-n", "10", *trace_command(name, args.svgf, args.resolution, out,
+                                                      jitter=args.jitter)]
         print(" ".join(command), flush=True)
         start = time.perf_counter()
         subprocess.run(command, check=True, cwd=HERE.parent)

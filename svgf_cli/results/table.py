@@ -200,6 +200,13 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         _STATIC | {"camera-motion"},
     ),
     SequenceSpec(
+        "testdata/lag_jit/camera",
+        "lag/camera traced with jittered samples (svgf trace --jitter, as Mitsuba's 1-spp "
+        "frames) against references box-filtered over 4x4 positions (64 samples each): a pan "
+        "of the kind a renderer that jitters its samples writes.",
+        _STATIC | {"camera-motion"},
+    ),
+    SequenceSpec(
         "testdata/lag/glossy",
         "Glossy floor (roughness 0.25), gold sphere and steel block (metal); the light slides "
         "and the camera moves; lobe passes written.",
