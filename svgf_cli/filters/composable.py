@@ -544,6 +544,9 @@ GROUP_SETTINGS: dict[str, object] = {
     # (docs/performance.md#production-frames-1080p-80-channels).
     "object_history": False, "edge_filter": 0.0, "noisy_outline_weight": 0.0,
     "spatial_variance_radius": 1,
+    # TAA acts on the summed output too, which the shares do not use (the colour's TAA is
+    # in the colour the groups are composed to).
+    "taa": False, "taa_jittered": False,
 }
 
 
