@@ -153,3 +153,16 @@ def test_check_reports_noisy_outlines(capsys: pytest.CaptureFixture[str]) -> Non
     code, out, _ = run_cli(["inspect", str(cycles / "dof" / "in.0003.exr"), "--preset-aovs",
                             "cycles", "--check", "--json"], capsys)
     assert json.loads(out)["files"][0]["noisy_outline_pixels"] > 0.05
+
+
+def test_check_reports_jittered_samples(capsys: pytest.CaptureFixture[str]) -> None:
+    """seq_jit (svgf trace --jitter) is named jittered, seq (pixel centres) and the
+    depth-of-field shot (its header says centre-sampled) are not; --json says the same."""
+    data = Path(__file__).resolve().parent.parent / "testdata"
+    for folder, aovs, jittered in (("seq_jit", "svgf", True), ("seq", "svgf", False),
+                                   ("cycles/dof", "cycles", False)):
+        args = ["inspect", str(data / folder / "in.0002.exr"), "--preset-aovs", aovs, "--check"]
+        code, out, _ = run_cli(args, capsys)
+        assert code == 0 and ("jittered samples:" in out) == jittered, folder
+        code, out, _ = run_cli([*args, "--json"], capsys)
+        assert json.loads(out)["files"][0]["jittered_samples"] is jittered

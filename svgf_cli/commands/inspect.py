@@ -83,6 +83,19 @@ def noisy_outline_pixels(frame: Any) -> float:
     return float(np.mean(outline_share(frame.mesh_id, frame.depth) > DENSE_FROM))
 
 
+def jittered_frame(frame: Any) -> bool:
+    """Whether the default preset's TAA runs on the frame (``taa_jittered``): its header does
+    not say centre-sampled and its planes' depth is off the line of pixel centres
+    (``filters.jitter``)."""
+    from svgf_cli.filters.jitter import jittered_samples
+    from svgf_cli.filters.values import cleaned_depth, cleaned_normal
+
+    if frame.centre_sampled:
+        return False
+    return jittered_samples(cleaned_depth(frame.depth), cleaned_normal(frame.normal),
+                            frame.mesh_id)
+
+
 def _report(
     info: ExrInfo,
     mapping: LayerMapping,
@@ -270,7 +283,7 @@ def command(
         resolved.requested_signals = signals
         if check and resolved.missing:
             fail(InputError(f"missing channel(s) for {', '.join(resolved.missing)}", name))
-        sum_check = noisy = None
+        sum_check = noisy = jittered = None
         if check and not resolved.missing and resolved.plan is None:
             fail(InputError(f"no signal set possible ({'; '.join(resolved.notes)})", name))
         elif check and not resolved.missing:
@@ -278,12 +291,14 @@ def command(
             # The light passes against the colour, as `svgf denoise` checks them on read.
             sum_check = read.sum_check if resolved.plan.checked else None
             noisy = noisy_outline_pixels(read.frame)
+            jittered = jittered_frame(read.frame)
         additivity = _additivity(name, mapping, info) if check and not resolved.missing else []
         if as_json:
             report = _report(info, mapping, resolved, sum_check)
             report["light_groups"] = _light_groups(info, mapping)
             if noisy is not None:
                 report["noisy_outline_pixels"] = noisy
+                report["jittered_samples"] = jittered
             report["additivity"] = [
                 {"what": a.what, "values": a.values, "failing": a.failing,
                  "worst_relative": a.worst_relative, "passed": a.passed} for a in additivity]
@@ -300,6 +315,10 @@ def command(
                 click.echo(f"  noisy outlines: {100 * noisy:.1f} % of the pixels (the G-buffer "
                            "changes object from pixel to pixel, as in a defocused region): the "
                            "default preset blurs them (noisy_outline_weight)")
+            if jittered:
+                click.echo("  jittered samples: the planes' depth is off the line of pixel "
+                           "centres (each pixel's sample at a random point of it): the default "
+                           "preset anti-aliases the outlines over time (taa_jittered)")
             for result in additivity:
                 click.echo(f"  light-layer check: {result.describe()}")
         if _denoised(info) and any(not a.passed for a in additivity):
