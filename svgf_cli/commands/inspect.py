@@ -96,6 +96,26 @@ def jittered_frame(frame: Any) -> bool:
                             frame.mesh_id)
 
 
+def _frame_lines(groups: list[str], noisy: float | None, jittered: bool,
+                 additivity: list[Any]) -> list[str]:
+    """The text report's lines after the header's: light groups, and what ``--check`` read
+    in the frame."""
+    lines = []
+    if groups:
+        lines.append(f"  light groups: {', '.join(groups)} (svgf denoise writes them "
+                     "denoised, adding up to the colour)")
+    if noisy is not None and noisy >= 0.0005:  # 0.05 %: a region, not a corner
+        lines.append(f"  noisy outlines: {100 * noisy:.1f} % of the pixels (the G-buffer "
+                     "changes object from pixel to pixel, as in a defocused region): the "
+                     "default preset blurs them (noisy_outline_weight)")
+    if jittered:
+        lines.append("  jittered samples: the planes' depth is off the line of pixel centres "
+                     "(each pixel's sample at a random point of it): the default preset "
+                     "anti-aliases the outlines over time (taa_jittered)")
+    lines.extend(f"  light-layer check: {result.describe()}" for result in additivity)
+    return lines
+
+
 def _report(
     info: ExrInfo,
     mapping: LayerMapping,
@@ -307,20 +327,9 @@ def command(
             if index:
                 click.echo("")
             click.echo(_text(info, mapping, resolved, sum_check))
-            groups = _light_groups(info, mapping)
-            if groups:
-                click.echo(f"  light groups: {', '.join(groups)} (svgf denoise writes them "
-                           "denoised, adding up to the colour)")
-            if noisy is not None and noisy >= 0.0005:  # 0.05 %: a region, not a corner
-                click.echo(f"  noisy outlines: {100 * noisy:.1f} % of the pixels (the G-buffer "
-                           "changes object from pixel to pixel, as in a defocused region): the "
-                           "default preset blurs them (noisy_outline_weight)")
-            if jittered:
-                click.echo("  jittered samples: the planes' depth is off the line of pixel "
-                           "centres (each pixel's sample at a random point of it): the default "
-                           "preset anti-aliases the outlines over time (taa_jittered)")
-            for result in additivity:
-                click.echo(f"  light-layer check: {result.describe()}")
+            for line in _frame_lines(_light_groups(info, mapping), noisy, bool(jittered),
+                                     additivity):
+                click.echo(line)
         if _denoised(info) and any(not a.passed for a in additivity):
             fail(InputError("the denoised light layers do not add up to the colour", name))
     if as_json:
