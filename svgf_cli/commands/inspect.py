@@ -83,17 +83,14 @@ def noisy_outline_pixels(frame: Any) -> float:
     return float(np.mean(outline_share(frame.mesh_id, frame.depth) > DENSE_FROM))
 
 
-def jittered_frame(frame: Any) -> bool:
-    """Whether the default preset's TAA runs on the frame (``taa_jittered``): its header does
-    not say centre-sampled and its planes' depth is off the line of pixel centres
-    (``filters.jitter``)."""
-    from svgf_cli.filters.jitter import jittered_samples
+def frame_jittered(frame: Any) -> bool:
+    """Whether the default preset's TAA runs on the frame (``taa_jittered``;
+    ``filters.jitter.jittered_frame`` on the G-buffer as the filter cleans it)."""
+    from svgf_cli.filters.jitter import jittered_frame
     from svgf_cli.filters.values import cleaned_depth, cleaned_normal
 
-    if frame.centre_sampled:
-        return False
-    return jittered_samples(cleaned_depth(frame.depth), cleaned_normal(frame.normal),
-                            frame.mesh_id)
+    return jittered_frame(frame.centre_sampled, cleaned_depth(frame.depth),
+                          cleaned_normal(frame.normal), frame.mesh_id)
 
 
 def _frame_lines(groups: list[str], noisy: float | None, jittered: bool,
@@ -303,7 +300,7 @@ def command(
         resolved.requested_signals = signals
         if check and resolved.missing:
             fail(InputError(f"missing channel(s) for {', '.join(resolved.missing)}", name))
-        sum_check = noisy = jittered = None
+        sum_check = noisy = is_jittered = None
         if check and not resolved.missing and resolved.plan is None:
             fail(InputError(f"no signal set possible ({'; '.join(resolved.notes)})", name))
         elif check and not resolved.missing:
@@ -311,14 +308,14 @@ def command(
             # The light passes against the colour, as `svgf denoise` checks them on read.
             sum_check = read.sum_check if resolved.plan.checked else None
             noisy = noisy_outline_pixels(read.frame)
-            jittered = jittered_frame(read.frame)
+            is_jittered = frame_jittered(read.frame)
         additivity = _additivity(name, mapping, info) if check and not resolved.missing else []
         if as_json:
             report = _report(info, mapping, resolved, sum_check)
             report["light_groups"] = _light_groups(info, mapping)
             if noisy is not None:
                 report["noisy_outline_pixels"] = noisy
-                report["jittered_samples"] = jittered
+                report["jittered_samples"] = is_jittered
             report["additivity"] = [
                 {"what": a.what, "values": a.values, "failing": a.failing,
                  "worst_relative": a.worst_relative, "passed": a.passed} for a in additivity]
@@ -327,7 +324,7 @@ def command(
             if index:
                 click.echo("")
             click.echo(_text(info, mapping, resolved, sum_check))
-            for line in _frame_lines(_light_groups(info, mapping), noisy, bool(jittered),
+            for line in _frame_lines(_light_groups(info, mapping), noisy, bool(is_jittered),
                                      additivity):
                 click.echo(line)
         if _denoised(info) and any(not a.passed for a in additivity):

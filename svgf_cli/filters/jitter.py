@@ -97,3 +97,11 @@ def jittered_samples(depth: np.ndarray, normal: np.ndarray, mesh_id: np.ndarray)
     ``JITTERED_SHARE`` of them off their line (:func:`plane_triples`)."""
     tested, jittered = plane_triples(depth, normal, mesh_id)
     return tested >= MIN_TRIPLES and jittered >= JITTERED_SHARE * tested
+
+
+def jittered_frame(centre_sampled: bool, depth: np.ndarray, normal: np.ndarray,
+                   mesh_id: np.ndarray) -> bool:
+    """Whether a frame's samples are jittered: the header's word first (a frame it says is
+    centre-sampled is not, whatever a lens did to its G-buffer), else its planes
+    (:func:`jittered_samples`)."""
+    return not centre_sampled and jittered_samples(depth, normal, mesh_id)

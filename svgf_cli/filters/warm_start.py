@@ -33,6 +33,12 @@ WARM_FRAMES = 4
 LOOKAHEAD_FRAMES = 8
 
 
+def lookahead_params(params: SVGFParams) -> SVGFParams:
+    """The look-ahead's bidirectional run's settings: the causal run's TAA anti-aliases the
+    warm colours (``filters.stages.taa``), so the look-ahead gives them none (not twice)."""
+    return params.replace(bidirectional=True, taa=False, taa_jittered=False)
+
+
 def denoise_warm_start(
     frames: Iterable[Frame], params: SVGFParams, *, warm: int = WARM_FRAMES,
     lookahead: int = LOOKAHEAD_FRAMES,
@@ -46,8 +52,7 @@ def denoise_warm_start(
         raise ValueError(f"warm ({warm}) must be in 0 .. lookahead ({lookahead})")
     remaining = iter(frames)
     head = list(islice(remaining, lookahead))
-    warmed = (denoise_bidirectional(head, params.replace(taa=False, taa_jittered=False))[:warm]
-              if warm and head else [])
+    warmed = denoise_bidirectional(head, lookahead_params(params))[:warm] if warm and head else []
     causal = Denoiser(params)
     for index, frame in enumerate(head):
         if index >= len(warmed):

@@ -26,6 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from svgf_cli.errors import InputError
+from svgf_cli.filters.warm_start import lookahead_params
 from svgf_cli.progress import Progress
 from svgf_cli.run.output import OutputFrame
 from svgf_cli.run.stop import StopFlag
@@ -63,10 +64,7 @@ def warm_colours(
         colours[task.frame] = np.stack(planes).astype(np.float32, copy=False)
         return []
 
-    # The causal run anti-aliases the warm colours (filters.stages.taa): not twice.
-    lean = replace(config, params=config.params.replace(bidirectional=True, taa=False,
-                                                        taa_jittered=False),
-                   colour_only=True,
+    lean = replace(config, params=lookahead_params(config.params), colour_only=True,
                    float_colour=True, light_layers="as-read", debug_aovs=False)
     silent = Progress("lines", 0, quiet=True, out=io.StringIO(), err=io.StringIO())
     try:

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from svgf_cli.filters.context import FrameContext, StageBase
-from svgf_cli.filters.jitter import jittered_samples
+from svgf_cli.filters.jitter import jittered_frame
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.taa import taa_resolve
 
@@ -36,8 +36,8 @@ class TAA(StageBase):
 
     def run(self, ctx: FrameContext) -> bool:
         frame, resident = ctx.frame, ctx.resident
-        if not (ctx.params.taa or (not frame.centre_sampled and jittered_samples(
-                ctx.depth, ctx.normal_in, frame.mesh_id))):
+        if not (ctx.params.taa or jittered_frame(frame.centre_sampled, ctx.depth,
+                                                 ctx.normal_in, frame.mesh_id)):
             resident.taa_previous = None
             return False
         current = ctx.output if frame.final_colour is None else frame.final_colour
