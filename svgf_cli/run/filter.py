@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Concatenate, Generic, ParamSpec, Protocol, Typ
 import numpy as np
 
 from svgf_cli.errors import InputError, UsageError
+from svgf_cli.filters import id_stability
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.frame import DenoisedFrame, Frame
 from svgf_cli.progress import Progress
@@ -51,6 +52,39 @@ P = ParamSpec("P")
 R = TypeVar("R")
 
 
+class IdCheck:
+    """Object ids that are renumbered from frame to frame (`filters.id_stability`) are let
+    go: from the first frame whose ids changed where its surfaces did not, to the end of the
+    pass, every frame is filtered as one without ids (one warning naming that frame)."""
+
+    def __init__(self, progress: Progress) -> None:
+        self._progress = progress
+        self._previous: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.unstable = False
+
+    def admit(self, task: FrameTask, frame: Frame) -> None:
+        if self.unstable:
+            frame.mesh_id = id_stability.without_ids(frame.depth)
+            return
+        if task.reset_history:
+            self._previous = None  # a new shot: its ids need not match the last one's
+        previous = self._previous
+        self._previous = id_stability.sampled_rows(frame.mesh_id, frame.depth, frame.normal)
+        if previous is None:
+            return
+        changed, compared = id_stability.id_change_share(previous, frame.mesh_id, frame.depth,
+                                                         frame.normal)
+        if not id_stability.ids_unstable(changed, compared):
+            return
+        self.unstable = True
+        self._previous = None
+        frame.mesh_id = id_stability.without_ids(frame.depth)
+        self._progress.warning(
+            f"{task.input}: object ids changed on {100 * changed:.0f}% of the surfaces seen at "
+            "the same depth and normal as in the frame before (ids renumbered from frame to "
+            "frame, as Mitsuba's shape_index): ids ignored from this frame on")
+
+
 class FrameFilter(Generic[F]):
     """The filter of one pass (``filter``), and the checks a frame passes before it is
     filtered.
@@ -84,6 +118,7 @@ class FrameFilter(Generic[F]):
         self._on_first_frame = on_first_frame
         self.size: tuple[int, int] | None = None  # (width, height) of the first frame
         self._size_source: Path | None = None
+        self._ids = IdCheck(progress)
 
     def admit(self, task: FrameTask, result: ReadResult) -> None:
         """Report the read's warnings and check the frame's resolution."""
@@ -99,6 +134,7 @@ class FrameFilter(Generic[F]):
                 f"to {frame_size[0]}x{frame_size[1]}",
                 str(task.input),
             )
+        self._ids.admit(task, result.frame)
 
     def _first_frame(self, task: FrameTask, result: ReadResult, frame_size: tuple[int, int]
                      ) -> None:
