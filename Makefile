@@ -11,7 +11,7 @@ PYTHON_BLENDER ?= python3.11
 BLENDER_VENV   := .venv-blender
 BLENDER_STAMP  := $(BLENDER_VENV)/.installed
 
-.PHONY: venv demo test lint bench results clean cycles-fixtures lag-fixtures mutation mutation-report
+.PHONY: venv demo test lint bench results clean cycles-fixtures mitsuba-fixtures lag-fixtures mutation mutation-report
 
 venv: $(STAMP)
 
@@ -76,6 +76,19 @@ $(BLENDER_STAMP):
 # Re-renders testdata/cycles (about 20 minutes on two cores); see testdata/cycles/README.md.
 cycles-fixtures: $(BLENDER_STAMP)
 	nice -n 10 $(BLENDER_VENV)/bin/python testdata/cycles/render.py
+
+# Mitsuba 3 (CPU, scalar_rgb) next to this project, for `make mitsuba-fixtures` only (CI never
+# runs it): re-renders testdata/mitsuba/seq (about 4 minutes on two cores).
+MITSUBA_VENV  := .venv-mitsuba
+MITSUBA_STAMP := $(MITSUBA_VENV)/.installed
+
+$(MITSUBA_STAMP): pyproject.toml
+	test -x $(MITSUBA_VENV)/bin/python || $(PYTHON) -m venv $(MITSUBA_VENV)
+	$(MITSUBA_VENV)/bin/python -m pip install -q "mitsuba==3.9.*" -e .
+	touch $(MITSUBA_STAMP)
+
+mitsuba-fixtures: $(MITSUBA_STAMP)
+	nice -n 10 $(MITSUBA_VENV)/bin/python testdata/mitsuba/render.py
 
 # Regenerates testdata/lag/ (scenes, animations, 5 x 16 frames + references; nice'd,
 # about 15 CPU-minutes). See testdata/lag/README.md.

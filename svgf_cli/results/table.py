@@ -207,6 +207,14 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         _STATIC | {"camera-motion"},
     ),
     SequenceSpec(
+        "testdata/mitsuba/seq",
+        "Mitsuba 3.9: testdata/seq's animation rendered by Mitsuba itself (path integrator "
+        "with its defaults, independent sampler, box pixel filter, 1 spp; colour, albedo, "
+        "normal and depth from one jittered sample, emission from a second render of the "
+        "same samples; svgf trace's motion; 4096-spp references).",
+        _STATIC | {"camera-motion", "moving-objects"},
+    ),
+    SequenceSpec(
         "testdata/lag/glossy",
         "Glossy floor (roughness 0.25), gold sphere and steel block (metal); the light slides "
         "and the camera moves; lobe passes written.",
