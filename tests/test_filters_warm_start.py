@@ -10,7 +10,7 @@ from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import resolve_params
 from svgf_cli.filters.taa import taa_resolve
 from svgf_cli.filters.two_pass import denoise_bidirectional
-from svgf_cli.filters.warm_start import denoise_warm_start
+from svgf_cli.filters.warm_start import denoise_warm_start, lookahead_params
 
 PARAMS = resolve_params("default")
 
@@ -58,17 +58,23 @@ def test_no_warm_frames_is_the_causal_run_and_short_shots_are_looked_ahead_whole
 
 
 def test_taa_anti_aliases_the_warm_colours_and_carries_on_from_them() -> None:
-    """With TAA (forced; the default gives it jittered frames) the warm colours go through
-    the causal run's TAA: the first as it is (no history yet), the next blended with it at
-    the outlines (the kernel's blend of the two warm colours), nowhere else."""
+    """With TAA (forced; the default gives it jittered frames) the look-ahead anti-aliases
+    the warm colours backwards in time, and they go through the causal run's TAA: the first
+    as it is (no history yet), the next blended with it at the outlines (the kernel's blend
+    of the two warm colours), nowhere else."""
     import reference_svgf as ref
 
     # (No noisy outlines' exchanges after TAA: they would carry its change a pixel on.)
     params = PARAMS.replace(taa=True, noisy_outline_weight=0.0)
     frames = scene_sequence(6)
     got = [o.color for o in denoise_warm_start(frames, params, warm=3, lookahead=6)]
-    warm = [o.color for o in denoise_bidirectional(frames, params.replace(taa=False))[:3]]
+    warm = [o.color for o in denoise_bidirectional(frames, lookahead_params(params))[:3]]
     np.testing.assert_array_equal(got[0], warm[0])
+    # The look-ahead's own TAA, backwards: the first warm colour anti-aliased at its outlines.
+    plain_warm = denoise_bidirectional(frames, params.replace(taa=False))[0].color
+    first_outline = ref.taa_outline(frames[0].depth)
+    assert np.any(warm[0] != plain_warm)
+    np.testing.assert_array_equal(warm[0][:, ~first_outline], plain_warm[:, ~first_outline])
     frame = frames[1]
     want = np.empty_like(warm[1])
     taa_resolve(warm[1], warm[0], frame.motion, frame.depth,

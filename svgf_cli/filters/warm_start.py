@@ -34,9 +34,12 @@ LOOKAHEAD_FRAMES = 8
 
 
 def lookahead_params(params: SVGFParams) -> SVGFParams:
-    """The look-ahead's bidirectional run's settings: the causal run's TAA anti-aliases the
-    warm colours (``filters.stages.taa``), so the look-ahead gives them none (not twice)."""
-    return params.replace(bidirectional=True, taa=False, taa_jittered=False)
+    """The look-ahead's bidirectional run's settings: the causal run's, bidirectional. Its
+    TAA (where the causal run has one) anti-aliases the warm colours backwards in time, so
+    the first frame, which the causal TAA only takes as its history, is anti-aliased too;
+    the causal TAA then blends the next warm colours with it
+    (docs/stability.md#the-first-frame-anti-aliased)."""
+    return params.replace(bidirectional=True)
 
 
 def denoise_warm_start(
