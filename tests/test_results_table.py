@@ -60,3 +60,14 @@ def test_unknown_options_are_found_in_the_help_text() -> None:
     # A prefix of a known option is not that option.
     assert unknown_options(["--pre"], help_text) == ["--pre"]
     assert unknown_options(["--temporal=1"], help_text) == []
+
+
+def test_a_method_skips_the_sequences_it_cannot_run_on() -> None:
+    """The direct/indirect signal set needs light passes: a colour-only sequence (Mitsuba's
+    one-sample frames) is not given it; every other method still applies there."""
+    mitsuba = next(s for s in SEQUENCES if s.name == "mitsuba-seq")
+    assert mitsuba.has("colour-only")
+    skipped = [m.name for m in METHODS if not m.applies_to(mitsuba) and m.needs is None]
+    assert skipped == ["svgf-direct-indirect"]
+    seq = next(s for s in SEQUENCES if s.name == "seq")
+    assert next(m for m in METHODS if m.name == "svgf-direct-indirect").applies_to(seq)

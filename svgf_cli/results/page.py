@@ -367,6 +367,7 @@ def methods_table(
             status = f"{problems[method.name].status} on some sequence (see below)"
         else:
             status = "ran" + (f" (sequences tagged `{method.needs}`)" if method.needs else "")
+            status += f" (not on sequences tagged `{method.unless}`)" if method.unless else ""
         lines.append(f"| `{method.name}` | `{method.command}` | {method.about} | {status} |")
     lines.append("| `input` | the noisy 1-spp input itself | raw radiance | ran |")
     return "\n".join(lines)

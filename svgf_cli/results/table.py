@@ -85,9 +85,11 @@ class MethodSpec:
     baseline: str | None = None
     needs: str | None = None  # a sequence tag the method needs (e.g. "lobes")
     contact: bool = False  # a column of the contact sheets
+    unless: str | None = None  # a sequence tag the method cannot run on (e.g. "colour-only")
 
     def applies_to(self, sequence: SequenceSpec) -> bool:
-        return self.needs is None or sequence.has(self.needs)
+        return ((self.needs is None or sequence.has(self.needs))
+                and (self.unless is None or not sequence.has(self.unless)))
 
     @property
     def command(self) -> str:
@@ -97,10 +99,12 @@ class MethodSpec:
 
 
 def denoised(
-    name: str, options: str, about: str, *, needs: str | None = None, contact: bool = True
+    name: str, options: str, about: str, *, needs: str | None = None, contact: bool = True,
+    unless: str | None = None,
 ) -> MethodSpec:
     """A method made by ``svgf denoise OPTIONS`` (added to the sequence's own options)."""
-    return MethodSpec(name, about, tuple(shlex.split(options)), needs=needs, contact=contact)
+    return MethodSpec(name, about, tuple(shlex.split(options)), needs=needs, contact=contact,
+                      unless=unless)
 
 
 def baseline(
@@ -128,6 +132,7 @@ METHODS: tuple[MethodSpec, ...] = (
         "--signals direct-indirect",
         "two signals, direct and indirect light",
         contact=False,
+        unless="colour-only",
     ),
     denoised(COMBINED, "--signals combined", "one signal: the combined colour", contact=False),
     denoised(BIDIRECTIONAL, "--bidirectional", "forward and time-reversed passes combined"),
@@ -212,7 +217,7 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         "with its defaults, independent sampler, box pixel filter, 1 spp; colour, albedo, "
         "normal and depth from one jittered sample, emission from a second render of the "
         "same samples; svgf trace's motion; 4096-spp references).",
-        _STATIC | {"camera-motion", "moving-objects"},
+        _STATIC | {"camera-motion", "moving-objects", "colour-only"},
     ),
     SequenceSpec(
         "testdata/lag/glossy",
