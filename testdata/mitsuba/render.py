@@ -1,6 +1,8 @@
-"""Render `seq`'s animated Cornell box with Mitsuba 3: one-sample frames as Mitsuba writes them.
+"""Render svgf's Cornell box animations with Mitsuba 3: one-sample frames as Mitsuba writes them.
 
-Run with `make mitsuba-fixtures` (a virtualenv with `mitsuba` 3.9 and this project). Each
+Run with `make mitsuba-fixtures` (a virtualenv with `mitsuba` 3.9 and this project):
+`--scene seq` (`testdata/seq`'s animation) and the `lag` sequences' (`--scene lag/shadow`,
+...). Each
 frame is three Mitsuba renders of the same scene, CPU variant `scalar_rgb`, `path`
 integrator with its defaults (no depth limit, Russian roulette), `independent` sampler,
 `hdrfilm` with a box pixel filter (`--pixel-filter`, Mitsuba's default is a Gaussian whose
@@ -36,15 +38,21 @@ from svgf_cli.io.exr import write_exr  # noqa: E402
 from svgf_trace.animation import load_animation  # noqa: E402
 from svgf_trace.scene import Scene, load_obj  # noqa: E402
 
-SCENE = ROOT / "testdata" / "cornell_checker.obj"
-ANIMATION = ROOT / "testdata" / "anim.json"
 WIDTH, HEIGHT = 128, 72
+# name -> (scene, animation, frames): seq's animation and the lag sequences' (testdata/lag).
+SCENES = {
+    "seq": (ROOT / "testdata" / "cornell_checker.obj", ROOT / "testdata" / "anim.json", "1-10"),
+    **{f"lag/{name}": (ROOT / "testdata" / "lag" / "cornell_lag.obj",
+                       ROOT / "testdata" / "lag" / name / "anim.json", "1-16")
+       for name in ("shadow", "light_slide_dim", "light_step", "camera")},
+}
 
 
 def _args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=ROOT / "testdata" / "mitsuba" / "seq")
-    parser.add_argument("--frames", default="1-10", help="first-last")
+    parser.add_argument("--scene", default="seq", choices=sorted(SCENES))
+    parser.add_argument("--out", type=Path, help="default: testdata/mitsuba/SCENE")
+    parser.add_argument("--frames", help="first-last (default: the scene's)")
     parser.add_argument("--ref-spp", type=int, default=4096)
     parser.add_argument("--seed", type=int, default=0, help="added to each frame's seeds")
     parser.add_argument("--pixel-filter", default="box", choices=["box", "gaussian"])
@@ -85,7 +93,8 @@ def _shapes(mi: object, scene: Scene, animation: object, frame: int, folder: Pat
         shape = {"type": "ply", "filename": str(ply), "face_normals": True,
                  "bsdf": {"type": "diffuse", "reflectance": reflectance}}
         if material.emissive:
-            radiance = [float(v) for v in material.ke]
+            scaled = material.ke * animation.emission_scale(obj.name, frame)
+            radiance = [float(v) for v in scaled]
             shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": radiance}}
         shapes[obj.name] = shape
     return shapes
@@ -108,14 +117,15 @@ def _render(mi: object, shapes: dict, camera: object, integrator: dict, spp: int
     return np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float32)
 
 
-def _motion(frames: tuple[int, int], folder: Path) -> dict[int, np.ndarray]:
+def _motion(scene: Path, animation: Path, frames: tuple[int, int], folder: Path
+            ) -> dict[int, np.ndarray]:
     """`svgf trace`'s motion of the animation at pixel centres: frame -> (2, H, W)."""
     import OpenImageIO as oiio
 
     pattern = folder / "trace.####.exr"
-    subprocess.run([sys.executable, "-m", "svgf_cli", "trace", str(SCENE), "-o", str(pattern),
+    subprocess.run([sys.executable, "-m", "svgf_cli", "trace", str(scene), "-o", str(pattern),
                     "--frames", f"{frames[0]}-{frames[1]}", "--resolution", f"{WIDTH}x{HEIGHT}",
-                    "--spp", "1", "--max-depth", "1", "--animation", str(ANIMATION), "--quiet"],
+                    "--spp", "1", "--max-depth", "1", "--animation", str(animation), "--quiet"],
                    check=True)
     motion = {}
     for frame in range(frames[0], frames[1] + 1):
@@ -148,15 +158,17 @@ def main() -> None:
 
     mi.set_variant("scalar_rgb")
     args = _args()
-    first, last = (int(v) for v in args.frames.split("-"))
-    scene = load_obj(SCENE)
-    animation = load_animation(ANIMATION, [o.name for o in scene.objects])
+    scene_path, animation_path, frames = SCENES[args.scene]
+    out = args.out or ROOT / "testdata" / "mitsuba" / args.scene
+    first, last = (int(v) for v in (args.frames or frames).split("-"))
+    scene = load_obj(scene_path)
+    animation = load_animation(animation_path, [o.name for o in scene.objects])
     aov = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal,pp:position",
            "integrator": {"type": "path"}}
-    args.out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     attributes = {"generatedBy": f"Mitsuba {mi.__version__} (testdata/mitsuba/render.py)"}
     with tempfile.TemporaryDirectory() as tmp:
-        motion = _motion((first, last), Path(tmp))
+        motion = _motion(scene_path, animation_path, (first, last), Path(tmp))
         for frame in range(first, last + 1):
             camera = animation.camera(frame, WIDTH, HEIGHT)
             shapes = _shapes(mi, scene, animation, frame, Path(tmp))
@@ -164,13 +176,13 @@ def main() -> None:
             noisy = _render(mi, shapes, camera, aov, 1, seed, args.pixel_filter)
             emitted = _render(mi, shapes, camera, {"type": "path", "max_depth": 1}, 1, seed,
                               args.pixel_filter)
-            write_exr(args.out / f"in.{frame:04d}.exr",
+            write_exr(out / f"in.{frame:04d}.exr",
                       _input_channels(noisy, emitted, camera, motion[frame]),
                       attributes=attributes)
             if args.ref_spp:
                 ref = _render(mi, shapes, camera, {"type": "path"}, args.ref_spp,
                               seed + 50000, args.pixel_filter)
-                write_exr(args.out / f"ref.{frame:04d}.exr",
+                write_exr(out / f"ref.{frame:04d}.exr",
                           {c: ref[..., i] for i, c in enumerate("RGB")},
                           attributes=attributes, half=True)
             print(f"frame {frame} done", flush=True)
