@@ -220,6 +220,21 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         _STATIC | {"camera-motion", "moving-objects", "colour-only"},
     ),
     SequenceSpec(
+        "testdata/mitsuba/lag/shadow",
+        "Mitsuba 3.9: lag/shadow's animation (a sphere rolling over the floor, its shadow "
+        "moving; static camera and light) rendered as testdata/mitsuba/seq (16 frames).",
+        frozenset({"lag", "moving-objects", "colour-only"}),
+        contact_frames=(5,),
+    ),
+    SequenceSpec(
+        "testdata/mitsuba/lag/light_slide_dim",
+        "Mitsuba 3.9: lag/light_slide_dim's animation (the ceiling light slides right to left "
+        "and dims to 45% at frame 10; static camera) rendered as testdata/mitsuba/seq.",
+        frozenset({"lag", "colour-only"}),
+        events=(Event(10, "light dims to 45%"),),
+        contact_frames=(10,),
+    ),
+    SequenceSpec(
         "testdata/lag/glossy",
         "Glossy floor (roughness 0.25), gold sphere and steel block (metal); the light slides "
         "and the camera moves; lobe passes written.",
