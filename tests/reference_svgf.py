@@ -1098,6 +1098,39 @@ def _catmull_rom(t: float) -> np.ndarray:
                      t * (0.5 + t * (2 - 1.5 * t)), t * t * (-0.5 + t / 2)])
 
 
+def emission_mean(emission: np.ndarray, motion: np.ndarray, state: dict | None,
+                  alpha: float, cap: float, still_motion: float = 0.01,
+                  level_change: float = 0.01) -> tuple[np.ndarray, dict]:
+    """filters.emission_mean in float64 numpy, functional: (this frame's emitted mean,
+    the state to pass on); ``state`` None is the first frame."""
+    e = emission.astype(np.float64)
+    speed = np.hypot(motion[0].astype(np.float64), motion[1].astype(np.float64))
+    pad = ((1, 1), (1, 1))
+
+    def around(plane: np.ndarray, how: str) -> np.ndarray:
+        fill = -np.inf if how == "max" else np.inf
+        padded = np.pad(plane, pad, constant_values=fill)
+        h, w = plane.shape
+        windows = [padded[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)]
+        return np.max(windows, axis=0) if how == "max" else np.min(windows, axis=0)
+
+    still_now = around(speed, "max") <= still_motion
+    level_now = around(e.max(axis=0), "max")
+    if state is None:
+        mean, length = e.copy(), np.ones(speed.shape)
+    else:
+        steady = np.abs(level_now - state["level"]) <= level_change * np.maximum(
+            level_now, state["level"])
+        keep = still_now & state["still"] & steady
+        low = np.stack([around(c, "min") for c in e])
+        high = np.stack([around(c, "max") for c in e])
+        h = np.clip(state["mean"], low, high)
+        length = np.where(keep, np.minimum(state["length"] + 1, cap), 1.0)
+        weight = np.maximum(1.0 / length, alpha)
+        mean = np.where(keep[None], h + weight[None] * (e - h), e)
+    return mean, {"mean": mean, "length": length, "still": still_now, "level": level_now}
+
+
 def taa_resolve(current: np.ndarray, previous: np.ndarray, motion: np.ndarray,
                 depth: np.ndarray, weights: tuple[float, float, float],
                 alpha: float) -> np.ndarray:

@@ -422,12 +422,35 @@ def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[Light
 def emission_kept(light: LightLayers, emission: np.ndarray | None) -> np.ndarray:
     """The emission passes' light as added back, (E, 3, H, W): Emit and Env are noise-free,
     so their own values are the shares; where the filter took the emission into a signal it
-    is 0 in ``emission`` (the medium's split fills it: :func:`medium_emission`)."""
+    is 0 in ``emission`` (the medium's split fills it: :func:`medium_emission`). Where the
+    filter changed it (a still light's outline: its mean over frames,
+    ``filters.emission_mean``) each pass takes its share of the new value: its own share
+    there, else its share of the 7x7 around (:func:`emission_shares`)."""
     kept = np.zeros((len(light.emission), *light.emission[0].radiance.shape)
                     if light.emission else (0,), dtype=F32)
     for own, layer in zip(kept, light.emission, strict=True):
         np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
+    if emission is not None and len(kept):
+        total = kept.sum(axis=0, dtype=F32)
+        changed = (emission != 0.0) & (np.abs(emission - total) > 1e-5 * np.maximum(
+            np.abs(emission), np.abs(total)))
+        if changed.any():
+            shares = emission_shares([layer.radiance for layer in light.emission])
+            kept[:, changed] = shares[:, changed] * emission[changed]
     return kept
+
+
+def emission_shares(passes: list[np.ndarray]) -> np.ndarray:
+    """Each emission pass's share of their sum, (E, 3, H, W): its own where they hold light,
+    else over the 7x7 around (``box_filter``), else equal parts."""
+    raw = np.stack(passes).astype(F32)
+    total = raw.sum(axis=0)
+    around = np.stack([box_filter(plane) for plane in raw])
+    around_total = around.sum(axis=0)
+    equal = np.full_like(raw, 1.0 / len(passes))
+    own = np.divide(raw, total, out=equal.copy(), where=total > SHARE_FLOOR)
+    near = np.divide(around, around_total, out=equal, where=around_total > SHARE_FLOOR)
+    return np.where(total > SHARE_FLOOR, own, near).astype(F32)
 
 
 def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,

@@ -142,6 +142,9 @@ class FrameContext:
     # The noisy outlines' exchanges the edge filter made (filters.edge_filter.OutlineSpill),
     # for the light layers to make the same; None: none.
     outline_spill: Any = None
+    # Whether the frame's samples are jittered (filters.stages.taa.frame_is_jittered); None:
+    # not worked out yet.
+    jittered: bool | None = None
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
     temporal: TemporalState | None = None
     reprojected: bool = False  # there was a history to reproject

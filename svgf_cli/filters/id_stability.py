@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from svgf_cli.filters.fastmath import FASTMATH
+
 # The test looks at every ROW_STEP-th row: a share, not a map, is wanted.
 ROW_STEP = 4
 # "The same surface at the same pixel": view depth within 1 %, normals within ~8 degrees.
@@ -31,7 +33,8 @@ MIN_COMPARED_SHARE = 0.1
 UNSTABLE_SHARE = 0.1
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
 def _count_rows(prev_id, prev_depth, prev_normal, mesh_id, depth, normal, max_change,
                 min_dot):  # noqa: ANN001, ANN202
     rows = prev_id.shape[0]

@@ -370,15 +370,17 @@ class SVGFParams:
         " docs/algorithm.md#noisy-outlines-defocus).",
         group="output", valid=Range(0, 0.25, shown="0..1/4", noun="a weight"),
     )
-    taa: bool = _p(False, "Temporal anti-aliasing of the output at object outlines (the"
-                   " paper's last step): the previous output, Catmull-Rom resampled and clipped"
-                   " to the current 3x3, blended in where a jittered sample flips between two"
-                   " surfaces.", group="output")
+    taa: bool = _p(False, "Temporal anti-aliasing of the output at object outlines (the paper's"
+                   " last step): the previous output, resampled and clipped to the current 3x3,"
+                   " blended in where a jittered sample flips surfaces.", group="output")
     taa_jittered: bool = _p(False, "taa on the frames whose G-buffer shows jittered samples (a"
                             " plane's depth off the line of pixel centres) unless the header"
                             " says centre-sampled.", group="output")
     taa_alpha: float = _p(0.5, "The current output's share in the TAA blend.", group="output",
                           valid=Range(0, 1, low_open=True))
+    still_emission_mean: bool = _p(False, "On jittered frames, the emission added back is its"
+                                   " mean over frames where nothing moves: a still light's"
+                                   " outline shows its coverage.", group="output")
 
     def to_json(self) -> str:
         """Stable JSON of every field (sorted keys), stored in output metadata."""
@@ -465,6 +467,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("taa_jittered", True, "a jittered frame's outline pixel shows one surface"
                   " or the other from frame to frame, the reference their mix: outlines crawl"
                   " and flicker: docs/stability.md#jittered-outlines"),
+        Departure("still_emission_mean", True, "a jittered light's outline flips between its"
+                  " radiance and nothing from frame to frame, the reference its coverage:"
+                  " docs/stability.md#a-still-lights-outline"),
         Departure("taa_alpha", 0.65, "TAA's history lags a moving shadow or light by a frame"
                   " more at 0.5: docs/stability.md#jittered-outlines"),
         Departure("edge_filter", AUTO_PIXEL_FILTER, "frames sampled at pixel centres show"

@@ -24,6 +24,7 @@ from svgf_cli.filters.stages.demodulate import Demodulate
 from svgf_cli.filters.stages.despike import Despike
 from svgf_cli.filters.stages.despike_lone import DespikeLone
 from svgf_cli.filters.stages.edge_filter import EdgeFilter
+from svgf_cli.filters.stages.emission_mean import EmissionMean
 from svgf_cli.filters.stages.fill_medium import FillMedium
 from svgf_cli.filters.stages.firefly_clamp import FireflyClamp
 from svgf_cli.filters.stages.gradients import Gradients
@@ -78,6 +79,7 @@ def causal() -> list[Stage]:
         Variance(),
         Atrous(),  # its feedback_iteration output is the colour history
         StoreHistory(),
+        EmissionMean(),  # still_emission_mean
         *composition(),
         TAA(),  # taa
         PixelFilter(),  # pixel_filter
@@ -108,6 +110,7 @@ def reverse() -> list[Stage]:
         output_frame(Variance("combination")),
         output_frame(Atrous()),
         StoreHistory(),
+        EmissionMean(),  # still_emission_mean: backwards in time, warm-up frames too
         *(output_frame(stage) for stage in composition()),
         output_frame(TAA()),  # taa, taa_jittered: backwards in time
         output_frame(PixelFilter()),  # pixel_filter

@@ -38,6 +38,8 @@ class Resident:
     history: dict[str, np.ndarray] | None = None
     fresh: dict[str, np.ndarray] | None = None
     taa_previous: np.ndarray | None = None
+    # A still light's emission means (filters.emission_mean): mean, length, still, level.
+    emission_mean: dict[str, np.ndarray] | None = None
     albedo: tuple[np.ndarray, np.ndarray] | None = None
     albedo_slots: tuple[int, ...] = ()
     forward_albedo: tuple[np.ndarray, np.ndarray] | None = None
@@ -47,6 +49,7 @@ class Resident:
         """Drop all history: the next frame is processed cold."""
         self.history = None
         self.taa_previous = None
+        self.emission_mean = None
         self.albedo = None
         self.albedo_slots = ()
         self.signal_names = None
@@ -62,6 +65,7 @@ class Resident:
             arrays += list(pair) if pair is not None else []
         if self.taa_previous is not None:
             arrays.append(self.taa_previous)
+        arrays += list(self.emission_mean.values()) if self.emission_mean is not None else []
         return sum({id(array): array.nbytes for array in arrays}.values())
 
     def resolution(self) -> tuple[int, int] | None:
@@ -131,6 +135,8 @@ class Resident:
                 state[key] = self.history[key].copy()
         if self.taa_previous is not None:
             state["taa_previous"] = self.taa_previous.copy()
+        for key, plane in (self.emission_mean or {}).items():
+            state[f"emission_mean_{key}"] = plane.copy()
         if self.albedo is not None:
             state["albedo_history"] = self.albedo[0].copy()
             state["albedo_length"] = self.albedo[1].copy()
@@ -163,6 +169,7 @@ class Resident:
         albedo, slots = _albedo_state(state, history)
         self.history = history
         self.taa_previous = taa_previous
+        self.emission_mean = _emission_mean_state(state, history)
         self.albedo, self.albedo_slots = albedo, slots
         self.signal_names = names
         self.frames_processed = frames
@@ -224,3 +231,24 @@ def _encode(text: str) -> np.ndarray:
 
 def _decode(array: np.ndarray) -> str:
     return np.asarray(array, dtype=np.uint8).tobytes().decode("utf-8")
+
+
+_EMISSION_MEAN = {"mean": F32, "length": F32, "still": np.uint8, "level": F32}
+
+
+def _emission_mean_state(state: dict[str, np.ndarray], history: dict[str, np.ndarray] | None
+                         ) -> dict[str, np.ndarray] | None:
+    """The emission means of a saved state (None: it has none), checked."""
+    keys = [k for k in _EMISSION_MEAN if f"emission_mean_{k}" in state]
+    if not keys:
+        return None
+    if len(keys) != len(_EMISSION_MEAN):
+        raise ValueError("denoiser state has part of the emission means")
+    planes = {k: np.array(state[f"emission_mean_{k}"], dtype=t, copy=True, order="C")
+              for k, t in _EMISSION_MEAN.items()}
+    shape = planes["length"].shape
+    if (planes["mean"].shape != (3, *shape)
+            or any(planes[k].shape != shape for k in ("still", "level"))
+            or (history is not None and shape != history["prev_depth"].shape)):
+        raise ValueError("denoiser state emission means do not match the history shape")
+    return planes

@@ -138,6 +138,7 @@ MODULE_TESTS: dict[str, tuple[str, ...]] = {
     "svgf_cli/filters/shares.py": ("tests/test_light_layers.py",),
     "svgf_cli/filters/jitter.py": ("tests/test_filters_jitter.py",),
     "svgf_cli/filters/id_stability.py": ("tests/test_filters_id_stability.py",),
+    "svgf_cli/filters/emission_mean.py": ("tests/test_filters_emission_mean.py",),
     "svgf_cli/run/light.py": ("tests/test_light_layers.py",),
 }
 # The file driver (svgf_cli/run/, every module): its tests, fastest first.

@@ -36,8 +36,7 @@ class TAA(StageBase):
 
     def run(self, ctx: FrameContext) -> bool:
         frame, resident = ctx.frame, ctx.resident
-        if not (ctx.params.taa or jittered_frame(frame.centre_sampled, ctx.depth,
-                                                 ctx.normal_in, frame.mesh_id)):
+        if not (ctx.params.taa or frame_is_jittered(ctx)):
             resident.taa_previous = None
             return False
         current = ctx.output if frame.final_colour is None else frame.final_colour
@@ -55,3 +54,13 @@ class TAA(StageBase):
             ctx.frame = dataclasses.replace(frame,
                                             final_colour=resident.taa_previous.copy())
         return True
+
+
+def frame_is_jittered(ctx: FrameContext) -> bool:
+    """``filters.jitter.jittered_frame`` of the frame in flight, worked out once per frame
+    (the TAA and the emission mean both ask)."""
+    if ctx.jittered is None:
+        frame = ctx.frame
+        ctx.jittered = jittered_frame(frame.centre_sampled, ctx.depth, ctx.normal_in,
+                                      frame.mesh_id)
+    return ctx.jittered
