@@ -78,7 +78,7 @@ cycles-fixtures: $(BLENDER_STAMP)
 	nice -n 10 $(BLENDER_VENV)/bin/python testdata/cycles/render.py
 
 # Mitsuba 3 (CPU, scalar_rgb) next to this project, for `make mitsuba-fixtures` only (CI never
-# runs it): re-renders testdata/mitsuba (about 18 minutes on two cores).
+# runs it): re-renders testdata/mitsuba (about 25 minutes on two cores).
 MITSUBA_VENV  := .venv-mitsuba
 MITSUBA_STAMP := $(MITSUBA_VENV)/.installed
 
@@ -88,7 +88,7 @@ $(MITSUBA_STAMP): pyproject.toml
 	touch $(MITSUBA_STAMP)
 
 mitsuba-fixtures: $(MITSUBA_STAMP)
-	for scene in seq lag/shadow lag/light_slide_dim; do \
+	for scene in seq lag/shadow lag/light_slide_dim lag/light_step; do \
 		nice -n 10 $(MITSUBA_VENV)/bin/python testdata/mitsuba/render.py --scene $$scene || exit 1; \
 	done
 

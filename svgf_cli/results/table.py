@@ -235,6 +235,15 @@ SEQUENCES: tuple[SequenceSpec, ...] = (
         contact_frames=(10,),
     ),
     SequenceSpec(
+        "testdata/mitsuba/lag/light_step",
+        "Mitsuba 3.9: lag/light_step's animation (the light drops to 30% on frames 6-10, "
+        "back to 100% from frame 11; static camera and scene) rendered as "
+        "testdata/mitsuba/seq.",
+        frozenset({"lag", "colour-only"}),
+        events=(Event(6, "light to 30%"), Event(11, "light back to 100%")),
+        contact_frames=(6,),
+    ),
+    SequenceSpec(
         "testdata/lag/glossy",
         "Glossy floor (roughness 0.25), gold sphere and steel block (metal); the light slides "
         "and the camera moves; lobe passes written.",
