@@ -323,6 +323,9 @@ class DenoisedFrame:
     emission: np.ndarray | None = None
     # (H, W) bool: the pixels whose G-buffer was a medium's (filters.stages.fill_medium).
     medium: np.ndarray | None = None
+    # (H, W) bool: the pixels whose emission added back is a still light's mean over frames,
+    # not the frame's (filters.stages.emission_mean); None: none.
+    emission_averaged: np.ndarray | None = None
     # The frame's G-buffer as the filter used it, in a frame without signals (None unless
     # the filter was asked for it: `filters.denoiser.Denoiser.gbuffer_output`).
     gbuffer: Frame | None = None

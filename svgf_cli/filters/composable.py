@@ -419,24 +419,21 @@ def medium_emission(filtered: np.ndarray, pixels: np.ndarray, passes: list[Light
                     taken / len(emitters)).astype(F32)
 
 
-def emission_kept(light: LightLayers, emission: np.ndarray | None) -> np.ndarray:
+def emission_kept(light: LightLayers, emission: np.ndarray | None,
+                  averaged: np.ndarray | None = None) -> np.ndarray:
     """The emission passes' light as added back, (E, 3, H, W): Emit and Env are noise-free,
     so their own values are the shares; where the filter took the emission into a signal it
-    is 0 in ``emission`` (the medium's split fills it: :func:`medium_emission`). Where the
-    filter changed it (a still light's outline: its mean over frames,
-    ``filters.emission_mean``) each pass takes its share of the new value: its own share
+    is 0 in ``emission`` (the medium's split fills it: :func:`medium_emission`). On the
+    ``averaged`` pixels (a still light's outline: its mean over frames,
+    ``filters.stages.emission_mean``) each pass takes its share of the mean: its own share
     there, else its share of the 7x7 around (:func:`emission_shares`)."""
     kept = np.zeros((len(light.emission), *light.emission[0].radiance.shape)
                     if light.emission else (0,), dtype=F32)
     for own, layer in zip(kept, light.emission, strict=True):
         np.copyto(own, layer.radiance, where=True if emission is None else emission != 0.0)
-    if emission is not None and len(kept):
-        total = kept.sum(axis=0, dtype=F32)
-        changed = (emission != 0.0) & (np.abs(emission - total) > 1e-5 * np.maximum(
-            np.abs(emission), np.abs(total)))
-        if changed.any():
-            shares = emission_shares([layer.radiance for layer in light.emission])
-            kept[:, changed] = shares[:, changed] * emission[changed]
+    if emission is not None and averaged is not None and len(kept):
+        shares = emission_shares([layer.radiance for layer in light.emission])
+        kept[:, :, averaged] = shares[:, :, averaged] * emission[:, averaged]
     return kept
 
 
@@ -469,7 +466,7 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     weight; 0: none), applied to the colour passes written anew
     (:func:`covered_pixel_filter`)."""
     if kept is None:
-        kept = emission_kept(light, emission)
+        kept = emission_kept(light, emission, denoised.emission_averaged)
     if (light.emission and denoised.medium is not None and emission is not None
             and medium_signal in outputs and denoised.medium.any()):
         assert medium_signal is not None
@@ -679,7 +676,8 @@ class LayeredDenoiser:
             # outputs (fresh per frame, written only as debug layers), the emission kept.
             outputs = {name: spill.apply(plane, None if self.debug_layers else plane)
                        for name, plane in outputs.items()}
-            kept = emission_kept(light, emission) if light.emission else None
+            kept = (emission_kept(light, emission, denoised.emission_averaged)
+                    if light.emission else None)
             for own in kept if kept is not None else ():
                 spill.apply(own, own)
             emission = None if emission is None else spill.apply(emission)

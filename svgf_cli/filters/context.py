@@ -145,6 +145,8 @@ class FrameContext:
     # Whether the frame's samples are jittered (filters.stages.taa.frame_is_jittered); None:
     # not worked out yet.
     jittered: bool | None = None
+    # The pixels whose emission is a still light's mean (filters.stages.emission_mean).
+    emission_averaged: np.ndarray | None = None
     illumination_name: str = "demodulated"  # the demodulated (+ clamped) frame
     temporal: TemporalState | None = None
     reprojected: bool = False  # there was a history to reproject

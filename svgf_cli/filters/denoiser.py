@@ -75,6 +75,7 @@ class Denoiser(PipelineFilter):
         colour = ctx.output if final is None else final
         return DenoisedFrame(color=colour, layers=ctx.layers, counts=ctx.counts,
                              emission=ctx.frame.emission, medium=ctx.medium_pixels,
+                             emission_averaged=ctx.emission_averaged,
                              outline_spill=ctx.outline_spill,
                              gbuffer=_used_gbuffer(ctx) if self.gbuffer_output else None)
 

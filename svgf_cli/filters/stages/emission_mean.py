@@ -23,7 +23,7 @@ class EmissionMean(StageBase):
 
     name = "emission_mean"
     reads = ("frame.emission", "motion", "depth", "normal_in", "frame.mesh_id")
-    writes = ("frame.emission",)
+    writes = ("frame.emission", "emission_averaged")
     clock = "taa"
 
     def enabled(self, params: SVGFParams) -> bool:
@@ -46,5 +46,7 @@ class EmissionMean(StageBase):
         emission_mean(frame.emission, ctx.motion, planes["mean"], planes["length"],
                       planes["still"], planes["level"], F32(ctx.params.alpha),
                       F32(ctx.params.history_cap))
+        averaged = np.any(planes["mean"] != frame.emission, axis=0)
+        ctx.emission_averaged = averaged if averaged.any() else None
         ctx.frame = dataclasses.replace(frame, emission=planes["mean"].copy())
         return True
