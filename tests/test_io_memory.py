@@ -21,6 +21,7 @@ import pytest
 
 from svgf_cli.filters.composable import LayeredDenoiser
 from svgf_cli.filters.params import resolve_params
+from svgf_cli.io import zipchunks
 from svgf_cli.io.exr import read_frame
 from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.output import prepare_colour, write_output
@@ -73,8 +74,9 @@ def _run(out: Path, frames: range = FRAMES, read: Any = default_reader) -> None:
 def test_pass_through_channels_reach_the_writer_as_read(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Every channel the output passes through is handed to the OpenEXR writer as the very
-    array decoded (half stays half: no conversion, no copy), and is written bit for bit."""
+    """Every channel the output passes through is handed to the writer (the OpenEXR
+    library's, or `zipchunks` for this ZIP shot) as the very array decoded (half stays half:
+    no conversion, no copy), and is written bit for bit."""
     path = SHOT / "in.0002.exr"
     result = read_frame(path, build_mapping("cycles"))
     assert result.source is not None and result.colour_channels is not None
@@ -90,7 +92,13 @@ def test_pass_through_channels_reach_the_writer_as_read(
         handed[name] = pixels
         return real_channel(name, pixels, *args)
 
+    class RecordingChunkWriter(zipchunks.ChunkWriter):
+        def __init__(self, attributes: Any, planes: Any, p_linear: Any) -> None:
+            handed.update(planes)
+            super().__init__(attributes, planes, p_linear)
+
     monkeypatch.setattr(OpenEXR, "Channel", recording)
+    monkeypatch.setattr(zipchunks, "ChunkWriter", RecordingChunkWriter)
     write_output(tmp_path / "o.exr", result.source, part_index=part.index,
                  channels=dict(zip(names, colour, strict=True)), attributes={})
     passed = [n for n in stored if n not in names]

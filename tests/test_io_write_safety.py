@@ -23,7 +23,7 @@ import pytest
 from exr_fixtures import PartSpec, bits_equal, gbuffer, read_parts, write_parts
 
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.io import atomic
+from svgf_cli.io import atomic, zipchunks
 from svgf_cli.io.atomic import (
     STALE_AFTER_SECONDS,
     parse_temporary,
@@ -37,8 +37,9 @@ from svgf_cli.io.output import write_output
 from svgf_cli.run.history import load_history, save_history
 
 
+@pytest.mark.parametrize("codec", ["zip", "piz"])  # zipchunks' writer, the library's
 def test_output_is_the_renamed_temporary_never_written_in_place(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, codec: str
 ) -> None:
     source_path = write_parts(tmp_path / "in.0001.exr", [PartSpec(gbuffer())])
     source = read_frame(source_path, build_mapping()).source
@@ -58,10 +59,18 @@ def test_output_is_the_renamed_temporary_never_written_in_place(
         assert Path(dst).read_bytes() == b"previous frame"  # untouched until the rename
         return real_replace(src, dst)
 
+    real_chunks = zipchunks.ChunkWriter.write
+
+    def spy_chunks(self, fh, threads=0):  # so must the chunk writer (ZIP parts)
+        written.append(str(fh.name))
+        return real_chunks(self, fh, threads)
+
     monkeypatch.setattr(OpenEXR.File, "write", spy_write)
+    monkeypatch.setattr(zipchunks.ChunkWriter, "write", spy_chunks)
     monkeypatch.setattr(atomic.os, "replace", spy_replace)
     colour = {c: np.ones((8, 12), np.float32) for c in "RGB"}
-    write_output(target, source, part_index=0, channels=colour, attributes={})
+    write_output(target, source, part_index=0, channels=colour, attributes={},
+                 compression=codec)
     assert len(written) == 1 and Path(written[0]).name.startswith(".out.0001.exr.")
     assert Path(written[0]).parent == tmp_path and written[0] != str(target)
     # Renamed, not copied: the final file is the very inode the library wrote.

@@ -24,7 +24,7 @@ import OpenEXR
 
 from svgf_cli.errors import InputError
 from svgf_cli.halfconv import storable
-from svgf_cli.io import atomic
+from svgf_cli.io import atomic, zipchunks
 from svgf_cli.io.exr import (
     LOSSY_COMPRESSIONS,
     ExrWriteError,
@@ -34,7 +34,7 @@ from svgf_cli.io.exr import (
     is_colour_channel,
     output_error,
 )
-from svgf_cli.io.source import SourceFile, SourcePart, one_line
+from svgf_cli.io.source import SourceChannel, SourceFile, SourcePart, one_line
 
 HALF_MAX = float(np.finfo(np.float16).max)  # 65504
 
@@ -158,10 +158,13 @@ def write_output(
     those input channels (plus ``channels``). Returns notes about structure the writer
     could not keep (mip-map levels). Raises InputError for input channels that cannot be
     written back (subsampled), ExrWriteError (one line, real cause) when writing fails.
+
+    A single scanline part written with ZIP or ZIPS has its chunks encoded by `zipchunks`
+    (the same file, ~3x less CPU than the library's codec); everything else by the library.
     """
     path = Path(path)
     notes: list[str] = []
-    parts: list[Any] = []
+    parts: list[_PartOut] = []
     for part in source.parts:
         if keep_only is not None and part.index != part_index:
             continue
@@ -179,15 +182,23 @@ def write_output(
             )
         )
     check_output_path(path)
-    exr = OpenEXR.File(parts, num_threads=threads)
+    chunks = _chunk_writer(parts[0]) if len(parts) == 1 else None
+    if chunks is not None:
 
-    def write(tmp: Path) -> None:
-        try:
-            exr.write(str(tmp))
-        except OSError:
-            raise
-        except Exception as exc:  # the bindings raise RuntimeError/ValueError on failure
-            raise ExrWriteError(f"write failed: {_write_reason(exc, tmp)}", str(path)) from None
+        def write(tmp: Path) -> None:
+            with open(tmp, "xb") as fh:
+                chunks.write(fh, threads)
+    else:
+        exr = OpenEXR.File([p.library_part() for p in parts], num_threads=threads)
+
+        def write(tmp: Path) -> None:
+            try:
+                exr.write(str(tmp))
+            except OSError:
+                raise
+            except Exception as exc:  # the bindings raise RuntimeError/ValueError on failure
+                raise ExrWriteError(f"write failed: {_write_reason(exc, tmp)}",
+                                    str(path)) from None
 
     try:
         atomic.write_atomically(path, write)
@@ -201,6 +212,64 @@ def _write_reason(exc: Exception, tmp: Path) -> str:
     return one_line(str(exc).replace(str(tmp), "output").replace(tmp.name, "output"))
 
 
+@dataclass
+class _PartOut:
+    """One output part before encoding: its header (bindings' dict), its channels (pixels
+    in their output type) and the source part it was made from."""
+
+    name: str
+    header: dict[str, Any]
+    channels: dict[str, SourceChannel]
+    source: SourcePart
+
+    def library_part(self) -> Any:
+        """The part for the OpenEXR bindings' writer."""
+        return OpenEXR.Part(
+            self.header,
+            {name: OpenEXR.Channel(name, c.pixels, c.x_sampling, c.y_sampling, c.p_linear)
+             for name, c in self.channels.items()},
+            self.name,
+        )
+
+
+def _chunk_writer(out: _PartOut) -> zipchunks.ChunkWriter | None:
+    """The part as `zipchunks` writes it (the source's attributes byte for byte, changed and
+    new ones encoded), or None where the library writes it: no raw header, not a
+    full-resolution scanline ZIP/ZIPS part in increasing line order, or a value `zipchunks`
+    cannot encode."""
+    source = out.source
+    if source.raw is None or source.header.get("tiles") is not None:
+        return None
+    if any((c.x_sampling, c.y_sampling) != (1, 1) for c in out.channels.values()):
+        return None
+    if out.header.get("lineOrder", OpenEXR.INCREASING_Y) != OpenEXR.INCREASING_Y:
+        return None
+    codec = codec_name(out.header)
+    if codec not in ("zip", "zips"):
+        return None
+    stored = {a.name: a for a in source.raw}
+    attributes = []
+    for key, value in out.header.items():
+        if key in _COMPUTED_KEYS or key == "type":  # the library's own view of the part
+            continue
+        if key == "compression":
+            code = 3 if codec == "zip" else 2
+            attributes.append(zipchunks.RawAttribute(key, "compression", bytes([code])))
+        elif key in stored and value is source.header.get(key):
+            attributes.append(stored[key])
+        else:
+            encoded = zipchunks.encode_value(value)
+            if encoded is None:
+                return None
+            attributes.append(zipchunks.RawAttribute(key, *encoded))
+    planes = {name: c.pixels for name, c in out.channels.items()}
+    linear = {name: c.p_linear for name, c in out.channels.items()}
+    try:
+        return zipchunks.ChunkWriter(attributes, planes, linear)
+    except zipchunks.Declined:
+        return None
+
+
 def _output_part(
     source: SourceFile,
     part: SourcePart,
@@ -210,7 +279,7 @@ def _output_part(
     explicit_codec: str | None,
     keep_only: Collection[str] | None,
     notes: list[str],
-) -> Any:
+) -> _PartOut:
     label = f"part {part.index}" + (f" {part.name!r}" if part.name else "")
     header = {k: v for k, v in part.header.items() if k not in _COMPUTED_KEYS}
     kept = {
@@ -239,13 +308,10 @@ def _output_part(
     header.update(attributes)
     if software:
         _append_software(header, software)
-    exr_channels = {
-        name: OpenEXR.Channel(name, c.pixels, c.x_sampling, c.y_sampling, c.p_linear)
-        for name, c in kept.items()
-    }
+    channels = dict(kept)
     for name, plane in replace.items():
-        exr_channels[name] = OpenEXR.Channel(name, plane)
-    return OpenEXR.Part(header, exr_channels, part.name)
+        channels[name] = SourceChannel(plane)
+    return _PartOut(part.name, header, channels, part)
 
 
 def synthetic_source(

@@ -23,6 +23,7 @@ import numpy as np
 import OpenEXR
 
 from svgf_cli.errors import InputError
+from svgf_cli.io import zipchunks
 
 PIXEL_TYPE_NAMES = {"f2": "half", "f4": "float", "u4": "uint"}
 
@@ -49,12 +50,16 @@ class SourceChannel:
 
 @dataclass
 class SourcePart:
-    """One part: its name, its header (OpenEXR bindings' dict) and its channels."""
+    """One part: its name, its header (OpenEXR bindings' dict) and its channels.
+
+    ``raw`` holds a single-part file's header attributes as stored (`zipchunks`), so the
+    writer can copy them byte for byte when it encodes the chunks itself; None otherwise."""
 
     index: int
     name: str
     header: dict[str, Any]
     channels: dict[str, SourceChannel] = field(default_factory=dict)
+    raw: tuple[zipchunks.RawAttribute, ...] | None = None
 
     @property
     def data_window(self) -> tuple[int, int, int, int]:
@@ -208,6 +213,7 @@ def decode_source(
     cannot be decoded (truncated file, corrupt chunk, bad chunk table).
     """
     path = Path(path)
+    raw = _raw_attributes(path)
     try:
         with capture_c_stderr() as library_lines, capture_library_output() as printed:
             exr = OpenEXR.File(str(path), separate_channels=True, num_threads=threads)
@@ -227,7 +233,8 @@ def decode_source(
                     )
                     for name, channel in part.channels.items()
                 }
-                parts.append(SourcePart(index, part.name(), dict(part.header), channels))
+                parts.append(SourcePart(index, part.name(), dict(part.header), channels,
+                                        raw if len(exr.parts) == 1 else None))
     except InputError:
         raise
     except UnicodeDecodeError as exc:
@@ -235,6 +242,15 @@ def decode_source(
     except Exception as exc:  # the bindings raise RuntimeError/ValueError/... on bad data
         raise InputError(f"cannot read pixels: {one_line(str(exc))}", str(path)) from None
     return SourceFile(path, parts)
+
+
+def _raw_attributes(path: Path) -> tuple[zipchunks.RawAttribute, ...] | None:
+    """A single-part file's header attributes as stored, or None (multi-part, unreadable)."""
+    try:
+        with open(path, "rb") as fh:
+            return zipchunks.read_raw_header(fh).attributes
+    except (OSError, zipchunks.Declined):
+        return None
 
 
 def _part_count(path: Path) -> int:
