@@ -150,22 +150,36 @@ def test_written_file_reads_back_as_the_library_writes_it(
         assert channels[name][0].tobytes() == plane.tobytes(), name
 
 
-def test_chunks_that_do_not_shrink_are_stored_as_they_are(tmp_path: Path) -> None:
-    """Random float bits do not deflate: the chunk is stored raw (size == its lines' bytes),
-    as the library stores it, and still reads back."""
-    planes = {"R": np.random.default_rng(3).random((16, 64), dtype=np.float32)}
-    theirs, ours = tmp_path / "lib.exr", tmp_path / "ours.exr"
-    box = (np.array([0, 0], np.int32), np.array([63, 15], np.int32))
+def _zip_pair(folder: Path, planes: dict[str, np.ndarray]) -> tuple[Path, Path]:
+    """``planes`` (all of one shape, window at the origin) written by the library (ZIP) and,
+    with its header, by `zipchunks`: (ours, theirs)."""
+    height, width = next(iter(planes.values())).shape
+    box = (np.array([0, 0], np.int32), np.array([width - 1, height - 1], np.int32))
+    theirs, ours = folder / "lib.exr", folder / "ours.exr"
     _library_write(theirs, {"compression": OpenEXR.ZIP_COMPRESSION, "dataWindow": box,
                             "displayWindow": box}, planes)
     _hand_write(ours, theirs, planes)
-    with open(ours, "rb") as fh:
+    return ours, theirs
+
+
+def _first_chunk(path: Path) -> tuple[int, bytes]:
+    """The first chunk of a single-part scanline file: its y and its stored bytes."""
+    with open(path, "rb") as fh:
         header = zipchunks.read_raw_header(fh)
         fh.seek(header.end)
         (position,) = struct.unpack("<Q", fh.read(8))
         fh.seek(position)
-        _, size = struct.unpack("<ii", fh.read(8))
-    assert size == 16 * 64 * 4
+        y, size = struct.unpack("<ii", fh.read(8))
+        return y, fh.read(size)
+
+
+def test_chunks_that_do_not_shrink_are_stored_as_they_are(tmp_path: Path) -> None:
+    """Random float bits do not deflate: the chunk is stored raw (size == its lines' bytes),
+    as the library stores it, and still reads back."""
+    planes = {"R": np.random.default_rng(3).random((16, 64), dtype=np.float32)}
+    ours, theirs = _zip_pair(tmp_path, planes)
+    _, data = _first_chunk(ours)
+    assert data == planes["R"].tobytes()
     assert_same_file(ours, theirs)
 
 
@@ -173,19 +187,9 @@ def test_deflated_chunks_are_zlib_streams_of_the_predicted_bytes(tmp_path: Path)
     """The first chunk, inflated by zlib and undone by the format's description, is the
     channels' rows in name order."""
     planes = {"B": np.full((16, 8), 0.5, np.float16), "A": np.ones((16, 8), np.float16)}
-    template = tmp_path / "lib.exr"
-    box = (np.array([0, 0], np.int32), np.array([7, 15], np.int32))
-    _library_write(template, {"compression": OpenEXR.ZIP_COMPRESSION, "dataWindow": box,
-                              "displayWindow": box}, planes)
-    ours = tmp_path / "ours.exr"
-    _hand_write(ours, template, planes)
-    with open(ours, "rb") as fh:
-        header = zipchunks.read_raw_header(fh)
-        fh.seek(header.end)
-        (position,) = struct.unpack("<Q", fh.read(8))
-        fh.seek(position)
-        y, size = struct.unpack("<ii", fh.read(8))
-        packed = zlib.decompress(fh.read(size))
+    ours, _ = _zip_pair(tmp_path, planes)
+    y, data = _first_chunk(ours)
+    packed = zlib.decompress(data)
     raw = np.frombuffer(_reference_unpack(packed), np.uint8)
     assert _reference_pack(raw.tobytes()) == packed
     rows = raw.reshape(16, 2, 8 * 2)  # line, channel (A then B), bytes
