@@ -318,3 +318,17 @@ def test_other_codecs_and_multipart_files_go_to_the_library(
         assert len(calls) == expected, codec
         assert decode_source(out).parts[0].channels["ViewLayer.Combined.R"].pixels.tobytes() \
             == colour["ViewLayer.Combined.R"].tobytes()
+
+
+def test_a_new_files_attributes_are_the_librarys_defaults(tmp_path: Path) -> None:
+    """`scanline_attributes` (the bidirectional run's scratch files): a file the library
+    reads back with the same header as its own file of the same planes, plus the string."""
+    planes = {"a": np.full((5, 7), 0.25, np.float16), "b": np.arange(35, dtype=np.float32)
+              .reshape(5, 7)}
+    theirs, ours = tmp_path / "lib.exr", tmp_path / "ours.exr"
+    _library_write(theirs, {"compression": OpenEXR.ZIP_COMPRESSION, "note": "x é"}, planes)
+    writer = zipchunks.ChunkWriter(
+        zipchunks.scanline_attributes(7, 5, strings={"note": "x é"}), planes, {})
+    with open(ours, "wb") as fh:
+        writer.write(fh)
+    assert_same_file(ours, theirs)

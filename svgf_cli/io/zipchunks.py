@@ -165,6 +165,27 @@ def encode_header(attributes: Sequence[RawAttribute], channel_names: Sequence[st
     return bytes(out + b"\0")
 
 
+def scanline_attributes(
+    width: int, height: int, codec: int = ZIP, strings: Mapping[str, str] | None = None
+) -> list[RawAttribute]:
+    """The attributes every scanline file needs (windows at the origin, increasing y, square
+    pixels, the default screen window), the codec, and ``strings`` as string attributes:
+    a new file's header, for `ChunkWriter`."""
+    box = struct.pack("<iiii", 0, 0, width - 1, height - 1)
+    attributes = [
+        RawAttribute("compression", "compression", bytes([codec])),
+        RawAttribute("dataWindow", "box2i", box),
+        RawAttribute("displayWindow", "box2i", box),
+        RawAttribute("lineOrder", "lineOrder", b"\0"),
+        RawAttribute("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+        RawAttribute("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0)),
+        RawAttribute("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+    ]
+    for name, value in (strings or {}).items():
+        attributes.append(RawAttribute(name, "string", value.encode("utf-8")))
+    return attributes
+
+
 def data_window(header: RawHeader) -> tuple[int, int, int, int]:
     """(x_min, y_min, width, height) of the ``dataWindow`` attribute."""
     attr = header.get("dataWindow")
