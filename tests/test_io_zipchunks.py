@@ -332,3 +332,42 @@ def test_a_new_files_attributes_are_the_librarys_defaults(tmp_path: Path) -> Non
     with open(ours, "wb") as fh:
         writer.write(fh)
     assert_same_file(ours, theirs)
+
+
+def test_a_disk_that_fills_mid_write_leaves_nothing_half_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The chunk writer fails after some chunks (ENOSPC): one line naming the output and the
+    system's reason, the earlier output untouched, no temporary left."""
+    source = decode_source(CYCLES[0])
+    colour = {"ViewLayer.Combined.R": source.parts[0].channels["ViewLayer.Combined.R"].pixels}
+    target = tmp_path / "out" / "o.0001.exr"
+    target.parent.mkdir()
+    target.write_bytes(b"previous frame")
+    real = zipchunks.ChunkWriter.write
+
+    def filling(self: zipchunks.ChunkWriter, fh: Any, threads: int = 0) -> None:
+        class Full(io.RawIOBase):
+            written = 0
+
+            def write(self, data: Any) -> int:
+                Full.written += len(data)
+                if Full.written > 4096:
+                    raise OSError(28, "No space left on device")
+                return fh.write(data)
+
+            def tell(self) -> int:
+                return fh.tell()
+
+            def seek(self, *args: Any) -> int:
+                return fh.seek(*args)
+
+        real(self, Full(), threads)
+
+    monkeypatch.setattr(zipchunks.ChunkWriter, "write", filling)
+    with pytest.raises(Exception, match="No space left on device") as raised:
+        write_output(target, source, part_index=0, channels=colour, attributes={})
+    message = str(raised.value)
+    assert message == f"{target}: cannot write: No space left on device", message
+    assert target.read_bytes() == b"previous frame"
+    assert [p.name for p in target.parent.iterdir()] == ["o.0001.exr"]
