@@ -44,11 +44,13 @@ def _reference_unpack(packed: bytes) -> bytes:
     return raw.tobytes()
 
 
-@pytest.mark.parametrize("size", [1, 2, 3, 4, 7, 64, 1001])
+@pytest.mark.parametrize("size", [0, 1, 2, 3, 4, 7, 64, 1001])
 def test_reorder_predict_matches_the_format_and_inverts(size: int) -> None:
     raw = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
     packed = np.empty_like(raw)
     zipchunks.reorder_predict(raw, packed)
+    if size == 0:
+        return
     assert packed.tobytes() == _reference_pack(raw.tobytes())
     assert _reference_unpack(packed.tobytes()) == raw.tobytes()
 
@@ -122,7 +124,8 @@ def _mixed_planes(height: int, width: int, seed: int = 0) -> dict[str, np.ndarra
 
 
 @pytest.mark.parametrize("codec", [OpenEXR.ZIP_COMPRESSION, OpenEXR.ZIPS_COMPRESSION])
-@pytest.mark.parametrize("window", [(0, 0, 37, 21), (-5, -9, 16, 35), (3, 17, 1, 1)])
+@pytest.mark.parametrize("window", [(0, 0, 37, 21), (-5, -9, 16, 35), (3, 17, 1, 1),
+                                    (0, 0, 5, 32)])
 def test_written_file_reads_back_as_the_library_writes_it(
     tmp_path: Path, codec: Any, window: tuple[int, int, int, int]
 ) -> None:
@@ -134,7 +137,7 @@ def test_written_file_reads_back_as_the_library_writes_it(
         "compression": codec, "type": OpenEXR.scanlineimage, "dataWindow": box,
         "displayWindow": box, "owner": "svgf tests", "frames": 12,
         "worldToCamera": np.arange(16, dtype=np.float32).reshape(4, 4),
-        "strings": ["one", "two"], "pixelAspectRatio": 1.5,
+        "strings": ["one", "two"], "pixelAspectRatio": 1.5, "empty": "",
     }
     planes = _mixed_planes(height, width)
     linear = {"G": True}
@@ -142,6 +145,7 @@ def test_written_file_reads_back_as_the_library_writes_it(
     _library_write(theirs, header, planes, linear)
     _hand_write(ours, theirs, planes, linear)
     assert_same_file(ours, theirs)
+    assert_chunk_table(ours, 16 if codec == OpenEXR.ZIP_COMPRESSION else 1)
     # Magic and version flags as the library's (the long-names flag: a 49-byte name).
     assert ours.read_bytes()[:8] == theirs.read_bytes()[:8]
     assert struct.unpack("<i", ours.read_bytes()[4:8])[0] & zipchunks.LONG_NAMES
@@ -160,6 +164,26 @@ def _zip_pair(folder: Path, planes: dict[str, np.ndarray]) -> tuple[Path, Path]:
                             "displayWindow": box}, planes)
     _hand_write(ours, theirs, planes)
     return ours, theirs
+
+
+def assert_chunk_table(path: Path, lines: int) -> None:
+    """The offset table holds one entry per chunk of ``lines`` lines, the first chunk
+    starts right after it, each chunk right after the one before, and the file ends with
+    the last one: nothing missing, nothing extra."""
+    data = path.read_bytes()
+    with open(path, "rb") as fh:
+        header = zipchunks.read_raw_header(fh)
+    box = next(a for a in header.attributes if a.name == "dataWindow").value
+    _, y0, _, y1 = struct.unpack("<iiii", box)
+    count = (y1 - y0 + lines) // lines
+    positions = struct.unpack_from(f"<{count}Q", data, header.end)
+    at = header.end + 8 * count
+    for index, position in enumerate(positions):
+        assert position == at, index
+        y, size = struct.unpack_from("<ii", data, position)
+        assert y == y0 + index * lines
+        at = position + 8 + size
+    assert at == len(data)
 
 
 def _first_chunk(path: Path) -> tuple[int, bytes]:
@@ -261,7 +285,7 @@ def test_header_reader_declines_multipart_and_truncated_files(tmp_path: Path) ->
     data = single.read_bytes()
     with open(single, "rb") as fh:
         end = zipchunks.read_raw_header(fh).end
-    for cut in (4, 12, end - 1):
+    for cut in (4, 7, 12, end - 1):
         with pytest.raises(zipchunks.Declined):
             zipchunks.read_raw_header(io.BytesIO(data[:cut]))
 
@@ -292,6 +316,7 @@ def test_drop_in_output_matches_the_library_writer(
                      software="svgf")
     assert ours.read_bytes() != theirs.read_bytes()  # really two writers
     assert_same_file(ours, theirs)
+    assert_chunk_table(ours, 16)
     header, _ = _decoded(ours)
     assert header["svgf/preset"] == "default" and header["svgf/frame"] == 2
     assert "svgf" in header["Software"]
@@ -371,3 +396,30 @@ def test_a_disk_that_fills_mid_write_leaves_nothing_half_written(
     assert message == f"{target}: cannot write: No space left on device", message
     assert target.read_bytes() == b"previous frame"
     assert [p.name for p in target.parent.iterdir()] == ["o.0001.exr"]
+
+
+@pytest.mark.parametrize("length", [31, 32])
+def test_the_long_names_flag_starts_at_32_bytes(tmp_path: Path, length: int) -> None:
+    """Names of up to 31 bytes fit the original format; 32 need the long-names flag (the
+    library's version bytes, for a channel and for an attribute name)."""
+    name = "n" * length
+    for planes, header in (({name: np.zeros((2, 3), np.float16)}, {}),
+                           ({"R": np.zeros((2, 3), np.float16)}, {name: "x"})):
+        box = (np.array([0, 0], np.int32), np.array([2, 1], np.int32))
+        theirs, ours = tmp_path / "lib.exr", tmp_path / "ours.exr"
+        _library_write(theirs, {"compression": OpenEXR.ZIP_COMPRESSION, "dataWindow": box,
+                                "displayWindow": box, **header}, planes)
+        _hand_write(ours, theirs, planes)
+        assert ours.read_bytes()[:8] == theirs.read_bytes()[:8]
+        flags = struct.unpack("<i", ours.read_bytes()[4:8])[0]
+        assert bool(flags & zipchunks.LONG_NAMES) == (length > 31)
+
+
+def test_writer_declines_a_header_without_codec_or_with_a_bad_window() -> None:
+    planes = {"R": np.zeros((2, 4), np.float16)}
+    attributes = [a for a in _raw({}) if a.name != "compression"]
+    with pytest.raises(zipchunks.Declined):
+        zipchunks.ChunkWriter(attributes, planes, {})
+    for box in (("box2f", struct.pack("<iiii", 0, 0, 3, 1)), ("box2i", b"\0" * 12)):
+        with pytest.raises(zipchunks.Declined):
+            zipchunks.ChunkWriter(_raw({"dataWindow": box}), planes, {})

@@ -215,6 +215,8 @@ def reorder_predict(raw: np.ndarray, out: np.ndarray) -> None:
     """out = delta(t) with t = raw[0::2] ++ raw[1::2]: out[0] = t[0],
     out[j] = (t[j] - t[j-1] + 128) mod 256 (OpenEXR's ZIP predictor)."""
     n = raw.size
+    if n == 0:
+        return
     half = (n + 1) // 2
     out[0] = raw[0]
     for j in range(1, half):
