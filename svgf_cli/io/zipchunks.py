@@ -29,11 +29,10 @@ from isal import isal_zlib
 
 MAGIC = 20000630
 VERSION = 2
-TILED, LONG_NAMES, NON_IMAGE, MULTIPART = 0x200, 0x400, 0x800, 0x1000
+LONG_NAMES, NON_IMAGE, MULTIPART = 0x400, 0x800, 0x1000
 ZIPS, ZIP = 2, 3
 LINES_PER_CHUNK = {ZIPS: 1, ZIP: 16}
-PIXEL_TYPES = {0: np.dtype("<u4"), 1: np.dtype("<f2"), 2: np.dtype("<f4")}
-TYPE_CODES = {dtype: code for code, dtype in PIXEL_TYPES.items()}
+TYPE_CODES = {np.dtype("<u4"): 0, np.dtype("<f2"): 1, np.dtype("<f4"): 2}  # uint, half, float
 ISAL_LEVEL = 1  # levels 1 and 2 cost the same, 3 costs 2.5x: all within 0.6 % in size
 _MAX_NAME = 255
 _MAX_PIXELS = 1 << 31  # beyond this the file is not one a renderer wrote: let OpenEXR judge
@@ -59,20 +58,14 @@ class ChannelSpec:
     name: str
     dtype: np.dtype
     p_linear: bool = False
-    x_sampling: int = 1
-    y_sampling: int = 1
 
 
 @dataclass(frozen=True)
 class RawHeader:
-    """A single-part file's version flags, attributes in file order and where they end."""
+    """A single-part file's attributes in file order and where they end."""
 
-    flags: int
     attributes: tuple[RawAttribute, ...]
     end: int
-
-    def get(self, name: str) -> RawAttribute | None:
-        return next((a for a in self.attributes if a.name == name), None)
 
 
 # -- the header ------------------------------------------------------------------------------
@@ -93,8 +86,7 @@ def read_raw_header(fh: BinaryIO) -> RawHeader:
     magic, version = struct.unpack("<ii", head)
     if magic != MAGIC or version & 0xFF != VERSION:
         raise Declined("not an OpenEXR 2 file")
-    flags = version & ~0xFF
-    if flags & (MULTIPART | NON_IMAGE):
+    if version & (MULTIPART | NON_IMAGE):
         raise Declined("multi-part or deep")
     data = bytearray()
 
@@ -117,7 +109,7 @@ def read_raw_header(fh: BinaryIO) -> RawHeader:
         while True:
             need(at + 1)
             if data[at] == 0:
-                return RawHeader(flags, tuple(attributes), 8 + at + 1)
+                return RawHeader(tuple(attributes), 8 + at + 1)
             name, at = name_at(at)
             kind, at = name_at(at)
             need(at + 4)
@@ -138,7 +130,7 @@ def encode_channels(specs: Sequence[ChannelSpec]) -> bytes:
     for spec in sorted(specs, key=lambda s: s.name.encode("utf-8")):
         out += spec.name.encode("utf-8") + b"\0"
         out += struct.pack("<iB3xii", TYPE_CODES[np.dtype(spec.dtype).newbyteorder("<")],
-                           int(spec.p_linear), spec.x_sampling, spec.y_sampling)
+                           int(spec.p_linear), 1, 1)
     return bytes(out + b"\0")
 
 
@@ -186,9 +178,9 @@ def scanline_attributes(
     return attributes
 
 
-def data_window(header: RawHeader) -> tuple[int, int, int, int]:
+def data_window(attributes: Mapping[str, RawAttribute]) -> tuple[int, int, int, int]:
     """(x_min, y_min, width, height) of the ``dataWindow`` attribute."""
-    attr = header.get("dataWindow")
+    attr = attributes.get("dataWindow")
     if attr is None or attr.type != "box2i" or len(attr.value) != 16:
         raise Declined("no dataWindow")
     x0, y0, x1, y1 = struct.unpack("<iiii", attr.value)
@@ -198,9 +190,9 @@ def data_window(header: RawHeader) -> tuple[int, int, int, int]:
     return x0, y0, width, height
 
 
-def codec_of(header: RawHeader) -> int:
+def codec_of(attributes: Mapping[str, RawAttribute]) -> int:
     """The ``compression`` attribute's code (ZIPS or ZIP), or Declined."""
-    attr = header.get("compression")
+    attr = attributes.get("compression")
     code = attr.value[0] if attr is not None and len(attr.value) == 1 else -1
     if code not in LINES_PER_CHUNK:
         raise Declined("codec")
@@ -277,12 +269,11 @@ class ChunkWriter:
         p_linear: Mapping[str, bool],
     ) -> None:
         by_name = {a.name: a for a in attributes if a.name != "channels"}
-        header = RawHeader(0, tuple(by_name.values()), 0)
-        self.codec = codec_of(header)
+        self.codec = codec_of(by_name)
         line_order = by_name.get("lineOrder")
         if line_order is not None and line_order.value != b"\0":
             raise Declined("line order")
-        _, self.y_min, self.width, self.height = data_window(header)
+        _, self.y_min, self.width, self.height = data_window(by_name)
         specs = []
         for name, plane in planes.items():
             dtype = np.dtype(plane.dtype).newbyteorder("<")
