@@ -15,6 +15,7 @@ import OpenEXR
 import OpenImageIO as oiio
 import pytest
 
+from svgf_cli import heap
 from svgf_cli.io import output as output_module
 from svgf_cli.io import zipchunks
 from svgf_cli.io.output import write_output
@@ -220,6 +221,23 @@ def test_deflated_chunks_are_zlib_streams_of_the_predicted_bytes(tmp_path: Path)
     assert y == 0
     assert rows[:, 0].tobytes() == planes["A"].tobytes()
     assert rows[:, 1].tobytes() == planes["B"].tobytes()
+
+
+def test_a_chunk_deflated_in_pieces_is_one_zlib_stream(tmp_path: Path) -> None:
+    """A chunk of more than ``DEFLATE_PIECE`` bytes is deflated and written in pieces, each
+    well below the heap's mapping threshold, that make one zlib stream of the chunk."""
+    rng = np.random.default_rng(3)
+    planes = {c: (rng.random((16, 6000)) * 4).round(2).astype(np.float32) for c in "RGB"}
+    ours, theirs = _zip_pair(tmp_path, planes)
+    _, data = _first_chunk(ours)
+    raw = np.frombuffer(_reference_unpack(zlib.decompress(data)), np.uint8)
+    assert raw.size == 16 * 6000 * 4 * 3 > 2 * zipchunks.DEFLATE_PIECE
+    assert_same_file(ours, theirs)
+    pieces = zipchunks.deflate_pieces(raw.copy())
+    assert len(pieces) > 2
+    assert max(len(piece) for piece in pieces) < heap.MMAP_THRESHOLD
+    assert zlib.decompress(b"".join(pieces)) == raw.tobytes()
+    assert zlib.decompress(b"".join(zipchunks.deflate_pieces(raw[:0].copy()))) == b""
 
 
 def test_encoding_is_deterministic_and_thread_count_free(tmp_path: Path) -> None:

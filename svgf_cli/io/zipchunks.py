@@ -34,6 +34,10 @@ ZIPS, ZIP = 2, 3
 LINES_PER_CHUNK = {ZIPS: 1, ZIP: 16}
 TYPE_CODES = {np.dtype("<u4"): 0, np.dtype("<f2"): 1, np.dtype("<f4"): 2}  # uint, half, float
 ISAL_LEVEL = 1  # levels 1 and 2 cost the same, 3 costs 2.5x: all within 0.6 % in size
+# A chunk's deflated stream is made and written in pieces from this much input (a 16-line
+# production chunk deflates to ~1.5 MB in one piece: a block that size is mapped afresh for
+# every chunk, while pieces of ~100 kB are recycled by the heap).
+DEFLATE_PIECE = 1 << 18
 _MAX_NAME = 255
 _MAX_PIXELS = 1 << 31  # beyond this the file is not one a renderer wrote: let OpenEXR judge
 
@@ -237,6 +241,17 @@ def _layout(specs: Sequence[ChannelSpec], width: int) -> tuple[list[int], int]:
     return offsets, at
 
 
+def deflate_pieces(data: np.ndarray) -> list[bytes]:
+    """One zlib stream of ``data`` (uint8) at ``ISAL_LEVEL``, in the pieces the compressor
+    gave it out in (input fed ``DEFLATE_PIECE`` bytes at a time); joined, they inflate to
+    ``data``."""
+    deflate = isal_zlib.compressobj(ISAL_LEVEL)
+    pieces = [deflate.compress(data[start:start + DEFLATE_PIECE])
+              for start in range(0, data.size, DEFLATE_PIECE)]
+    pieces.append(deflate.flush())
+    return [piece for piece in pieces if piece]
+
+
 def _map_ordered(fn: Callable[[int], Any], count: int, threads: int) -> Iterator[Any]:
     """fn(0..count-1) in order, on ``threads`` threads (at most 4 results ahead per thread)."""
     if threads <= 1:
@@ -298,7 +313,7 @@ class ChunkWriter:
         # 16-line production chunk) cost more in page faults than the copies themselves.
         scratch = threading.local()
 
-        def encode(index: int) -> tuple[bytes, bytes]:
+        def encode(index: int) -> tuple[bytes, list[bytes]]:
             if not hasattr(scratch, "raw"):
                 scratch.raw = np.empty((lines, row_bytes), np.uint8)
                 scratch.packed = np.empty(lines * row_bytes, np.uint8)
@@ -310,10 +325,12 @@ class ChunkWriter:
             flat = raw.reshape(-1)
             packed = scratch.packed[:flat.size]
             reorder_predict(flat, packed)
-            deflated = isal_zlib.compress(packed, ISAL_LEVEL)
+            pieces = deflate_pieces(packed)
+            size = sum(len(piece) for piece in pieces)
             # OpenEXR stores a chunk that does not shrink as it is.
-            data = deflated if len(deflated) < flat.size else flat.tobytes()
-            return struct.pack("<ii", self.y_min + y0, len(data)), data
+            if size >= flat.size:
+                pieces, size = [flat.tobytes()], flat.size
+            return struct.pack("<ii", self.y_min + y0, size), pieces
 
         # The kernel's first call (numba loading it from its cache) in this thread, not in
         # two pool threads at once.
@@ -322,10 +339,11 @@ class ChunkWriter:
         table_at = fh.tell()
         fh.write(b"\0" * (8 * count))
         positions = []
-        for prefix, data in _map_ordered(encode, count, threads):
+        for prefix, pieces in _map_ordered(encode, count, threads):
             positions.append(fh.tell())
             fh.write(prefix)
-            fh.write(data)
+            for piece in pieces:
+                fh.write(piece)
         end = fh.tell()
         fh.seek(table_at)
         fh.write(struct.pack(f"<{count}Q", *positions))
