@@ -530,6 +530,89 @@ def test_pass_shares_steady_a_flickering_share_and_start_over() -> None:
     assert (mean == 7.0).all()
 
 
+def test_pass_shares_follow_each_pass_by_its_channels() -> None:
+    """Each pass's history is its own by name: a pass missing from a frame (black in it: left
+    out of the frame's passes) leaves the others' histories where they were."""
+    from svgf_cli.filters.pass_shares import PassShares
+
+    shape = (3, 4, 5)
+    still = np.zeros((2, *shape[1:]), np.float32)
+    mesh = np.ones(shape[1:], np.int32)
+    long = np.full(shape[1:], 30.0, np.float32)
+    spread = np.full(shape, 1e3, np.float32)
+    shares = PassShares()
+    for key, value in ((("a.R", "a.G", "a.B"), 1.0), (("b.R", "b.G", "b.B"), 100.0)):
+        shares.blend(key, np.full(shape, value, np.float32), spread, still, mesh, long, 0.2)
+    shares.advance(mesh)
+    mean = np.full(shape, 100.0, np.float32)  # only "b" this frame
+    shares.blend(("b.R", "b.G", "b.B"), mean, spread, still, mesh, long, 0.2)
+    assert (mean == 100.0).all()
+    shares.advance(mesh)
+    mean = np.full(shape, 3.0, np.float32)  # "a" is back: no history of its own now
+    shares.blend(("a.R", "a.G", "a.B"), mean, spread, still, mesh, long, 0.2)
+    assert (mean == 3.0).all()
+
+
+def test_a_light_pass_black_in_the_frame_is_written_as_read_and_changes_nothing(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lobe pass +0 on every pixel as read (the shot's TransDir and VolumeInd) is left out
+    of the light layers: the output keeps it as read (+0, as its denoised light was), and
+    every other layer and the colour are bit for bit as when it is filtered with them."""
+    from svgf_cli.filters.composable import LayeredDenoiser
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io import lightlayers
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.run.output import light_replaced
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    runs: dict[bool, list] = {True: [], False: []}
+    for left_out in (True, False):
+        if not left_out:
+            monkeypatch.setattr(lightlayers, "_all_zero", lambda source, names: False)
+        layered = LayeredDenoiser(PRESETS["default"])
+        for frame in (1, 2, 3):
+            result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+            result.frame.light = lightlayers.read_light_layers(result, "cycles")
+            names = {n for layer in result.frame.light.passes for n in layer.channels}
+            runs[left_out].append((layered.process(result.frame), names,
+                                   light_replaced(result.frame.light)))
+    black = [f"ViewLayer.{p}.{c}" for p in ("TransDir", "VolumeInd") for c in "RGB"]
+    for (got, names, replaced), (want, all_names, _) in zip(*runs.values(), strict=True):
+        assert set(black) <= all_names and not set(black) & names
+        assert not set(black) & set(replaced) and not set(black) & got.light.keys()
+        assert np.array_equal(got.color.view(np.uint32), want.color.view(np.uint32))
+        assert got.light.keys() == want.light.keys() - set(black) and len(got.light) > 20
+        for name, plane in got.light.items():
+            assert np.array_equal(plane.view(np.uint32), want.light[name].view(np.uint32)), name
+        for name in black:
+            assert not want.light[name].view(np.uint32).any()  # +0, as read
+
+
+def test_only_a_pass_of_plus_zero_bits_counts_as_black() -> None:
+    """-0 is not +0: such a pass is filtered (its output is +0), never written as read."""
+    from svgf_cli.io.lightlayers import _all_zero
+    from svgf_cli.io.source import SourceChannel, SourcePart
+
+    def part(value: float, dtype: type) -> SourcePart:
+        channels = {c: SourceChannel(np.full((2, 3), value, dtype)) for c in "RGB"}
+        return SourcePart(0, "", {}, channels)
+
+    for dtype in (np.float16, np.float32):
+        assert _all_zero(_Source(part(0.0, dtype)), "RGB")
+        assert not _all_zero(_Source(part(-0.0, dtype)), "RGB")
+        assert not _all_zero(_Source(part(1e-7, dtype)), "RGB")
+
+
+class _Source:
+    """A decoded file of one part (what `_all_zero` asks of a `SourceFile`)."""
+
+    def __init__(self, part) -> None:  # noqa: ANN001
+        self.part = part
+
+    def part_holding(self, name: str):  # noqa: ANN201
+        return self.part if name in self.part.channels else None
+
+
 def test_covered_pixel_filter_blends_only_coloured_pixels() -> None:
     """A colour pass written anew gets the colour's pixel filter over its pixels above 0:
     a texture edge inside a surface blends (a converged colour pass is filtered as its

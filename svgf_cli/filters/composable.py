@@ -701,8 +701,9 @@ class LayeredDenoiser:
             alpha = params_for_samples(self.params, frame.samples_per_pixel).alpha
 
             def blend(index: int, mean: np.ndarray, spread: np.ndarray) -> None:
-                self.shares.blend(index, mean, spread, gbuffer.motion, gbuffer.mesh_id,
-                                  lengths.get(light.passes[index].signal), alpha)
+                layer = light.passes[index]
+                self.shares.blend(layer.channels, mean, spread, gbuffer.motion,
+                                  gbuffer.mesh_id, lengths.get(layer.signal), alpha)
 
             write_passes(denoised, emission, outputs, albedos, light, medium, kept, blend,
                          pixel_filter_weight(self.params.pixel_filter, frame.centre_sampled))

@@ -20,14 +20,15 @@ F32 = np.float32
 
 
 class PassShares:
-    """Last frame's averaged stored light of each light pass (by its index in the frame's
-    passes) and last frame's mesh ids; :meth:`blend` folds them into this frame's, in
+    """Last frame's averaged stored light of each light pass (by its channels: a pass black
+    in a frame is not among its passes, so an index would name another pass the next
+    frame) and last frame's mesh ids; :meth:`blend` folds them into this frame's, in
     place, :meth:`advance` keeps this frame's for the next."""
 
     def __init__(self) -> None:
-        self.previous: dict[int, np.ndarray] = {}
+        self.previous: dict[tuple[str, ...], np.ndarray] = {}
         self.previous_mesh: np.ndarray | None = None
-        self._current: dict[int, np.ndarray] = {}
+        self._current: dict[tuple[str, ...], np.ndarray] = {}
 
     def reset(self) -> None:
         """Forget the history (a new shot, or another history loaded for the colour)."""
@@ -35,18 +36,19 @@ class PassShares:
         self._current.clear()
         self.previous_mesh = None
 
-    def blend(self, index: int, mean: np.ndarray, spread: np.ndarray, motion: np.ndarray,
-              mesh_id: np.ndarray, length: np.ndarray | None, alpha: float) -> None:
-        """Pass ``index``'s average ``mean`` (3, H, W) blended in place with its own last
+    def blend(self, key: tuple[str, ...], mean: np.ndarray, spread: np.ndarray,
+              motion: np.ndarray, mesh_id: np.ndarray, length: np.ndarray | None,
+              alpha: float) -> None:
+        """Pass ``key``'s average ``mean`` (3, H, W) blended in place with its own last
         frame's, that clamped to ``mean +- spread`` (none: as it is; ``length`` None: no
         history for its signal), and kept."""
-        previous = self.previous.get(index)
+        previous = self.previous.get(key)
         if (previous is not None and length is not None and self.previous_mesh is not None
                 and previous.shape == mean.shape):
             blend_previous(mean, spread, previous, np.ascontiguousarray(motion, dtype=F32),
                            np.ascontiguousarray(mesh_id), self.previous_mesh,
                            np.ascontiguousarray(length, dtype=F32), float(alpha))
-        self._current[index] = mean.copy()
+        self._current[key] = mean.copy()
 
     def advance(self, mesh_id: np.ndarray) -> None:
         """This frame's averages become last frame's (a pass not averaged this frame, black

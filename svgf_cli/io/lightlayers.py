@@ -90,6 +90,18 @@ def _plane(source: SourceFile, names: Sequence[str]) -> np.ndarray | None:
     return plane
 
 
+def _all_zero(source: SourceFile, names: Sequence[str]) -> bool:
+    """Whether every value of the channels ``names`` is +0 (bit for bit: a -0 is not)."""
+    for name in names:
+        part = source.part_holding(name)
+        pixels = None if part is None else part.channels[name].pixels
+        if pixels is None or pixels.dtype.itemsize not in (2, 4):
+            return False
+        if np.any(pixels.view(np.uint16 if pixels.dtype.itemsize == 2 else np.uint32)):
+            return False
+    return True
+
+
 def _lobe_passes(resolved, preset: str  # noqa: ANN001
                  ) -> Iterator[tuple[str, Sequence[str], Sequence[str] | None]]:
     """Each lobe light pass the layers resolve (three channels): its role
@@ -108,7 +120,9 @@ def pass_layers(source: SourceFile, resolved, plan: SignalPlan | None,  # noqa: 
                 preset: str) -> list[LightLayer]:
     """The lobe light passes the file holds (``<lobe>_direct``, ``<lobe>_indirect``), each
     with its colour pass when the preset stores the light divided by it, and the signal of
-    ``plan`` built from it."""
+    ``plan`` built from it. A pass +0 on every pixel (Cycles' ``TransDir`` or ``VolumeInd``,
+    often; all four of a shot without glass or volumes) is left out: the output keeps it as
+    read, which is what its denoised light would be, and nothing is computed for it."""
     owner: dict[str, str] = {}
     for recipe in (plan.signals if plan is not None else ()):
         for term in recipe.terms:
@@ -117,6 +131,8 @@ def pass_layers(source: SourceFile, resolved, plan: SignalPlan | None,  # noqa: 
     found = []
     colours: dict[tuple[str, ...], np.ndarray | None] = {}  # each colour pass read once
     for role, names, colour_names in _lobe_passes(resolved, preset):
+        if _all_zero(source, names):
+            continue  # written as read: its denoised light is +0 everywhere too
         colour = None
         if colour_names:
             key = tuple(colour_names)
