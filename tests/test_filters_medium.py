@@ -71,6 +71,52 @@ def test_filled_copies_the_sources_and_leaves_the_input() -> None:
     assert plane[0, 0, 0] == 0.0  # the input is not written
 
 
+def test_fill_medium_fills_a_shared_colour_once_and_leaves_a_white_one() -> None:
+    """Signals sharing one demodulation colour (Cycles' direct and indirect diffuse share
+    DiffCol) share its filled copy; a constant colour (the medium's white) is not copied:
+    filling it changes no value. The filter's output is bit for bit as with a copy each."""
+    import dataclasses
+
+    from svgf_cli.filters.context import FrameContext, StageBase
+
+    taken: list[Frame] = []
+
+    class Take(StageBase):
+        name = "take"
+
+        def run(self, ctx: FrameContext) -> bool:
+            taken.append(ctx.frame)
+            return False
+
+    def frame_of(copies: bool) -> Frame:
+        frame = fog_frame(np.random.default_rng(4), with_medium=True)
+        diffuse, volume = frame.signals
+        shared = diffuse.albedo
+        second = shared.copy() if copies else shared
+        halved = dataclasses.replace(diffuse, name="indirect", radiance=diffuse.radiance * 0.5,
+                                     albedo=second)
+        return dataclasses.replace(frame, signals=[diffuse, halved, volume])
+
+    outputs = []
+    for copies in (False, True):
+        denoiser = Denoiser(PRESETS["default"])
+        denoiser.pipeline.insert_after("fill_medium", Take())
+        source = frame_of(copies)
+        outputs.append(denoiser.process(source))
+        diffuse, indirect, volume = taken[-1].signals
+        assert (diffuse.albedo is indirect.albedo) is not copies
+        assert diffuse.albedo is not source.signals[0].albedo  # filled: a copy
+        assert np.array_equal(diffuse.albedo, filled(source.signals[0].albedo, _sources(source)))
+        assert volume.albedo is source.signals[2].albedo  # white: left as it is
+    assert np.array_equal(outputs[0].color.view(np.uint32), outputs[1].color.view(np.uint32))
+
+
+def _sources(frame: Frame) -> np.ndarray:
+    out = np.empty(frame.depth.shape, np.int32)
+    fill_sources(frame.depth, frame.medium, PRESETS["default"].medium_fill_radius, out)
+    return out
+
+
 def fog_frame(rng: np.random.Generator, *, with_medium: bool, size: int = 48) -> Frame:
     """A lit floor (albedo 0.5, light 1) under fog on its left half: there, each pixel's one
     sample scattered in the fog (no surface; fog light, exponential noise, mean 0.4) with

@@ -50,8 +50,11 @@ class FillMedium(StageBase):
         normal[0][own], normal[1][own], normal[2][own] = 0.0, 0.0, 1.0
         ctx.normal_in = normal
         ctx.motion = filled(ctx.motion, sources)
-        signals = [dataclasses.replace(s, albedo=filled(s.albedo, sources))
-                   for s in frame.signals]
+        albedos: dict[int, np.ndarray] = {}  # signals sharing a colour share its fill
+        for signal in frame.signals:
+            if id(signal.albedo) not in albedos:
+                albedos[id(signal.albedo)] = filled_unless_constant(signal.albedo, sources)
+        signals = [dataclasses.replace(s, albedo=albedos[id(s.albedo)]) for s in frame.signals]
         emission = frame.emission
         medium = next((i for i, s in enumerate(frame.signals) if s.radiance is frame.medium),
                       None)
@@ -63,6 +66,16 @@ class FillMedium(StageBase):
             frame, mesh_id=filled(frame.mesh_id, sources, MEDIUM_ID),
             albedo=filled(frame.albedo, sources), signals=signals, emission=emission)
         return None
+
+
+def filled_unless_constant(plane: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """:func:`filled` of ``plane``, or ``plane`` itself where every value has the same bits
+    (a signal demodulated by white: filling gives the same plane, and a copy would only be
+    more memory)."""
+    bits = plane.reshape(-1).view(np.uint32) if plane.dtype == np.float32 else None
+    if bits is not None and bits.size and bits.min() == bits.max():
+        return plane
+    return filled(plane, sources)
 
 
 def emission_into_medium(medium: np.ndarray, emission: np.ndarray, pixels: np.ndarray
