@@ -508,26 +508,31 @@ def test_pass_shares_steady_a_flickering_share_and_start_over() -> None:
     from svgf_cli.filters.pass_shares import PassShares
 
     shape = (3, 6, 8)
-    still = np.zeros((2, *shape[1:]), np.float32)
-    mesh = np.ones(shape[1:], np.int32)
-    long = np.full(shape[1:], 30.0, np.float32)
-    spread = np.full(shape, 10.0, np.float32)
+    still, mesh, long, spread = _still_pixels(shape, 10.0)
     shares = PassShares()
     blended = []
+    key = ("p.R", "p.G", "p.B")
     for frame in range(12):
         mean = np.full(shape, 1.0 if frame % 2 else 3.0, np.float32)
-        shares.blend(0, mean, spread, still, mesh, long, 0.2)
+        shares.blend(key, mean, spread, still, mesh, long, 0.2)
         shares.advance(mesh)
         blended.append(float(mean[0, 0, 0]))
     assert blended[0] == 3.0  # the first frame has no history
     assert abs(blended[-1] - blended[-2]) < 0.6  # the input swings by 2
     mean = np.full(shape, 5.0, np.float32)
-    shares.blend(0, mean, spread, still, mesh, np.ones(shape[1:], np.float32), 0.2)
+    shares.blend(key, mean, spread, still, mesh, np.ones(shape[1:], np.float32), 0.2)
     assert (mean == 5.0).all()  # no history for the colour: none for the shares
     shares.reset()
     mean = np.full(shape, 7.0, np.float32)
-    shares.blend(0, mean, spread, still, mesh, long, 0.2)
+    shares.blend(key, mean, spread, still, mesh, long, 0.2)
     assert (mean == 7.0).all()
+
+
+def _still_pixels(shape: tuple[int, int, int], spread: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """No motion, one mesh, a long colour history, and ``spread`` everywhere."""
+    return (np.zeros((2, *shape[1:]), np.float32), np.ones(shape[1:], np.int32),
+            np.full(shape[1:], 30.0, np.float32), np.full(shape, spread, np.float32))
 
 
 def test_pass_shares_follow_each_pass_by_its_channels() -> None:
@@ -536,10 +541,7 @@ def test_pass_shares_follow_each_pass_by_its_channels() -> None:
     from svgf_cli.filters.pass_shares import PassShares
 
     shape = (3, 4, 5)
-    still = np.zeros((2, *shape[1:]), np.float32)
-    mesh = np.ones(shape[1:], np.int32)
-    long = np.full(shape[1:], 30.0, np.float32)
-    spread = np.full(shape, 1e3, np.float32)
+    still, mesh, long, spread = _still_pixels(shape, 1e3)
     shares = PassShares()
     for key, value in ((("a.R", "a.G", "a.B"), 1.0), (("b.R", "b.G", "b.B"), 100.0)):
         shares.blend(key, np.full(shape, value, np.float32), spread, still, mesh, long, 0.2)
