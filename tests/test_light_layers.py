@@ -229,6 +229,11 @@ def test_compose_passes_gives_a_pass_black_in_the_whole_frame_none() -> None:
     np.testing.assert_allclose(parts[3], volume, rtol=1e-6)  # where VolumeDir read 0 too
     without = compose_passes(light, outputs, [passes[0], passes[2], passes[3]], emitters=True)
     np.testing.assert_array_equal(parts[[0, 2, 3]].view(np.uint32), without.view(np.uint32))
+    # A signal's passes listed apart (the reader lists them side by side, split in place):
+    # the same parts, bit for bit.
+    order = [0, 3, 1, 4, 2]
+    apart = compose_passes(light, outputs, [passes[k] for k in order], emitters=True)
+    np.testing.assert_array_equal(apart.view(np.uint32), parts[order].view(np.uint32))
 
 
 def test_fill_from_neighbours_matches_a_numpy_reference() -> None:

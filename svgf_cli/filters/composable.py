@@ -222,6 +222,7 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
             continue
         own = [passes[i] for i in indexes]
         weights = np.empty((len(own), *light.shape), dtype=F32)
+        spread = np.empty(light.shape, dtype=F32) if blend is not None else None
         for index, smooth, layer in zip(indexes, weights, own, strict=True):
             if index not in lit:
                 smooth[...] = 0.0
@@ -237,15 +238,19 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
             surface, coverage = covered[id(layer.colour)]
             stored = np.ascontiguousarray(layer.stored, dtype=F32)
             covered_average(stored, surface, coverage, SHARE_RADIUS, smooth)
-            if blend is not None:
-                spread = np.empty_like(smooth)
+            if blend is not None and spread is not None:
                 covered_spread(stored, surface, coverage, smooth, SHARE_RADIUS,
                                SHARE_HISTORY_REACH, spread)
                 blend(index, smooth, spread)
             smooth *= layer.colour
-        estimates[indexes] = split_by_shares(
-            filtered, weights, [p.radiance for p in own], out=weights,
+        # Passes listed side by side (a signal's always are): split straight into theirs.
+        side_by_side = indexes == list(range(indexes[0], indexes[-1] + 1))
+        parts = split_by_shares(
+            filtered, weights, [p.radiance for p in own],
+            out=estimates[indexes[0]:indexes[-1] + 1] if side_by_side else weights,
             last=lambda own=own: frame_totals([p.radiance for p in own]))
+        if not side_by_side:
+            estimates[indexes] = parts
     barred = {k: pixels for k, pixels in (barred or {}).items() if pixels.any()}
     for index, pixels in barred.items():
         np.copyto(estimates[index], 0.0, where=pixels)
