@@ -562,9 +562,10 @@ def test_pass_shares_follow_each_pass_by_its_channels() -> None:
 
 def test_a_light_pass_black_in_the_frame_is_written_as_read_and_changes_nothing(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """A lobe pass +0 on every pixel as read (the shot's TransDir and VolumeInd) is left out
-    of the light layers: the output keeps it as read (+0, as its denoised light was), and
-    every other layer and the colour are bit for bit as when it is filtered with them."""
+    """A lobe pass +0 on every pixel as read (the shot's TransDir and VolumeInd), and an
+    emission pass so while another is not (its Emit beside Env), is left out of the light
+    layers: the output keeps it as read (+0, as its denoised light was), and every other
+    layer and the colour are bit for bit as when it is filtered with them."""
     from svgf_cli.filters.composable import LayeredDenoiser
     from svgf_cli.filters.params import PRESETS
     from svgf_cli.io import lightlayers
@@ -580,10 +581,11 @@ def test_a_light_pass_black_in_the_frame_is_written_as_read_and_changes_nothing(
         for frame in (1, 2, 3):
             result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
             result.frame.light = lightlayers.read_light_layers(result, "cycles")
-            names = {n for layer in result.frame.light.passes for n in layer.channels}
+            light = result.frame.light
+            names = {n for layer in (*light.passes, *light.emission) for n in layer.channels}
             runs[left_out].append((layered.process(result.frame), names,
                                    light_replaced(result.frame.light)))
-    black = [f"ViewLayer.{p}.{c}" for p in ("TransDir", "VolumeInd") for c in "RGB"]
+    black = [f"ViewLayer.{p}.{c}" for p in ("TransDir", "VolumeInd", "Emit") for c in "RGB"]
     for (got, names, replaced), (want, all_names, _) in zip(*runs.values(), strict=True):
         assert set(black) <= all_names and not set(black) & names
         assert not set(black) & set(replaced) and not set(black) & got.light.keys()
@@ -593,6 +595,21 @@ def test_a_light_pass_black_in_the_frame_is_written_as_read_and_changes_nothing(
             assert np.array_equal(plane.view(np.uint32), want.light[name].view(np.uint32)), name
         for name in black:
             assert not want.light[name].view(np.uint32).any()  # +0, as read
+
+
+def test_emission_passes_all_black_are_all_kept(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Only while another emission pass has light is a black one left out: with every pass
+    black the emission passes stay (they take the light no light pass has)."""
+    from svgf_cli.io import lightlayers
+
+    result = _read_production_frame()
+    light = lightlayers.read_light_layers(result, "cycles")
+    assert [layer.channels[0] for layer in light.emission] == ["ViewLayer.Env.R"]
+    monkeypatch.setattr(lightlayers, "_all_zero", lambda source, names: True)
+    light = lightlayers.read_light_layers(result, "cycles")
+    assert not light.passes
+    assert [layer.channels[0] for layer in light.emission] == ["ViewLayer.Emit.R",
+                                                               "ViewLayer.Env.R"]
 
 
 def test_only_a_pass_of_plus_zero_bits_counts_as_black() -> None:

@@ -179,17 +179,22 @@ def check_groups(groups: Sequence[LightLayer], frame: Frame) -> SumCheck:
 
 
 def read_light_layers(result, preset: str) -> LightLayers:  # noqa: ANN001
-    """The light passes and groups of a read (`io.exr.ReadResult`) from its decoded file."""
+    """The light passes, groups and emission passes of a read (`io.exr.ReadResult`) from its
+    decoded file; an emission pass +0 on every pixel is left out (written as read) while
+    another one is not."""
     source = getattr(result, "source", None)
     if source is None:
         return LightLayers()
     resolved = result.resolved
     passes = pass_layers(source, resolved, getattr(result, "plan", None), preset)
     groups = group_layers(source, getattr(result, "colour_channels", None))
+    found = [names for names in (resolved["emission"], resolved["environment"])
+             if names and len(names) == 3]
+    # A black emission pass is written as read while another one takes the emission.
+    lit = [names for names in found if not _all_zero(source, names)]
     emission = []
-    for role in ("emission", "environment"):
-        names = resolved[role]
-        plane = _plane(source, names) if names and len(names) == 3 else None
+    for names in lit or found:
+        plane = _plane(source, names)
         if plane is not None:
             emission.append(LightLayer(tuple(names), plane, plane))  # type: ignore[arg-type]
     return LightLayers(passes, groups, emission)
