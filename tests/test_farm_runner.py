@@ -6,6 +6,7 @@ history files. The real Denoiser is exercised end to end in test_cli_*.py.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import os
 import signal
@@ -141,6 +142,35 @@ def test_reads_run_at_most_one_frame_ahead(tmp_path: Path) -> None:
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         f"out.{f:04d}.exr" for f in range(4, 21)
     ]
+
+
+@pytest.mark.parametrize("low_memory", [False, True])
+def test_low_memory_reads_no_frame_beside_the_filter(tmp_path: Path, low_memory: bool) -> None:
+    """--low-memory: while frame n is filtered no later frame has been read (the read of
+    n + 1 starts once n is handed to the writer); by default n + 1 is read meanwhile. The
+    same frames are written either way."""
+    reader = FakeReader()
+    ahead: list[int] = []
+
+    def factory(params: SVGFParams, debug: bool) -> FakeDenoiser:
+        d = FakeDenoiser(params, debug)
+
+        def slow_filter(n: int) -> None:
+            threading.Event().wait(0.03)  # an eager read of n + 1 has started meanwhile
+            ahead.append(len(reader.started) - n)
+
+        d.on_process = slow_filter
+        return d
+
+    tasks = tasks_for(tmp_path, range(1, 8), warmup=2)
+    (tmp_path / "out").mkdir()
+    config = dataclasses.replace(CONFIG, low_memory=low_memory)
+    stats = run_sequence(tasks, config, quiet(), make_denoiser=factory, read=reader)
+    assert stats.frames_written == 5 and reader.started == list(range(1, 8))
+    if low_memory:
+        assert ahead == [1] * 7
+    else:
+        assert ahead[:-1] == [2] * 6 and ahead[-1] == 1
 
 
 @pytest.mark.parametrize(
@@ -329,6 +359,28 @@ def test_read_ahead_and_write_behind_serve_a_reversed_pass(tmp_path: Path) -> No
     lines = progress.out.getvalue().splitlines()
     assert [line.split("(frame ")[1].split(",")[0] for line in lines] == ["5", "4", "3", "2", "1"]
     assert progress.err.getvalue().splitlines()[0] == f"WARNING: {tasks[0].output}: note 5"
+
+
+def test_read_ahead_not_eager_reads_a_frame_only_when_asked(tmp_path: Path) -> None:
+    """``eager=False`` (--low-memory): the next frame's read starts at ``prefetch`` or when
+    the frame is asked for, never beside the frame the caller holds; every frame is read
+    once and in order, and leaving the block starts no read."""
+    tasks = tasks_for(tmp_path, range(1, 6))
+    reader = FakeReader()
+    seen, held = [], []
+    with ReadAhead(tasks, lambda t: reader(t.input, None), RunStats(), eager=False) as reads:
+        for position, (task, _, _) in enumerate(reads):
+            threading.Event().wait(0.02)  # a read started now would have begun meanwhile
+            held.append(len(reader.started))
+            seen.append(task.frame)
+            if position % 2 == 0:
+                reads.prefetch()  # odd positions: asked for by the loop itself
+                reads.prefetch()  # once only
+            if position == 3:
+                break
+    assert seen == [1, 2, 3, 4] and held == [1, 2, 3, 4]
+    threading.Event().wait(0.05)
+    assert reader.started == [1, 2, 3, 4]  # frame 5: never asked for
 
 
 def test_write_behind_finishes_the_write_in_flight_when_an_error_unwinds(tmp_path: Path) -> None:

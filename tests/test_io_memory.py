@@ -58,13 +58,14 @@ def _held_bytes(source: SourceFile) -> int:
     return sum(bases.values())
 
 
-def _run(out: Path, frames: range = FRAMES, read: Any = default_reader) -> None:
+def _run(out: Path, frames: range = FRAMES, read: Any = default_reader,
+         low_memory: bool = False) -> None:
     """A causal run (no warm start) of the shot's ``frames`` into ``out``, light layers
     denoised, with the cycles preset's mapping."""
     out.mkdir(parents=True, exist_ok=True)
     mapping = build_mapping("cycles")
     config = RunConfig(params=resolve_params("default", warm_start=0), preset="default",
-                       mapping=mapping, light_layers="denoised")
+                       mapping=mapping, light_layers="denoised", low_memory=low_memory)
     tasks = [FrameTask(f, SHOT / f"in.{f:04d}.exr", out / f"o.{f:04d}.exr") for f in frames]
     quiet = Progress("lines", len(tasks), quiet=True, out=io.StringIO(), err=io.StringIO())
     stats = run_sequence(tasks, config, quiet, read=read)
@@ -202,3 +203,36 @@ def test_a_causal_run_holds_a_bounded_number_of_decoded_bytes(tmp_path: Path) ->
     assert len(held) == len(FRAMES)
     assert max(counts) <= 3
     assert max(held) <= 2.75 * one_file
+
+
+def test_low_memory_holds_two_decoded_files_and_writes_the_same_bits(tmp_path: Path) -> None:
+    """--low-memory: a frame is read only once the one before is filtered and handed to the
+    writer (the write before it done), so when each read ends the decoded files alive are
+    that one and the one being written (which let go of what it writes anew): at most two,
+    under two files' pixels; the outputs are the default run's, bit for bit."""
+    alive: list[weakref.ref[SourceFile]] = []
+    counts: list[int] = []
+    held: list[int] = []
+    lock = threading.Lock()
+
+    def read(path: Path, mapping: Any, **kwargs: Any) -> Any:
+        result = default_reader(path, mapping, **kwargs)
+        with lock:
+            alive.append(weakref.ref(result.source))
+            sources = [s for r in alive if (s := r()) is not None]
+            counts.append(len(sources))
+            held.append(sum(_held_bytes(s) for s in sources))
+        return result
+
+    frames = range(1, 5)
+    _run(tmp_path / "low", frames, read, low_memory=True)
+    _run(tmp_path / "default", frames)
+    one_file = _held_bytes(read_frame(SHOT / "in.0001.exr", build_mapping("cycles")).source)
+    assert len(counts) == len(frames) and max(counts) <= 2, counts
+    assert max(held) < 2 * one_file
+    for frame in frames:
+        name = f"o.{frame:04d}.exr"
+        low, default = _pixels(tmp_path / "low" / name), _pixels(tmp_path / "default" / name)
+        assert low.keys() == default.keys()
+        for channel, pixels in low.items():
+            assert np.array_equal(pixels.view(np.uint8), default[channel].view(np.uint8)), channel

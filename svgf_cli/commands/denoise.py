@@ -69,8 +69,8 @@ SECTIONS = [
     ("Presets and layers", ["preset", "preset_aovs", "signals", "aovs", "motion_convention"]),
     (
         "Run and progress",
-        ["bidirectional", "warm_start", "threads", "scratch_dir", "progress_mode", "quiet",
-         "verbose", "dry_run", "check_only"],
+        ["bidirectional", "warm_start", "threads", "low_memory", "scratch_dir", "progress_mode",
+         "quiet", "verbose", "dry_run", "check_only"],
     ),
     ("Farm chunks and Dask", ["chunk_size", "workers", "scheduler"]),
 ]
@@ -184,6 +184,13 @@ SECTIONS = [
     default=None,
     metavar="N",
     help="Compute and I/O threads (0 = all cores) [default: all].",
+)
+@click.option(
+    "--low-memory",
+    is_flag=True,
+    help="Read each frame only once the frame before is filtered (while it is written): "
+    "one decoded frame less in memory, reading no longer beside the filter (1080p "
+    "80-channel Cycles frames: peak 2.7 against 3.4 GB, ~9 % slower).",
 )
 @click.option("-q", "--quiet", is_flag=True, help="No start-up log or automatic progress.")
 @click.option("-v", "--verbose", is_flag=True, help="Per-frame timings and the chunk plan.")
@@ -460,6 +467,7 @@ def _execute(run: _Run) -> Any:
         debug_aovs=options["debug_aovs"],
         warmup_label=warmup_label(run.warmup),
         scratch_dir=options["scratch_dir"],
+        low_memory=options["low_memory"],
         # Dask workers set their own threads; a remote scheduler's workers keep theirs
         # unless --threads was given.
         threads=(run.threads if options["workers"] else options["threads"])

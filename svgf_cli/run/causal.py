@@ -6,7 +6,8 @@ read and the one written (the writer thread reads a denoised frame's planes whil
 one is filtered: safe because `DenoisedFrame` arrays are fresh per frame, not the filter's
 buffers). The one filtered has let go of the input pixels of the light layers a layered
 filter writes anew, the one written of every channel its output replaces
-(`output.release_light_inputs`, `output.release_replaced`).
+(`output.release_light_inputs`, `output.release_replaced`). With ``--low-memory``, two: the
+next frame is read once the one before is filtered and handed to the writer.
 """
 
 from __future__ import annotations
@@ -93,7 +94,8 @@ def run_causal(
         warmup_total = sum(1 for t in tasks if t.output is None)
     warmup = WarmupCount(progress, warmup_total)
     with (
-        ReadAhead(tasks, frame_reader(config, read), stats) as reads,
+        ReadAhead(tasks, frame_reader(config, read), stats,
+                  eager=not config.low_memory) as reads,
         WriteBehind(frame_writer(config), progress, stats) as writes,
     ):
         frame_started = time.perf_counter()
@@ -114,6 +116,9 @@ def run_causal(
                 writes.submit_denoised(task, result, denoised, config, frame_started)
                 # Only the writer holds this frame now: memory is freed when it is done.
                 denoised = result = None  # type: ignore[assignment]
+            # --low-memory: the next frame is read only now, beside this frame's write alone
+            # (the write before it is done); otherwise it is under way already.
+            reads.prefetch()
             frame_started = time.perf_counter()
             progress.detail(
                 f"frame {task.frame}: read {read_seconds:.3f} s, compute {compute_seconds:.3f} s"

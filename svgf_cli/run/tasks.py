@@ -47,6 +47,8 @@ class RunConfig:
     # --light-layers: "denoised" writes the light passes and groups denoised (run.light);
     # "as-read" passes them through. The CLI's default is "denoised".
     light_layers: str = "as-read"
+    # --low-memory: a causal run reads a frame only once the one before is filtered.
+    low_memory: bool = False
 
 
 @dataclass

@@ -4,7 +4,7 @@ writing with `frame_writer`).
 
 Each owns its thread, started with SIGINT/SIGTERM blocked (`stop.block_signals`). With the
 filter working on one frame between them, memory holds about three frames whatever the
-sequence length (two with ``ReadAhead(after=WriteBehind.in_flight)``).
+sequence length (two with ``ReadAhead(after=WriteBehind.in_flight)`` or not ``eager``).
 """
 
 from __future__ import annotations
@@ -92,19 +92,23 @@ class ReadAhead:
     to ``stats``. With ``after``, a read starts only once the future ``after`` returns
     when the read is queued (None: at once) is done, e.g. the write in flight
     (:meth:`WriteBehind.in_flight`: then a read overlaps at most the write of the frame
-    just filtered, never an older one, and two frames are in memory, not three). Owns its
-    thread: leaving the ``with`` block cancels a read not yet started and waits for one
-    under way.
+    just filtered, never an older one, and two frames are in memory, not three). Not
+    ``eager``: the next read starts when the caller asks (:meth:`prefetch`, e.g. once the
+    frame it holds is filtered), or when it asks for that frame: one read frame at a time,
+    never two. Owns its thread: leaving the ``with`` block cancels a read not yet started
+    and waits for one under way.
     """
 
     def __init__(
         self, tasks: Sequence[FrameTask], read: Callable[[FrameTask], ReadResult],
         stats: RunStats, after: Callable[[], Future[object] | None] | None = None,
+        eager: bool = True,
     ) -> None:
         self._tasks = tasks
         self._read = read
         self._stats = stats
         self._after = after
+        self._eager = eager
         self._position = 0
         self._executor = ThreadPoolExecutor(
             1, thread_name_prefix="svgf-read", initializer=block_signals
@@ -130,20 +134,28 @@ class ReadAhead:
 
     def __next__(self) -> tuple[FrameTask, ReadResult, float]:
         # No generator: its suspended frame would hold the previous result a frame longer.
+        self.prefetch()
         if self._upcoming is None:
             raise StopIteration
         task = self._tasks[self._position]
         wait_started = time.perf_counter()
         result, seconds = self._upcoming.result()
+        self._upcoming = None
         self._stats.wait_read_seconds += time.perf_counter() - wait_started
         self._stats.read_seconds += seconds
         self._position += 1
-        # Prefetch the next frame while this one is filtered (queue depth one).
-        self._upcoming = self._submit(self._position)
+        if self._eager:  # the next frame is read while this one is filtered (depth one)
+            self.prefetch()
         return task, result, seconds
+
+    def prefetch(self) -> None:
+        """Start reading the next frame now, if it is not read or under way already."""
+        if self._upcoming is None:
+            self._upcoming = self._submit(self._position)
 
     def close(self) -> None:
         self._upcoming = None
+        self._position = len(self._tasks)  # no read starts after this
         self._executor.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> ReadAhead:
