@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -223,6 +223,18 @@ class Frame:
     def names(self) -> tuple[str, ...]:
         """The signal names, in order."""
         return tuple(s.name for s in self.signals)
+
+    def release_filtered_planes(self) -> None:
+        """Let go of the planes only a colour's filter reads: each signal's radiance,
+        demodulation colour and gradient samples (its name and flags stay, its planes
+        become empty), the medium and the emission. For a caller that composes the light
+        layers once the colour is filtered and consumes the frame
+        (`filters.composable.LayeredDenoiser`): those planes need not live until then."""
+        empty = np.empty((3, 0, 0), dtype=np.float32)
+        self.signals = [replace(s, radiance=empty, albedo=empty, gradient=None)
+                        for s in self.signals]
+        self.medium = None
+        self.emission = None
 
     def signal(self, name: str) -> Signal:
         """The signal called ``name`` (ValueError if there is none)."""

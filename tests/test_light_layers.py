@@ -865,11 +865,12 @@ def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
         result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
         light = read_light_layers(result, "cycles")
         result.frame.light = light
+        groups = group_frame(result.frame, light.groups)  # before the frame is let go of
         denoised = layered.process(result.frame)
         assert denoised.medium is not None and denoised.medium.any()  # medium pixels filled
         assert "medium" in layered.colour.stage_seconds
         assert "medium" not in layered.groups.stage_seconds
-        want = own.process(group_frame(result.frame, light.groups))
+        want = own.process(groups)
         assert "medium" in own.stage_seconds
         assert taken[-1].layers.keys() == want.layers.keys()
         for name, plane in want.layers.items():
@@ -901,6 +902,50 @@ def test_layered_filter_holds_one_workspace_at_a_time_and_gives_the_same_bits() 
         got, want = outputs
         assert np.array_equal(got.color.view(np.uint32), want.color.view(np.uint32))
         assert got.light.keys() == want.light.keys() and len(got.light) > 20
+        for name, plane in want.light.items():
+            assert np.array_equal(got.light[name].view(np.uint32), plane.view(np.uint32)), name
+
+
+def test_layered_filter_lets_go_of_the_signals_planes_before_the_light_layers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Once the colour is filtered, the frame's signal planes (read only by the colour's
+    filter) are let go: none of them is alive when the light passes are composed, and every
+    output layer is bit for bit what a filter that keeps them gives."""
+    import weakref
+
+    from svgf_cli.filters import composable
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.frame import Frame
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    alive: list[list[bool]] = []
+    compose = composable.write_passes
+
+    def spy(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        alive.append([ref() is not None for ref in planes])
+        return compose(*args, **kwargs)
+
+    monkeypatch.setattr(composable, "write_passes", spy)
+    lean, keeping = (composable.LayeredDenoiser(PRESETS["default"]) for _ in range(2))
+    outputs: list[list] = [[], []]
+    for released in (True, False):
+        if not released:
+            monkeypatch.setattr(Frame, "release_filtered_planes", lambda self: None)
+        for frame in (1, 2):
+            result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+            result.frame.light = read_light_layers(result, "cycles")
+            planes = [weakref.ref(s.radiance) for s in result.frame.signals]
+            layered = lean if released else keeping
+            outputs[released].append(layered.process(result.frame))
+            if released:
+                assert all(s.radiance.size == 0 for s in result.frame.signals)
+    assert alive[:2] == [[False] * len(planes)] * 2 and any(alive[2])
+    for got, want in zip(outputs[True], outputs[False], strict=True):
+        assert np.array_equal(got.color.view(np.uint32), want.color.view(np.uint32))
+        assert got.light.keys() == want.light.keys()
         for name, plane in want.light.items():
             assert np.array_equal(got.light[name].view(np.uint32), plane.view(np.uint32)), name
 

@@ -730,6 +730,10 @@ class LayeredDenoiser:
         # stands in (filters.stages.reflected_lights): their colour passes stay as read.
         albedos = _planes(denoised.layers, tuple(s.name for s in frame.signals
                                                  if not s.glossy), ".albedo")
+        medium_signal = next((s.name for s in frame.signals
+                              if frame.medium is not None and s.radiance is frame.medium), None)
+        for filtered in (frame, gbuffer):  # read by the colour's filter alone (peak -115 MB)
+            filtered.release_filtered_planes()
         lengths = {name: denoised.layers.get(f"{name}.history_length") for name in names}
         denoised.layers = ({k: v for k, v in denoised.layers.items()
                             if ".albedo." not in k and not k.endswith(".history_length")}
@@ -738,8 +742,6 @@ class LayeredDenoiser:
         clock.clear()
         if light.passes:
             started = time.perf_counter()
-            medium = next((s.name for s in frame.signals
-                           if frame.medium is not None and s.radiance is frame.medium), None)
             alpha = params_for_samples(self.params, frame.samples_per_pixel).alpha
 
             def blend(index: int, mean: np.ndarray, spread: np.ndarray) -> None:
@@ -747,7 +749,7 @@ class LayeredDenoiser:
                 self.shares.blend(layer.channels, mean, spread, gbuffer.motion,
                                   gbuffer.mesh_id, lengths.get(layer.signal), alpha)
 
-            write_passes(denoised, emission, outputs, albedos, light, medium, kept, blend,
+            write_passes(denoised, emission, outputs, albedos, light, medium_signal, kept, blend,
                          pixel_filter_weight(self.params.pixel_filter, frame.centre_sampled),
                          spill)
             self.shares.advance(gbuffer.mesh_id)
