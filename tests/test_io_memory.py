@@ -177,13 +177,9 @@ def test_letting_go_of_replaced_pixels_changes_no_output_bit(
             assert lean[name].tobytes() == plane.tobytes(), (frame, name)
 
 
-def test_a_causal_run_holds_a_bounded_number_of_decoded_bytes(tmp_path: Path) -> None:
-    """When each read ends, the decoded files alive (the one read, the one filtered, the one
-    written) hold less than three files' pixels, whatever the run's length: the frame
-    written has let go of what the output writes anew (before it is handed to the writer),
-    and nothing is kept per frame. The frame being filtered lets go right after its light
-    layers are attached, which the next read may finish before (a race): so the bound is
-    two files plus a released one (measured 2.5-2.59 files; 3.0 without the releases)."""
+def _counting_reader() -> tuple[Any, list[int], list[int]]:
+    """A reader that notes, when each read ends, how many decoded files are alive and how
+    many bytes of pixels they hold: ``(read, counts, held)``."""
     alive: list[weakref.ref[SourceFile]] = []
     counts: list[int] = []
     held: list[int] = []
@@ -198,6 +194,17 @@ def test_a_causal_run_holds_a_bounded_number_of_decoded_bytes(tmp_path: Path) ->
             held.append(sum(_held_bytes(s) for s in sources))
         return result
 
+    return read, counts, held
+
+
+def test_a_causal_run_holds_a_bounded_number_of_decoded_bytes(tmp_path: Path) -> None:
+    """When each read ends, the decoded files alive (the one read, the one filtered, the one
+    written) hold less than three files' pixels, whatever the run's length: the frame
+    written has let go of what the output writes anew (before it is handed to the writer),
+    and nothing is kept per frame. The frame being filtered lets go right after its light
+    layers are attached, which the next read may finish before (a race): so the bound is
+    two files plus a released one (measured 2.5-2.59 files; 3.0 without the releases)."""
+    read, counts, held = _counting_reader()
     _run(tmp_path, FRAMES, read)
     one_file = _held_bytes(read_frame(SHOT / "in.0001.exr", build_mapping("cycles")).source)
     assert len(held) == len(FRAMES)
@@ -210,20 +217,7 @@ def test_low_memory_holds_two_decoded_files_and_writes_the_same_bits(tmp_path: P
     writer (the write before it done), so when each read ends the decoded files alive are
     that one and the one being written (which let go of what it writes anew): at most two,
     under two files' pixels; the outputs are the default run's, bit for bit."""
-    alive: list[weakref.ref[SourceFile]] = []
-    counts: list[int] = []
-    held: list[int] = []
-    lock = threading.Lock()
-
-    def read(path: Path, mapping: Any, **kwargs: Any) -> Any:
-        result = default_reader(path, mapping, **kwargs)
-        with lock:
-            alive.append(weakref.ref(result.source))
-            sources = [s for r in alive if (s := r()) is not None]
-            counts.append(len(sources))
-            held.append(sum(_held_bytes(s) for s in sources))
-        return result
-
+    read, counts, held = _counting_reader()
     frames = range(1, 5)
     _run(tmp_path / "low", frames, read, low_memory=True)
     _run(tmp_path / "default", frames)

@@ -1090,22 +1090,23 @@ def test_no_light_where_a_pass_has_none(outputs: dict[str, Path]) -> None:
         assert layer(den, "VolumeDir")[:, far].max() < 1e-3, frame
 
 
-@pytest.fixture(scope="module")
-def smoke_outputs(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("smoke") / "den"
-    code = exit_code(["denoise", "--preset-aovs", "cycles", "-q", SMOKE / "in.####.exr",
+def _denoised(tmp_path_factory: pytest.TempPathFactory, sequence: Path) -> Path:
+    """``sequence``'s frames denoised with the cycles preset's defaults (light layers too)."""
+    out = tmp_path_factory.mktemp(sequence.name) / "den"
+    code = exit_code(["denoise", "--preset-aovs", "cycles", "-q", sequence / "in.####.exr",
                       "-o", f"{out}/"])
     assert code == 0
     return out
+
+
+@pytest.fixture(scope="module")
+def smoke_outputs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _denoised(tmp_path_factory, SMOKE)
 
 
 @pytest.fixture(scope="module")
 def dof_outputs(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("dof") / "den"
-    code = exit_code(["denoise", "--preset-aovs", "cycles", "-q", DOF / "in.####.exr",
-                      "-o", f"{out}/"])
-    assert code == 0
-    return out
+    return _denoised(tmp_path_factory, DOF)
 
 
 def test_dof_colour_pass_is_the_mix_of_the_footprint(dof_outputs: Path) -> None:
@@ -1114,15 +1115,25 @@ def test_dof_colour_pass_is_the_mix_of_the_footprint(dof_outputs: Path) -> None:
     exchanges as the colour does (`spilled_colours`): 0.14x its input's relMSE, 0.55x
     before (each pixel the colour of whichever surface its sample saw); the layers still
     add up to the denoised colour."""
+    out, noisy = _layer_relmse_against_input(DOF, dof_outputs, "DiffCol")
+    assert out <= 0.2 * noisy, (out, noisy)
+    for frame in FRAMES:
+        for check in file_additivity(str(dof_outputs / f"in.{frame:04d}.exr"),
+                                     build_mapping("cycles")):
+            assert check.passed, check.describe()
+
+
+def _layer_relmse_against_input(sequence: Path, outputs: Path, name: str
+                                ) -> tuple[float, float]:
+    """Layer ``name``'s relMSE (trimmed) against the references, of ``outputs`` and of
+    the input, each averaged over the frames."""
     out, noisy = [], []
     for frame in FRAMES:
         file = f"in.{frame:04d}.exr"
-        ref = layer(channels(DOF / file.replace("in.", "ref.")), "DiffCol")
-        out.append(relmse_trimmed(layer(channels(dof_outputs / file), "DiffCol"), ref))
-        noisy.append(relmse_trimmed(layer(channels(DOF / file), "DiffCol"), ref))
-        for check in file_additivity(str(dof_outputs / file), build_mapping("cycles")):
-            assert check.passed, check.describe()
-    assert np.mean(out) <= 0.2 * np.mean(noisy), (np.mean(out), np.mean(noisy))
+        ref = layer(channels(sequence / file.replace("in.", "ref.")), name)
+        out.append(relmse_trimmed(layer(channels(outputs / file), name), ref))
+        noisy.append(relmse_trimmed(layer(channels(sequence / file), name), ref))
+    return float(np.mean(out)), float(np.mean(noisy))
 
 
 @pytest.mark.parametrize(("name", "bound"), [("DiffDir", 0.28), ("Combined_env", 0.2)])
@@ -1138,13 +1149,8 @@ def test_smoke_layer_errors_against_the_input(smoke_outputs: Path, name: str,
     noisy outlines, 0.34x before the medium's groups, 0.26x with the groups remodulated by
     the smoke's per-sample albedo (medium surfaces), 0.29x without the colour's pixel filter
     on the groups' shares."""
-    out, noisy = [], []
-    for frame in FRAMES:
-        file = f"in.{frame:04d}.exr"
-        ref = layer(channels(SMOKE / file.replace("in.", "ref.")), name)
-        out.append(relmse_trimmed(layer(channels(smoke_outputs / file), name), ref))
-        noisy.append(relmse_trimmed(layer(channels(SMOKE / file), name), ref))
-    assert np.mean(out) <= bound * np.mean(noisy), (np.mean(out), np.mean(noisy))
+    out, noisy = _layer_relmse_against_input(SMOKE, smoke_outputs, name)
+    assert out <= bound * noisy, (out, noisy)
 
 
 def test_smoke_layers_add_up_to_the_denoised_colour(smoke_outputs: Path) -> None:
