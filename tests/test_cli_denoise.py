@@ -38,6 +38,30 @@ def reference(sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[
     return {f: read_exr(p) for f, p in reference_run(tmp_path_factory, sequence).items()}
 
 
+def test_low_memory_says_so_and_writes_the_same_frames(
+    sequence: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    reference: dict[int, ExrImage],
+) -> None:
+    """--low-memory changes when frames are read, not what is written: the start-up log
+    says it, every output is the default run's, bit for bit."""
+    out = tmp_path / "den"
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr", "--low-memory"],
+        capsys,
+    )
+    assert code == 0, err
+    assert "Memory: --low-memory" in stdout
+    files = outputs(out, "den")
+    assert len(files) == len(FRAMES)
+    for frame, path in zip(FRAMES, files, strict=True):
+        assert read_exr(path).same_pixels(reference[frame]), frame
+    code, stdout, _ = run_cli(["denoise", sequence / "in.####.exr", "-o",
+                               tmp_path / "plain" / "den.####.exr"], capsys)
+    assert code == 0 and "Memory:" not in stdout
+
+
 def copy_inputs(sequence: Path, dest: Path) -> Path:
     shutil.copytree(sequence, dest)
     return dest

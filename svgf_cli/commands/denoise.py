@@ -381,6 +381,8 @@ def _log_start(run: _Run, info: Any) -> None:
     params, progress = run.params, run.progress
     progress.info(f"svgf {__version__} denoise")
     progress.info(f"Threads: {run.threads}")
+    if run.options["low_memory"]:
+        progress.info("Memory: --low-memory (each frame read once the one before is filtered)")
     progress.info(f"Preset: {run.options['preset']}")
     progress.info(f"Parameters: {describe_params(params)}")
     if params.atrous_iterations == AUTO_ITERATIONS:
