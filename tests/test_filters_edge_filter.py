@@ -12,6 +12,7 @@ from svgf_cli.filters.edge_filter import (
     OutlineSpill,
     edge_filter,
     edge_filter_weight,
+    exchange,
     isolated_samples,
     lone_samples,
     near,
@@ -178,6 +179,55 @@ def test_the_spill_made_on_its_box_alone_is_the_whole_frames() -> None:
     assert cropped.mesh_id.size < 0.5 * big_mesh.size
     np.testing.assert_array_equal(cropped.apply(big), whole.apply(big))
     assert not np.array_equal(whole.apply(big), big)
+    # The spill's scratch kept from plane to plane: another plane's exchanges are its own.
+    other = np.random.default_rng(8).random(big.shape).astype(F32)
+    np.testing.assert_array_equal(cropped.apply(other), whole.apply(other))
+    np.testing.assert_array_equal(cropped.apply(big), whole.apply(big))
+
+
+@pytest.mark.parametrize("passes", [3, 4])
+def test_the_spill_matches_a_float64_reference_in_place_or_not(passes: int) -> None:
+    """A whole-frame spill (no crop: even passes end in the plane handed in) made in place,
+    into another array and into a new one: the same bits, each ``passes`` exchanges of the
+    float64 reference; the planes handed in are left alone unless they are ``out``."""
+    colour, mesh, depth = _speckled(1)
+    colour *= np.random.default_rng(4).uniform(0.5, 1.5, colour.shape).astype(F32)
+    weights = noisy_outline_weights(outline_share(mesh, depth), 0.25)
+    weights[0, 0] = weights[-1, -1] = 0.1  # the box is the whole frame
+    spill = OutlineSpill.of(mesh, depth, weights, passes)
+    assert spill.mesh_id.shape == mesh.shape
+    want = colour.astype(np.float64)
+    for _ in range(passes):
+        want = ref.edge_filter(want, mesh, depth, weights)
+    kept = colour.copy()
+    fresh = spill.apply(colour)
+    np.testing.assert_array_equal(colour, kept)
+    into = np.full_like(colour, np.nan)
+    assert spill.apply(colour, into) is into
+    in_place = colour.copy()
+    assert spill.apply(in_place, in_place) is in_place
+    np.testing.assert_array_equal(fresh, into)
+    np.testing.assert_array_equal(fresh, in_place)
+    np.testing.assert_allclose(fresh, want, rtol=1e-5, atol=1e-6)
+    assert not np.allclose(fresh, colour)
+
+
+def test_the_exchanges_of_many_planes_at_once_are_each_planes() -> None:
+    """``exchange`` over six planes gives each three the bits it gives them alone."""
+    colour, mesh, depth = _speckled(2)
+    other = np.random.default_rng(6).random(colour.shape).astype(F32)
+    spill = OutlineSpill.of(mesh, depth, noisy_outline_weights(outline_share(mesh, depth),
+                                                               0.25), 1)
+    right, down = spill.pairs
+    box = (slice(None), *spill.box)
+    planes = np.ascontiguousarray(np.concatenate([colour[box], other[box]]))
+    both = np.empty_like(planes)
+    exchange(planes, right, down, np.empty_like(planes), both)
+    for k, alone in enumerate((colour, other)):
+        single = np.ascontiguousarray(alone[box])
+        out = np.empty_like(single)
+        exchange(single, right, down, np.empty_like(single), out)
+        np.testing.assert_array_equal(both[3 * k:3 * k + 3], out)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

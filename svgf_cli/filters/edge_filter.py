@@ -32,7 +32,7 @@ each pair uses the mean of its two pixels' weights, so what the pair holds is st
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
@@ -91,49 +91,73 @@ def _pair_weights(ids_a: np.ndarray, z_a: np.ndarray, w_a: np.ndarray, ids_b: np
         out[i] = pair if _outline(ids_a[i], ids_b[i], z_a[i], z_b[i]) else _ZERO
 
 
-@njit(
-    parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
-)
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def pair_weights(mesh_id: np.ndarray, depth: np.ndarray, weight: np.ndarray,
+                 right: np.ndarray, down: np.ndarray) -> None:
+    """The exchanges' weights (H, W): ``right[y, x]`` of the pair of pixel ``(y, x)`` and
+    its right neighbour, ``down[y, x]`` of it and the one below: the mean of the two
+    pixels' ``weight`` where they show two surfaces, else 0 (0 past the image's edge)."""
+    height, width = depth.shape
+    for y in prange(height):
+        ids, z, w = mesh_id[y], depth[y], weight[y]
+        across, under = right[y], down[y]
+        _pair_weights(ids[:-1], z[:-1], w[:-1], ids[1:], z[1:], w[1:], across[:-1])
+        across[width - 1] = _ZERO
+        if y < height - 1:
+            _pair_weights(ids, z, w, mesh_id[y + 1], depth[y + 1], weight[y + 1], under)
+        else:
+            under[:] = _ZERO
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def exchange(planes: np.ndarray, right: np.ndarray, down: np.ndarray, rows: np.ndarray,
+             out: np.ndarray) -> None:
+    """``out`` (C, H, W): ``planes`` (C, H, W) after the exchanges of the pair weights
+    ``right`` and ``down`` (:func:`pair_weights`), ``c'(p) = c(p) + sum_q w_pq (c(q) -
+    c(p))``, along rows (into ``rows``, (C, H, W) scratch) then columns; float32, row
+    slices."""
+    channels, height, width = planes.shape
+    for y in prange(height):
+        across = right[y]
+        for c in range(channels):
+            source, row = planes[c, y], rows[c, y]
+            row[0] = source[0] + across[0] * (source[1] - source[0]) if width > 1 else source[0]
+            for x in range(1, width - 1):
+                here = source[x]
+                row[x] = (here + across[x - 1] * (source[x - 1] - here)
+                          + across[x] * (source[x + 1] - here))
+            if width > 1:
+                row[width - 1] = source[width - 1] + across[width - 2] * (
+                    source[width - 2] - source[width - 1])
+    for y in prange(height):
+        above = max(y - 1, 0)
+        below = min(y + 1, height - 1)
+        up = down[above]
+        under = down[y]
+        for c in range(channels):
+            here, target = rows[c, y], out[c, y]
+            over, lower = rows[c, above], rows[c, below]
+            if y > 0:
+                for x in range(width):
+                    h = here[x]
+                    target[x] = h + up[x] * (over[x] - h) + under[x] * (lower[x] - h)
+            else:
+                for x in range(width):
+                    h = here[x]
+                    target[x] = h + _ZERO * (over[x] - h) + under[x] * (lower[x] - h)
+
+
 def edge_filter(colour: np.ndarray, mesh_id: np.ndarray, depth: np.ndarray,
                 weight: np.ndarray, out: np.ndarray) -> None:
     """``out`` (3, H, W): ``colour`` (3, H, W) with each outline neighbour's colour
     exchanged at the mean of the two pixels' ``weight`` (H, W), along rows then columns
-    (module docstring); float32. The pairs' weights are found once per row; the exchanges
-    run over row slices."""
-    height, width = depth.shape
-    rows = np.empty((3, height, width), dtype=F32)
-    for y in prange(height):
-        ids, z, w = mesh_id[y], depth[y], weight[y]
-        left = np.zeros(width, dtype=F32)  # with the pixel to the left
-        right = np.zeros(width, dtype=F32)
-        _pair_weights(ids[:-1], z[:-1], w[:-1], ids[1:], z[1:], w[1:], right[:-1])
-        left[1:] = right[:-1]
-        for c in range(3):
-            source, row = colour[c, y], rows[c, y]
-            row[0] = source[0] + right[0] * (source[1] - source[0]) if width > 1 else source[0]
-            for x in range(1, width - 1):
-                here = source[x]
-                row[x] = (here + left[x] * (source[x - 1] - here)
-                          + right[x] * (source[x + 1] - here))
-            if width > 1:
-                row[width - 1] = source[width - 1] + left[width - 1] * (
-                    source[width - 2] - source[width - 1])
-    for y in prange(height):
-        ids, z, w = mesh_id[y], depth[y], weight[y]
-        up = np.zeros(width, dtype=F32)
-        down = np.zeros(width, dtype=F32)
-        if y > 0:
-            _pair_weights(ids, z, w, mesh_id[y - 1], depth[y - 1], weight[y - 1], up)
-        if y < height - 1:
-            _pair_weights(ids, z, w, mesh_id[y + 1], depth[y + 1], weight[y + 1], down)
-        above = max(y - 1, 0)
-        below = min(y + 1, height - 1)
-        for c in range(3):
-            here, target = rows[c, y], out[c, y]
-            over, under = rows[c, above], rows[c, below]
-            for x in range(width):
-                h = here[x]
-                target[x] = h + up[x] * (over[x] - h) + down[x] * (under[x] - h)
+    (module docstring); float32."""
+    right = np.empty(depth.shape, dtype=F32)
+    down = np.empty(depth.shape, dtype=F32)
+    pair_weights(mesh_id, depth, weight, right, down)
+    exchange(colour, right, down, np.empty(out.shape, dtype=F32), out)
 
 
 def outline_share(mesh_id: np.ndarray, depth: np.ndarray, radius: int = DENSE_RADIUS
@@ -253,7 +277,9 @@ class OutlineSpill:
     over the outlines of ``mesh_id`` and ``depth``. Linear and conservative, so made on each
     light layer as on the colour they keep the layers adding up to it. Only the pixels
     within one of a weighted pixel change (a pair's weight is the mean of its two pixels'):
-    the exchanges are made on that box alone."""
+    the exchanges are made on that box alone. The pairs' weights are found once, for every
+    pass and every plane the exchanges are made on (a frame's colour and its ten or more
+    light layers)."""
 
     mesh_id: np.ndarray
     depth: np.ndarray
@@ -261,6 +287,17 @@ class OutlineSpill:
     passes: int
     # Where in the frame the three planes above lie (the whole frame by default).
     box: tuple[slice, slice] = (slice(None), slice(None))
+    # pair_weights of the three planes: (right, down).
+    pairs: tuple[np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
+    # The crops and rows the exchanges go through (`_scratch`).
+    scratch: list[np.ndarray] = field(default_factory=list, init=False, repr=False,
+                                      compare=False)
+
+    def __post_init__(self) -> None:
+        right = np.empty(self.depth.shape, dtype=F32)
+        down = np.empty(self.depth.shape, dtype=F32)
+        pair_weights(self.mesh_id, self.depth, self.weight, right, down)
+        object.__setattr__(self, "pairs", (right, down))
 
     @classmethod
     def of(cls, mesh_id: np.ndarray, depth: np.ndarray, weight: np.ndarray,
@@ -282,10 +319,30 @@ class OutlineSpill:
             out = np.array(planes, dtype=F32, order="C")
         elif out is not planes:
             np.copyto(out, planes)
-        crop = np.ascontiguousarray(out[(slice(None), *self.box)])
+        region = out[(slice(None), *self.box)]
+        # The passes go back and forth between two crops, in place where the box is the
+        # whole of ``out``; the crops and the rows' scratch are this spill's, for every
+        # plane it is made on (each fresh plane costs its pages' faults: docs/
+        # performance.md).
+        whole = region.flags.c_contiguous
+        rows, first, *rest = self._scratch(region.shape, 2 if whole else 3)
+        if whole:
+            crop, other = region, first
+        else:
+            np.copyto(first, region)
+            crop, other = first, rest[0]
+        right, down = self.pairs
         for _ in range(self.passes):
-            exchanged = np.empty_like(crop)
-            edge_filter(crop, self.mesh_id, self.depth, self.weight, exchanged)
-            crop = exchanged
-        out[(slice(None), *self.box)] = crop
+            exchange(crop, right, down, rows, other)
+            crop, other = other, crop
+        if crop is not region:
+            region[...] = crop
         return out
+
+    def _scratch(self, shape: tuple[int, ...], count: int) -> list[np.ndarray]:
+        """``count`` float32 arrays of ``shape``, kept for the next call."""
+        if self.scratch and self.scratch[0].shape != shape:
+            self.scratch.clear()
+        while len(self.scratch) < count:
+            self.scratch.append(np.empty(shape, dtype=F32))
+        return self.scratch[:count]
