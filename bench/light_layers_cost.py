@@ -1,15 +1,22 @@
-"""Cost of the denoised light layers (issue 31) at 1080p: `svgf denoise` of the production
-shot's frames tiled 15 x 15 to 1920x1080 (every channel, 3 light groups), with
-`--light-layers denoised` against `as-read`, CPU seconds (user + system of the child).
+"""Cost of the denoised light layers (issue 31) at 1080p: `svgf denoise` with
+`--light-layers denoised` against `as-read`, end to end, the two runs alternated
+(``--repeat`` pairs), wall and CPU seconds (user + system of the child).
 
-    nice -n 10 .venv/bin/python bench/light_layers_cost.py [--frames 4] [--tiled DIR] [--parts]
+    nice -n 10 .venv/bin/python bench/light_layers_cost.py [--frames 4] [--tiled DIR]
+    .venv/bin/python bench/light_layers_cost.py --frames-dir bench/out/production/production
+    .venv/bin/python bench/light_layers_cost.py --tiled DIR --parts
 
-Prints the CPU seconds per frame of each run and the difference per extra denoised layer
-(the light groups and the light passes written denoised). With ``--parts``: in this process,
-`LayeredDenoiser.process` on the same frames, wall and CPU seconds per frame of its parts
-(the colour's filter, the groups' filter, `write_passes`, `compose_groups`, the rest; and
-within the filters, each one's ``fill_medium`` stage), the mean over the frames after the
-first, best of ``--repeat``. Running it from a baseline worktree times that tree.
+The frames: the committed production shot's tiled 15 x 15 to 1920x1080 (every channel, 3
+light groups; its fog boxes then cover the frame, as a defocused or smoky shot's noisy
+outlines do), or ``--frames-dir``'s ``in.####.exr`` (the real 1080p render of
+`bench/production_frames.py`). Prints each run, then the medians per frame and the extra
+per denoised light layer (the light groups and light passes the denoised output writes
+anew: the issue's "each extra denoised layer", ~0.15 s a frame end to end on 2 cores).
+With ``--parts``: in this process, `LayeredDenoiser.process` on the same frames, wall and
+CPU seconds per frame of its parts (the colour's filter, the groups' filter,
+`write_passes`, `compose_groups`, the rest; and within the filters, each one's
+``fill_medium`` stage), the mean over the frames after the first, best of ``--repeat``.
+Running it from a baseline worktree times that tree.
 """
 
 from __future__ import annotations
@@ -44,11 +51,25 @@ def tile(source: Path, target: Path, reps: tuple[int, int] = (15, 15)) -> None:
     OpenEXR.File(header, channels).write(str(target))
 
 
-def cpu_of(args: list[str]) -> float:
+def timed(args: list[str]) -> tuple[float, float]:
+    """Wall and CPU (user + system) seconds of the command ``args``."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
     subprocess.run(args, check=True)
+    wall = time.perf_counter() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def denoised_layers(folder: Path) -> list[str]:
+    """The layers the denoised output of the first frame writes anew (its channels that
+    differ from the as-read output's)."""
+    name = "in.0001.exr"
+    ours = OpenEXR.File(str(folder / "out-denoised" / name), separate_channels=True)
+    read = OpenEXR.File(str(folder / "out-as-read" / name), separate_channels=True)
+    theirs = read.parts[0].channels
+    return sorted({n.rsplit(".", 1)[0] for n, c in ours.parts[0].channels.items()
+                   if not np.array_equal(c.pixels, theirs[n].pixels)} - {"ViewLayer.Combined"})
 
 
 Clock = dict[str, list[float]]  # part -> [wall, CPU] seconds
@@ -116,12 +137,16 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=4)
     parser.add_argument("--tiled", type=Path, help="folder for the tiled frames (kept)")
-    parser.add_argument("--repeat", type=int, default=2, help="runs of each mode (best kept)")
+    parser.add_argument("--frames-dir", type=Path,
+                        help="real 1080p frames in.####.exr instead of the tiled shot")
+    parser.add_argument("--repeat", type=int, default=3,
+                        help="runs of each mode, alternated (the median is kept; --parts: best)")
     parser.add_argument("--parts", action="store_true",
                         help="time LayeredDenoiser.process's parts in this process instead")
     args = parser.parse_args(argv)
-    folder = args.tiled or Path(tempfile.mkdtemp(prefix="svgf_light_cost_"))
-    folder.mkdir(parents=True, exist_ok=True)
+    out_root = args.tiled or Path(tempfile.mkdtemp(prefix="svgf_light_cost_"))
+    out_root.mkdir(parents=True, exist_ok=True)
+    folder = args.frames_dir or out_root
     for frame in range(1, args.frames + 1):
         target = folder / f"in.{frame:04d}.exr"
         if not target.exists():
@@ -130,21 +155,24 @@ def main(argv: list[str]) -> int:
         parts(folder, args.frames, args.repeat)
         return 0
     svgf = str(ROOT / ".venv/bin/svgf")
-    env_threads = os.environ.get("NUMBA_NUM_THREADS", "default")
-    results = {}
+    runs: dict[str, list[tuple[float, float]]] = {}
     for mode in ("as-read", "denoised") * args.repeat:
-        out = folder / f"out-{mode}"
-        cpu = cpu_of([svgf, "denoise", "-q", "--preset-aovs", "cycles", "--overwrite",
-                      str(folder / "in.####.exr"), "-o", f"{out}/", "--light-layers", mode])
-        results.setdefault(mode, []).append(cpu / args.frames)
-        print(f"{mode:>9}: {cpu:.2f} CPU-s, {cpu / args.frames:.3f} per frame", flush=True)
-    extra = min(results["denoised"]) - min(results["as-read"])
-    channels = OpenEXR.File(str(folder / "out-denoised" / "in.0001.exr"),
-                            separate_channels=True).parts[0].channels
-    groups = sum(1 for n in channels if ".Combined_" in n and n.endswith(".R"))
-    print(f"threads {env_threads}; extra per frame (best of {args.repeat}): {extra:.3f} CPU-s for "
-          f"{groups} light groups and the light passes; per light group (if all of it were "
-          f"the groups): {extra / max(groups, 1):.3f}")
+        out = out_root / f"out-{mode}"
+        wall, cpu = timed([svgf, "denoise", "-q", "--preset-aovs", "cycles", "--overwrite",
+                           str(folder / "in.####.exr"), "-o", f"{out}/", "--frames",
+                           f"1-{args.frames}", "--light-layers", mode])
+        runs.setdefault(mode, []).append((wall / args.frames, cpu / args.frames))
+        print(f"{mode:>9}: {wall:.2f} s wall, {cpu:.2f} CPU-s", flush=True)
+    median = {mode: np.median(np.array(pairs), axis=0) for mode, pairs in runs.items()}
+    extra = median["denoised"] - median["as-read"]
+    layers = denoised_layers(out_root)
+    threads = os.environ.get("NUMBA_NUM_THREADS", "default")
+    print(f"threads {threads}; medians per frame (wall, CPU): as-read {median['as-read'][0]:.3f}"
+          f" s, {median['as-read'][1]:.3f} CPU-s; denoised {median['denoised'][0]:.3f} s, "
+          f"{median['denoised'][1]:.3f} CPU-s")
+    print(f"{len(layers)} layers written anew ({', '.join(n.split('.')[-1] for n in layers)}):"
+          f" {extra[0]:.3f} s wall and {extra[1]:.3f} CPU-s a frame more, "
+          f"{extra[0] / max(len(layers), 1):.3f} s wall a layer")
     return 0
 
 
