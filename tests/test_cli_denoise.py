@@ -62,6 +62,37 @@ def test_low_memory_says_so_and_writes_the_same_frames(
     assert code == 0 and "Memory:" not in stdout
 
 
+def test_keep_memory_says_so_sets_the_heap_policy_and_writes_the_same_frames(
+    sequence: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    reference: dict[int, ExrImage],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """--keep-memory changes where freed memory goes, not what is written: the runner sets
+    the keeping policy (recorded here, so this test process keeps its own), the start-up
+    log says it, every output is the default run's, bit for bit; without it, no policy."""
+    import svgf_cli.run.chunk as chunk
+
+    calls: list[bool] = []
+    monkeypatch.setattr(chunk, "keep_freed_blocks", lambda: calls.append(True) or True)
+    out = tmp_path / "den"
+    code, stdout, err = run_cli(
+        ["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr", "--keep-memory"],
+        capsys,
+    )
+    assert code == 0, err
+    assert calls and "Memory: --keep-memory" in stdout
+    files = outputs(out, "den")
+    assert len(files) == len(FRAMES)
+    for frame, path in zip(FRAMES, files, strict=True):
+        assert read_exr(path).same_pixels(reference[frame]), frame
+    calls.clear()
+    code, stdout, _ = run_cli(["denoise", sequence / "in.####.exr", "-o",
+                               tmp_path / "plain" / "den.####.exr"], capsys)
+    assert code == 0 and not calls and "--keep-memory" not in stdout
+
+
 def copy_inputs(sequence: Path, dest: Path) -> Path:
     shutil.copytree(sequence, dest)
     return dest

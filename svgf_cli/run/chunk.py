@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.heap import map_large_blocks
+from svgf_cli.heap import keep_freed_blocks, map_large_blocks
 from svgf_cli.progress import Progress
 from svgf_cli.run.causal import CausalFilter, default_denoiser, run_causal
 from svgf_cli.run.history import HistoryFile
@@ -48,8 +48,10 @@ def run_sequence(
     ``make_denoiser``.
     """
     # Frame-sized arrays go back to the system when freed: without this the peak memory
-    # grows with the frames run (svgf_cli.heap).
+    # grows with the frames run (svgf_cli.heap); --keep-memory keeps them instead.
     map_large_blocks()
+    if config.keep_memory:
+        keep_freed_blocks()
     for line in describe_stages(config.params):
         progress.detail(line)
     if config.params.bidirectional:

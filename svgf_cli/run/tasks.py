@@ -49,6 +49,8 @@ class RunConfig:
     light_layers: str = "as-read"
     # --low-memory: a causal run reads a frame only once the one before is filtered.
     low_memory: bool = False
+    # Freed frame-sized blocks kept for the next frame (svgf_cli.heap.keep_freed_blocks).
+    keep_memory: bool = False
 
 
 @dataclass
