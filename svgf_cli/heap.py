@@ -19,8 +19,8 @@ again, for other callers): blocks already in an arena stay there.
 to glibc's largest threshold (32 MiB: every 1080p plane up to (4, H, W)) come from one arena
 and stay there when freed, below a trim threshold of 1 GiB. On machines that hand free
 memory back to their host (these VMs: docs/performance.md "fresh pages"), a plane written
-into memory freed a frame before costs a tenth of one written into fresh pages: faster, for
-a peak about 0.6 GB higher on 1080p production frames.
+into memory freed a frame before costs a tenth of one written into fresh pages: 0.7-0.8x
+the time on 1080p production frames, for a peak 0.5-1.8 GB higher (docs/farm.md).
 """
 
 from __future__ import annotations
