@@ -143,7 +143,7 @@ def exchange(planes: np.ndarray, right: np.ndarray, down: np.ndarray, rows: np.n
                 for x in range(width):
                     h = here[x]
                     target[x] = h + up[x] * (over[x] - h) + under[x] * (lower[x] - h)
-            else:
+            else:  # the first row has no pair above: a zero weight, the same arithmetic
                 for x in range(width):
                     h = here[x]
                     target[x] = h + _ZERO * (over[x] - h) + under[x] * (lower[x] - h)
