@@ -48,21 +48,16 @@ _libc: ctypes.CDLL | None = None
 
 def map_large_blocks() -> bool:
     """Make glibc map every block of ``MMAP_THRESHOLD`` or more on its own and give free
-    heap memory back (settings once per process, the trim at every call;
-    ``MALLOC_MMAP_THRESHOLD_`` in the environment wins). False where it does not apply
-    (not glibc) or failed."""
-    global _libc
-    if "MALLOC_MMAP_THRESHOLD_" in os.environ or not _glibc():
+    heap memory back, and trim what the heap holds free (``MALLOC_MMAP_THRESHOLD_`` in the
+    environment wins). Undoes :func:`keep_freed_blocks` but for its single arena (a later
+    run in the same process, say a Dask worker's next chunk, gets this policy again).
+    False where it does not apply (not glibc) or failed."""
+    libc = _mallopt((_M_MMAP_THRESHOLD, MMAP_THRESHOLD), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+    if libc is None:
         return False
     try:
-        if _libc is None:
-            libc = ctypes.CDLL(None)
-            if not (libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
-                    and libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)):
-                return False
-            _libc = libc
-        _libc.malloc_trim(0)
-    except (OSError, AttributeError):
+        libc.malloc_trim(0)
+    except AttributeError:
         return False
     return True
 
@@ -70,21 +65,26 @@ def map_large_blocks() -> bool:
 def keep_freed_blocks() -> bool:
     """Keep freed frame-sized blocks in the process for the next frame (module docstring):
     one arena, blocks up to ``KEEP_MMAP_THRESHOLD`` from it, free memory kept up to
-    ``KEEP_TRIM_THRESHOLD``. Replaces :func:`map_large_blocks`' settings (call it after);
-    ``MALLOC_MMAP_THRESHOLD_`` in the environment wins. False where it does not apply."""
+    ``KEEP_TRIM_THRESHOLD`` (``MALLOC_MMAP_THRESHOLD_`` in the environment wins). False
+    where it does not apply."""
+    return _mallopt((_M_MMAP_THRESHOLD, KEEP_MMAP_THRESHOLD),
+                    (_M_TRIM_THRESHOLD, KEEP_TRIM_THRESHOLD), (_M_ARENA_MAX, 1)) is not None
+
+
+def _mallopt(*settings: tuple[int, int]) -> ctypes.CDLL | None:
+    """The C library with each ``(parameter, value)`` set by ``mallopt``; None where the
+    environment sets the policy, the library is not glibc, or a setting failed."""
     global _libc
     if "MALLOC_MMAP_THRESHOLD_" in os.environ or not _glibc():
-        return False
+        return None
     try:
         libc = _libc if _libc is not None else ctypes.CDLL(None)
-        if not (libc.mallopt(_M_MMAP_THRESHOLD, KEEP_MMAP_THRESHOLD)
-                and libc.mallopt(_M_TRIM_THRESHOLD, KEEP_TRIM_THRESHOLD)
-                and libc.mallopt(_M_ARENA_MAX, 1)):
-            return False
-        _libc = libc
+        if not all(libc.mallopt(parameter, value) for parameter, value in settings):
+            return None
     except (OSError, AttributeError):
-        return False
-    return True
+        return None
+    _libc = libc
+    return libc
 
 
 def _glibc() -> bool:

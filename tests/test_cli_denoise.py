@@ -38,51 +38,29 @@ def reference(sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[
     return {f: read_exr(p) for f, p in reference_run(tmp_path_factory, sequence).items()}
 
 
-def test_low_memory_says_so_and_writes_the_same_frames(
-    sequence: Path,
-    tmp_path: Path,
-    capsys: pytest.CaptureFixture[str],
-    reference: dict[int, ExrImage],
-) -> None:
-    """--low-memory changes when frames are read, not what is written: the start-up log
-    says it, every output is the default run's, bit for bit."""
-    out = tmp_path / "den"
-    code, stdout, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr", "--low-memory"],
-        capsys,
-    )
-    assert code == 0, err
-    assert "Memory: --low-memory" in stdout
-    files = outputs(out, "den")
-    assert len(files) == len(FRAMES)
-    for frame, path in zip(FRAMES, files, strict=True):
-        assert read_exr(path).same_pixels(reference[frame]), frame
-    code, stdout, _ = run_cli(["denoise", sequence / "in.####.exr", "-o",
-                               tmp_path / "plain" / "den.####.exr"], capsys)
-    assert code == 0 and "Memory:" not in stdout
-
-
-def test_keep_memory_says_so_sets_the_heap_policy_and_writes_the_same_frames(
+@pytest.mark.parametrize("flag", ["--low-memory", "--keep-memory"])
+def test_memory_options_say_so_and_write_the_same_frames(
+    flag: str,
     sequence: Path,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
     reference: dict[int, ExrImage],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """--keep-memory changes where freed memory goes, not what is written: the runner sets
-    the keeping policy (recorded here, so this test process keeps its own), the start-up
-    log says it, every output is the default run's, bit for bit; without it, no policy."""
+    """--low-memory changes when frames are read and --keep-memory where freed memory goes
+    (the runner sets glibc's keeping policy: recorded here, so this test process keeps its
+    own), not what is written: the start-up log says it, every output is the default
+    run's, bit for bit; a plain run logs neither and sets no policy."""
     import svgf_cli.run.chunk as chunk
 
     calls: list[bool] = []
     monkeypatch.setattr(chunk, "keep_freed_blocks", lambda: calls.append(True) or True)
     out = tmp_path / "den"
     code, stdout, err = run_cli(
-        ["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr", "--keep-memory"],
-        capsys,
-    )
+        ["denoise", sequence / "in.####.exr", "-o", out / "den.####.exr", flag], capsys)
     assert code == 0, err
-    assert calls and "Memory: --keep-memory" in stdout
+    assert f"Memory: {flag}" in stdout
+    assert bool(calls) == (flag == "--keep-memory")
     files = outputs(out, "den")
     assert len(files) == len(FRAMES)
     for frame, path in zip(FRAMES, files, strict=True):
@@ -90,7 +68,7 @@ def test_keep_memory_says_so_sets_the_heap_policy_and_writes_the_same_frames(
     calls.clear()
     code, stdout, _ = run_cli(["denoise", sequence / "in.####.exr", "-o",
                                tmp_path / "plain" / "den.####.exr"], capsys)
-    assert code == 0 and not calls and "--keep-memory" not in stdout
+    assert code == 0 and "Memory:" not in stdout and not calls
 
 
 def copy_inputs(sequence: Path, dest: Path) -> Path:
