@@ -10,7 +10,7 @@ then the beauty with ``clean_aux``, as Blender's Denoise node does:
 input's codec); median seconds per frame after the first.
 
 Run: ``.venv/bin/python bench/bench_production.py [--frames 4] [--stand-in] [--no-oidn]
-[--svgf-args '--light-layers as-read']``
+[--svgf-args '--light-layers as-read'] [--frames-dir DIR --aovs svgf]``
 Targets (issue 32, 2 cores): <= 3 s/frame, >= 5x OIDN-high's pipeline, peak < 2 GB.
 """
 
@@ -32,20 +32,22 @@ from bench_e2e import run_cli  # noqa: E402
 from production_frames import make  # noqa: E402
 
 
-def oidn_pipeline(folder: Path, out: Path, frames: int) -> float | None:
-    """Median wall seconds per frame (after the first) of read + OIDN-high + write."""
+def oidn_pipeline(folder: Path, out: Path, frames: int, aovs: str = "cycles") -> float | None:
+    """Median wall seconds per frame (after the first) of read + OIDN-high + write: with the
+    noisy-aux prefilter on Cycles frames (1-spp albedo and normal), with the aux taken as
+    clean on others (an exact G-buffer: `svgf trace`'s, the synthetic set's)."""
     from svgf_cli.evaluate.baselines import OidnMethod
     from svgf_cli.io.exr import io_threads, read_frame, set_io_threads
     from svgf_cli.io.layers import build_mapping
     from svgf_cli.io.output import prepare_colour, write_output
 
     try:
-        oidn = OidnMethod(prefilter=True)
+        oidn = OidnMethod(prefilter=aovs == "cycles")
     except Exception as exc:  # noqa: BLE001 - report and skip
         print(f"OIDN skipped: {exc}")
         return None
     set_io_threads(2)
-    mapping = build_mapping("cycles")
+    mapping = build_mapping(aovs)
     seconds = []
     for frame in range(1, frames + 1):
         started = time.perf_counter()
@@ -73,12 +75,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-oidn", action="store_true")
     parser.add_argument("--svgf-args", default="",
                         help="more `svgf denoise` options, e.g. '--light-layers as-read'")
+    parser.add_argument("--frames-dir", type=Path,
+                        help="other frames in.####.exr instead, e.g. bench_e2e.py's synthetic "
+                             "set (--workdir DIR: DIR/in_1920x1080), with --aovs")
+    parser.add_argument("--aovs", default="cycles",
+                        help="their --preset-aovs (OIDN prefilters the aux on cycles only)")
     args = parser.parse_args(argv)
-    folder = make(frames=args.frames, stand_in=args.stand_in)
+    folder = args.frames_dir or make(frames=args.frames, stand_in=args.stand_in)
     print(f"frames: {folder}/in.####.exr ({args.frames})", flush=True)
     with tempfile.TemporaryDirectory(dir=REPO / "bench" / "out") as tmp:
-        svgf = run_cli(folder / "in.####.exr", Path(tmp), args.frames, "--preset-aovs", "cycles",
-                       *shlex.split(args.svgf_args))
+        svgf = run_cli(folder / "in.####.exr", Path(tmp), args.frames, "--preset-aovs",
+                       args.aovs, *shlex.split(args.svgf_args))
         print(
             f"svgf: {svgf['steady']:.2f} s/frame steady (first {svgf['first_frame']:.1f} s); "
             f"thread s/frame read {svgf['read']:.2f}, compute {svgf['compute']:.2f}, write "
@@ -88,9 +95,10 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.no_oidn:
             return 0
-        oidn = oidn_pipeline(folder, Path(tmp), args.frames)
+        oidn = oidn_pipeline(folder, Path(tmp), args.frames, args.aovs)
     if oidn is not None:
-        print(f"OIDN-high pipeline (noisy-aux prefilter): {oidn:.2f} s/frame; "
+        aux = "noisy-aux prefilter" if args.aovs == "cycles" else "clean aux"
+        print(f"OIDN-high pipeline ({aux}): {oidn:.2f} s/frame; "
               f"OIDN / svgf {oidn / svgf['steady']:.2f}x", flush=True)
     return 0
 
