@@ -577,9 +577,11 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
 
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
                   current: np.ndarray, depth: np.ndarray, k: float,
-                  weights: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """Clamp each history channel to the current 3x3 (in-image surface pixels, centre
-    included) ``mean +- k sigma``; where anything changed, scale the moments with the
+                  weights: tuple[float, float, float],
+                  radius: int | list[int] = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Clamp each history channel to the current 3x3 (the ``(2 radius + 1)^2`` window, one
+    radius per signal or one for all; in-image surface pixels, centre included)
+    ``mean +- k sigma``; where anything changed, scale the moments with the
     history luminance ``l -> l'``: ``m1 l'/l``, ``min(m2 (l'/l)^2, 1e36)`` (``l'``,
     ``l'^2`` where ``l <= 0`` or ``l' > 1e6 l``). A signal's pixels without history (its
     ``h <= 0``) and background are left alone. Returns the clamped history and moments."""
@@ -590,15 +592,18 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
     h = np.asarray(history_length, dtype=F64)
     w = np.asarray(weights, dtype=F64)
     num_signals, _, height, width = hist.shape
+    radii = [radius] * num_signals if isinstance(radius, int) else list(radius)
     for y in range(height):
         for x in range(width):
             if z[y, x] <= 0.0:
                 continue
-            window = [(yy, xx) for yy, xx in _neighbours(y, x, height, width, True)
-                      if z[yy, xx] > 0.0]
             for s in range(num_signals):
                 if h[s, y, x] <= 0.0:
                     continue
+                r = radii[s]
+                window = [(yy, xx) for yy in range(max(y - r, 0), min(y + r + 1, height))
+                          for xx in range(max(x - r, 0), min(x + r + 1, width))
+                          if z[yy, xx] > 0.0]
                 before = float(w @ hist[s, :, y, x])
                 for c in range(3):
                     values = np.array([cur[s, c, yy, xx] for yy, xx in window])

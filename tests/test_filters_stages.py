@@ -385,3 +385,39 @@ def test_history_clamp_pulls_stale_history_into_neighbourhood_range() -> None:
 def _window_high(current: np.ndarray, y: int, x: int, k: float) -> np.ndarray:
     window = current[0, :, y - 1:y + 2, x - 1:x + 2].reshape(3, -1).astype(np.float64)
     return window.mean(axis=1) + k * window.std(axis=1)
+
+
+def test_history_clamp_window_keeps_the_history_of_rarely_lit_surfaces() -> None:
+    """At one sample a surface lit by rare bright samples (indirect light) shows only zeros
+    in most 3x3 windows: the 3x3 clamp pulls its converged history to black there, a 5x5
+    one (what `history_clamp_radius` auto picks from 160 rows) keeps most of it."""
+    from svgf_cli.filters.params import PRESETS, history_clamp_radius_for
+    from svgf_cli.filters.stages.history_clamp import clamp_radii
+
+    h, w = 48, 64
+    rng = np.random.default_rng(7)
+    lit = rng.random((h, w)) < 0.08  # 8 % of the samples find the light
+    current = np.where(lit, F32(2.0), F32(0.0)).astype(F32)[None, None].repeat(3, axis=1)
+    history = np.full_like(current, 0.16)  # the converged mean, 0.08 x 2
+    length = np.full((1, h, w), 8.0, dtype=F32)
+    depth = np.ones((h, w), dtype=F32)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    kept = {}
+    for radius in (1, 2):
+        clamped = history.copy()
+        moments = np.stack([np.full((h, w), 0.16), np.full((h, w), 0.32)])[None].astype(F32)
+        history_clamp(clamped, moments, length, current, depth, F32(3.0), weights, radius)
+        kept[radius] = float(np.mean(clamped[0, 1] >= 0.16 - 1e-6))
+    # Kept wherever the window holds a lit sample: 1 - 0.92^9 of the pixels, 1 - 0.92^25.
+    assert abs(kept[1] - (1 - 0.92 ** 9)) < 0.05 and abs(kept[2] - (1 - 0.92 ** 25)) < 0.05, kept
+    default = PRESETS["default"]
+    assert [history_clamp_radius_for(default, rows, 2 * rows) for rows in
+            (72, 159, 160, 319, 320, 1080)] == [1, 1, 2, 2, 3, 3]
+    assert history_clamp_radius_for(default, 1080, 720) == 3  # the shorter side
+    assert history_clamp_radius_for(default.replace(history_clamp_radius=2), 72, 128) == 2
+    assert history_clamp_radius_for(PRESETS["paper"], 1080, 1920) == 1
+    # Glossy signals with their own k keep the 3x3; with glossy_history_clamp 0 they are
+    # clamped as the others, window included.
+    assert clamp_radii(default, (False, True), 1080, 1920) == [3, 1]
+    assert clamp_radii(default.replace(glossy_history_clamp=0.0), (False, True), 200,
+                       300) == [2, 2]

@@ -572,6 +572,36 @@ def test_history_clamp_matches_reference() -> None:
     assert np.any((length[0] <= 0) & (length[1] > 0) & np.any(want[1] != history[1], axis=0))
 
 
+@pytest.mark.parametrize("radii", [[2, 2], [1, 3], [3, 1]])
+def test_history_clamp_wider_windows_match_reference(radii: list[int]) -> None:
+    """A wider window per signal (``radius``), each against the float64 reference; the 3x3
+    signal of a mixed call gets exactly what a 3x3 call alone gives it."""
+    current, depth = _spiky_illumination(2)
+    rng = np.random.default_rng(5)
+    history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
+    length = rng.choice([0.0, 1.0, 4.0], size=(2, *depth.shape)).astype(F32)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    lum = np.einsum("c,scyx->syx", np.array(weights, dtype=np.float64), history)
+    moments = np.stack([lum, lum * lum * 1.5], axis=1).astype(F32)
+    got, got_moments = history.copy(), moments.copy()
+    history_clamp(got, got_moments, length, current, depth, F32(1.0), weights, radii)
+    want, want_moments = ref.history_clamp(history, moments, length, current, depth, 1.0,
+                                           weights, radii)
+    _close(got, want, 2e-5, "history clamp")
+    _close(got_moments, want_moments, 5e-5, "history clamp moments")
+    narrow = ref.history_clamp(history, moments, length, current, depth, 1.0, weights, 1)[0]
+    for s, radius in enumerate(radii):
+        assert np.sum(want[s] != narrow[s]) > (20 if radius > 1 else -1)  # the window counts
+        if radius == 1:
+            alone, alone_moments = history[s:s + 1].copy(), moments[s:s + 1].copy()
+            history_clamp(alone, alone_moments, length[s:s + 1], current[s:s + 1], depth,
+                          F32(1.0), weights)
+            assert np.array_equal(alone[0], got[s]) and np.array_equal(alone_moments[0],
+                                                                       got_moments[s])
+    with pytest.raises(ValueError, match="at least 1"):
+        history_clamp(got, got_moments, length, current, depth, F32(1.0), weights, 0)
+
+
 def test_history_clamp_raised_from_near_black_keeps_finite_moments() -> None:
     """A history almost black where the frame is lit (a light came on) is raised to the
     frame's band: scaling its moments by (l'/l)^2 overflowed to inf (and NaN variance) from

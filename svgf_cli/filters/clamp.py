@@ -4,9 +4,9 @@
   ``k`` standard deviations of its 8 neighbours is scaled down to that limit (hue kept).
   The centre is left out of the statistics, otherwise a firefly would widen its own bound.
 * :func:`history_clamp` (against ghosting): the reprojected history colour is clamped per
-  channel to the current frame's 3x3 mean +- ``k`` sigma, so stale history that no longer
-  matches the neighbourhood (moving shadows, lights switching) is pulled back; its luminance
-  moments are scaled with it.
+  channel to the current frame's 3x3 (or wider: ``radius``) mean +- ``k`` sigma, so stale
+  history that no longer matches the neighbourhood (moving shadows, lights switching) is
+  pulled back; its luminance moments are scaled with it.
 
 Neighbour statistics use only in-image, non-background pixels.
 """
@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
+from svgf_cli.filters.shares import box_channel, box_mean
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -107,8 +108,10 @@ def history_clamp(
     depth: np.ndarray,
     k: float | Sequence[float],
     luminance_weights: tuple[np.float32, np.float32, np.float32],
+    radius: int | Sequence[int] = 1,
 ) -> None:
-    """In place: clamp each history channel to the current 3x3 mean +- k*sigma, and let the
+    """In place: clamp each history channel to the current 3x3 mean +- k*sigma (the
+    ``(2 radius + 1)^2`` window's: one radius for all signals or one per signal), and let the
     luminance moments follow the history luminance ``l -> l'``: ``m1 *= l'/l`` and
     ``m2 *= (l'/l)^2`` (the relative spread kept; at most ``MAX_SECOND_MOMENT``), except
     ``m1 = l'``, ``m2 = l'^2`` where ``l <= 0`` or ``l' > MAX_RAISE l`` (a history raised
@@ -124,9 +127,32 @@ def history_clamp(
     ``k`` is one for all signals or one per signal; a signal with ``k <= 0`` is not clamped.
     All signals in one parallel pass (the background count is shared).
     """
-    ks = np.ascontiguousarray(np.broadcast_to(np.asarray(k, dtype=F32), (history.shape[0],)))
-    _history_clamp_rows(history, history_moments, history_length, current, depth, ks,
+    num_signals = history.shape[0]
+    ks = np.ascontiguousarray(np.broadcast_to(np.asarray(k, dtype=F32), (num_signals,)))
+    radii = np.broadcast_to(np.asarray(radius, dtype=np.int64), (num_signals,))
+    if radii.min() < 1:
+        raise ValueError(f"history clamp radius must be at least 1, got {radii.min()}")
+    wide = [s for s in range(num_signals) if radii[s] > 1 and ks[s] > 0]
+    narrow = ks.copy()
+    narrow[wide] = _ZERO  # left to the window statistics below
+    _history_clamp_rows(history, history_moments, history_length, current, depth, narrow,
                         luminance_weights)
+    if not wide:
+        return
+    # A wider window: its mean and mean square as box means over the surface pixels
+    # (running sums in float64, each plane once), then the same clamp per pixel.
+    surface = (depth > _ZERO).astype(F32)
+    covered: dict[int, np.ndarray] = {}
+    mean = np.empty((3, *depth.shape), dtype=F32)
+    mean_square = np.empty_like(mean)
+    for s in wide:
+        r = int(radii[s])
+        if r not in covered:
+            covered[r] = np.empty((1, *depth.shape), dtype=F32)
+            box_mean(surface[None], r, covered[r])
+        _window_means(current[s], surface, covered[r][0], r, mean, mean_square)
+        _clamp_to_window(history[s], history_moments[s], history_length[s], mean, mean_square,
+                         depth, ks[s], luminance_weights)
 
 
 @njit(
@@ -141,13 +167,12 @@ def _history_clamp_rows(
     ks: np.ndarray,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
 ) -> None:
-    """All rows of :func:`history_clamp` (``ks`` per signal).
+    """All rows of :func:`history_clamp`'s 3x3 (``ks`` per signal).
     """
     num_signals = history.shape[0]
     height, width = depth.shape
     wr, wg, wb = luminance_weights
     for y in prange(height):
-        y0, y1 = max(y - 1, 0), min(y + 2, height)
         column = np.zeros(width, dtype=F32)
         column_sq = np.empty(width, dtype=F32)
         count = np.empty(width, dtype=F32)
@@ -155,6 +180,7 @@ def _history_clamp_rows(
         total_sq = np.empty(width, dtype=F32)
         before = np.empty(width, dtype=F32)
         moved = np.empty(width, dtype=np.uint8)
+        y0, y1 = max(y - 1, 0), min(y + 2, height)
         for yy in range(y0, y1):
             z = depth[yy]
             for x in range(width):
@@ -205,3 +231,55 @@ def _history_clamp_rows(
                     else:
                         m1[x] = after
                         m2[x] = after * after
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _window_means(current: np.ndarray, surface: np.ndarray, coverage: np.ndarray, radius: int,
+                  mean: np.ndarray, mean_square: np.ndarray) -> None:
+    """Per channel of one signal's ``current`` (3, H, W): its mean and the mean of its
+    squares over the surface pixels of the (2 radius + 1)^2 window (``coverage``: the
+    surface's own box mean); six planes, one job each."""
+    for job in prange(6):
+        c = job % 3
+        out = mean[c] if job < 3 else mean_square[c]
+        box_channel(current[c], surface, True, job >= 3, coverage, radius, out)
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _clamp_to_window(history: np.ndarray, moments: np.ndarray, length: np.ndarray,
+                     mean: np.ndarray, mean_square: np.ndarray, depth: np.ndarray,
+                     k: np.float32, luminance_weights: tuple[np.float32, np.float32, np.float32],
+                     ) -> None:
+    """One signal's history (3, H, W) clamped per channel to ``mean +- k sigma`` (sigma from
+    ``mean_square``), its moments (2, H, W) following as :func:`history_clamp` says; where
+    it has a history and a surface."""
+    height, width = depth.shape
+    wr, wg, wb = luminance_weights
+    for y in prange(height):
+        z, h = depth[y], length[y]
+        hr, hg, hb = history[0, y], history[1, y], history[2, y]
+        m1, m2 = moments[0, y], moments[1, y]
+        for x in range(width):
+            if z[x] <= _ZERO or h[x] <= _ZERO:
+                continue
+            before = wr * hr[x] + wg * hg[x] + wb * hb[x]
+            moved = False
+            for c in range(3):
+                mu = mean[c, y, x]
+                sigma = np.sqrt(max(mean_square[c, y, x] - mu * mu, _ZERO))
+                value = history[c, y, x]
+                clamped = min(max(value, mu - k * sigma), mu + k * sigma)
+                if clamped != value:
+                    history[c, y, x] = clamped
+                    moved = True
+            if moved:
+                after = wr * hr[x] + wg * hg[x] + wb * hb[x]
+                if before > _ZERO and after <= MAX_RAISE * before:
+                    ratio = after / before
+                    m1[x] *= ratio
+                    m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)
+                else:
+                    m1[x] = after
+                    m2[x] = after * after

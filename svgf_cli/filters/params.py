@@ -26,6 +26,8 @@ AUTO_PIXEL_FILTER = -1.0
 AUTO_COVERAGE = -1
 # ``samples_per_pixel`` from the frame's header (params_for_samples).
 AUTO_SAMPLES = -1
+# ``history_clamp_radius`` from the image's size (history_clamp_radius_for).
+AUTO_CLAMP_RADIUS = -1
 
 # The parameter groups, in display order, with a one-line title each.
 GROUPS: dict[str, str] = {
@@ -111,47 +113,41 @@ class SVGFParams:
     temporal: bool = _p(True, "Reuse history through motion vectors (off: every frame cold).",
                         group="temporal")
     depth_tolerance: float = _p(
-        10.0,
-        "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient"
+        10.0, "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient"
         " + depth_slack * z).",
         group="temporal", valid=Range(0),
     )
     depth_slack: float = _p(
-        0.002,
-        "Depth-relative slack of the reprojection depth test (scale-free stand-in for"
+        0.002, "Depth-relative slack of the reprojection depth test (scale-free stand-in for"
         " Falcor's absolute 0.01).",
         group="temporal", valid=Range(0),
     )
     normal_tolerance: float = _p(
-        16.0,
-        "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient + 0.01).",
+        16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient"
+        " + 0.01).",
         group="temporal", valid=Range(0),
     )
     history_catmull_rom: bool = _p(
-        False,
-        "Resample the reprojected colour history and moments with a Catmull-Rom spline over"
+        False, "Resample the reprojected colour history and moments with a Catmull-Rom spline over"
         " the 4x4 taps (clamped to the bilinear taps' range) where all 16 pass the"
         " reprojection tests, bilinear elsewhere: bilinear resampling blurs the history a"
         " little more every frame.",
         group="temporal",
     )
     bidirectional: bool = _p(
-        False,
-        "Offline: also run the filter backwards in time and combine both passes' histories"
+        False, "Offline: also run the filter backwards in time and combine both passes' histories"
         " per pixel before the spatial filter (frames after the current one count too;"
         " about twice the work; docs/bidirectional.md).",
         group="temporal",
     )
     warm_start: int = _p(
-        0,
-        "The first N output frames of a cold start (a shot's first frames) from a"
+        0, "The first N output frames of a cold start (a shot's first frames) from a"
         " bidirectional run over its first 2N frames, not noisy (default preset: 4; 0: off;"
         " later frames unchanged; docs/stability.md#warm-start).",
         group="temporal", valid=Range(0, 16),
     )
     medium_fill_radius: int = _p(
-        0,
-        "Pixels whose sample scattered in fog or smoke (no surface, volume light around)"
+        0, "Pixels whose sample scattered in fog or smoke (no surface, volume light around)"
         " take the G-buffer of the nearest surface within this many pixels, or become a"
         " medium surface, and are filtered, not passed through (0: off;"
         " docs/algorithm.md#volumes-medium-pixels).",
@@ -336,6 +332,12 @@ class SVGFParams:
         " its luminance moments scaled with it (0 = off; glossy signals: glossy_history_clamp).",
         group="guards", valid=Range(0),
     )
+    history_clamp_radius: int = _p(
+        1, "The history clamp's window: the (2 r + 1)^2 pixels (1: the 3x3, which glossy"
+        " signals with their own k keep); auto (-1 in svgf/params) = from the image's shorter"
+        " side: 1 below 160 pixels, 2 below 320, else 3.",
+        group="guards", valid=Range(1, 8, auto=AUTO_CLAMP_RADIUS, shown="1..8", noun="a radius"),
+    )
     despike: float = _p(
         0.0,
         "Output guard: a filtered pixel brighter than this many times its second-brightest"
@@ -419,6 +421,11 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   f" material point's: {_ALG}#turning-objects"),
         Departure("history_clamp", 3.0, "a loose clamp of the history against outliers:"
                   f" {_GLOSSY}"),
+        Departure("history_clamp_radius", AUTO_CLAMP_RADIUS, "at one sample a dark surface"
+                  " lit by rare indirect samples shows a 3x3 of zeros most frames, which clamps"
+                  " its history to black: blotches, and the frame darker, on frames larger"
+                  f" than the fixtures' 128x72 (history_clamp_radius_for): {_ALG}"
+                  "#the-history-clamps-window"),
         Departure("glossy_history_clamp", 1.0, "reflections move with what they show, so"
                   f" their reprojected history is unreliable: {_GLOSSY}"),
         Departure("sigma_luminance", 2.0, "with the unfiltered history and the warm start,"
@@ -528,6 +535,26 @@ def atrous_iterations_for(params: SVGFParams, height: int, width: int,
         fewer += 1
         samples //= 4
     return max(1, count - fewer)
+
+
+# The shorter image side from which each wider clamp window is used (as the a-trous count).
+_CLAMP_SIDES = ((320, 3), (160, 2), (0, 1))
+
+
+def history_clamp_radius_for(params: SVGFParams, height: int, width: int) -> int:
+    """The history clamp's window radius for an image of ``height`` x ``width``: an
+    explicit one is kept; ``AUTO_CLAMP_RADIUS`` grows with the image as the a-trous count
+    does (1 below 160 rows, 2 below 320, 3 from 320). The clamp bounds the history by the
+    spread of this frame's one-sample values around the pixel: where a surface is lit by
+    rare bright samples (indirect light at one sample per pixel) a 3x3 holds only zeros in
+    most frames and pulls the history to black, while a wider window holds some of the
+    samples. On a small image a wider window reaches across other surfaces and lights
+    instead. Measured (docs/algorithm.md#the-history-clamps-window): 72 rows best at 1 (and
+    a Blender render at 144), 216 and 360 rows at 2-3."""
+    if params.history_clamp_radius != AUTO_CLAMP_RADIUS:
+        return params.history_clamp_radius
+    side = min(height, width)
+    return next(radius for smallest, radius in _CLAMP_SIDES if side >= smallest)
 
 
 def medium_coverage_radius_for(params: SVGFParams, height: int, width: int) -> int:

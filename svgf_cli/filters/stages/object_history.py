@@ -14,7 +14,7 @@ from svgf_cli.filters.object_motion import turning_pixels
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.reproject import reproject
 from svgf_cli.filters.stages.antilag import antilag_sigma
-from svgf_cli.filters.stages.history_clamp import clamp_ks
+from svgf_cli.filters.stages.history_clamp import clamp_ks, clamp_radii
 
 F32 = np.float32
 # An adopted history counts as at most this many frames. An object's light is only in part
@@ -158,9 +158,11 @@ def _resample(ctx: FrameContext, temporal: TemporalState, history: dict[str, np.
     material = tested(crop(temporal.history_moments[:, :, rows, columns]),
                       crop(temporal.history_length[:, rows, columns]), gradients)
     turned = tested(moments, length.copy())
-    ks = clamp_ks(p, temporal.glossy or (False,) * num_signals)
-    if max(ks) > 0.0:
-        history_clamp(colour, moments, length, current, depth, ks, temporal.luminance_weights)
+    glossy = temporal.glossy or (False,) * num_signals
+    ks = clamp_ks(p, glossy)
+    if max(ks) > 0.0:  # the window of the whole frame's clamp (its size, not the box's)
+        history_clamp(colour, moments, length, current, depth, ks, temporal.luminance_weights,
+                      clamp_radii(p, glossy, frame.height, frame.width))
     tested(moments, length)
     return TurnedHistory(rows, columns, turning[box] & (turned > material), colour, moments,
                          length)
