@@ -18,13 +18,14 @@ and the value policy's replacements are compared exactly.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 import reference_svgf as ref
 from moving_scene import ACESCG_LUMINANCE, plant_extremes, scene_frame
 
 from svgf_cli.filters import values
-from svgf_cli.filters.clamp import firefly_clamp, history_clamp
+from svgf_cli.filters.clamp import BAND_ROWS, firefly_clamp, history_clamp
 from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
@@ -574,9 +575,11 @@ def test_history_clamp_matches_reference() -> None:
 
 @pytest.mark.parametrize("radii", [[2, 2], [1, 3], [3, 1]])
 def test_history_clamp_wider_windows_match_reference(radii: list[int]) -> None:
-    """A wider window per signal (``radius``), each against the float64 reference; the 3x3
+    """A wider window per signal (``radius``), each against the float64 reference, over
+    more rows than a band of the wider windows' kernel (``clamp.BAND_ROWS``); the 3x3
     signal of a mixed call gets exactly what a 3x3 call alone gives it."""
-    current, depth = _spiky_illumination(2)
+    current, depth = _spiky_illumination(2, height=2 * BAND_ROWS + 7, width=12)
+    depth[BAND_ROWS - 1:BAND_ROWS + 2, 3:6] = 0.0  # background across a band's edge
     rng = np.random.default_rng(5)
     history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
     length = rng.choice([0.0, 1.0, 4.0], size=(2, *depth.shape)).astype(F32)
@@ -600,6 +603,17 @@ def test_history_clamp_wider_windows_match_reference(radii: list[int]) -> None:
                                                                        got_moments[s])
     with pytest.raises(ValueError, match="at least 1"):
         history_clamp(got, got_moments, length, current, depth, F32(1.0), weights, 0)
+    # The bands are fixed: one thread gives the same bits as two.
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        single, single_moments = history.copy(), moments.copy()
+        history_clamp(single, single_moments, length, current, depth, F32(1.0), weights, radii)
+    finally:
+        numba.set_num_threads(threads)
+    again, again_moments = history.copy(), moments.copy()
+    history_clamp(again, again_moments, length, current, depth, F32(1.0), weights, radii)
+    assert np.array_equal(single, again) and np.array_equal(single_moments, again_moments)
 
 
 def test_history_clamp_raised_from_near_black_keeps_finite_moments() -> None:

@@ -19,7 +19,6 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
-from svgf_cli.filters.shares import box_channel, box_mean
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -100,6 +99,22 @@ def _three_tap(column: np.ndarray, out: np.ndarray) -> None:
     out[width - 1] = column[width - 2] + column[width - 1]
 
 
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _follow_luminance(m1: np.ndarray, m2: np.ndarray, x: int, before: np.float32,
+                      after: np.float32) -> None:
+    """A clamped history's moments at ``x`` follow its luminance ``before -> after``."""
+    # Raised more than MAX_RAISE-fold, (l'/l)^2 could overflow m2 to inf: such a history
+    # counts as black.
+    if before > _ZERO and after <= MAX_RAISE * before:
+        ratio = after / before
+        m1[x] *= ratio
+        m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)
+    else:
+        m1[x] = after
+        m2[x] = after * after
+
+
 def history_clamp(
     history: np.ndarray,
     history_moments: np.ndarray,
@@ -125,7 +140,8 @@ def history_clamp(
     every inner loop runs over a row.
 
     ``k`` is one for all signals or one per signal; a signal with ``k <= 0`` is not clamped.
-    All signals in one parallel pass (the background count is shared).
+    The 3x3 signals in one parallel pass (the background count is shared); each wider one in
+    a pass of its own (:func:`_clamp_wide_rows`).
     """
     num_signals = history.shape[0]
     ks = np.ascontiguousarray(np.broadcast_to(np.asarray(k, dtype=F32), (num_signals,)))
@@ -134,26 +150,12 @@ def history_clamp(
         raise ValueError(f"history clamp radius must be at least 1, got {radii.min()}")
     wide = [s for s in range(num_signals) if radii[s] > 1 and ks[s] > 0]
     narrow = ks.copy()
-    narrow[wide] = _ZERO  # left to the window statistics below
+    narrow[wide] = _ZERO  # clamped by _clamp_wide_rows below
     _history_clamp_rows(history, history_moments, history_length, current, depth, narrow,
                         luminance_weights)
-    if not wide:
-        return
-    # A wider window: its mean and mean square as box means over the surface pixels
-    # (running sums in float64, each plane once), then the same clamp per pixel.
-    surface = (depth > _ZERO).astype(F32)
-    covered: dict[int, np.ndarray] = {}
-    mean = np.empty((3, *depth.shape), dtype=F32)
-    mean_square = np.empty_like(mean)
-    for s in wide:
-        r = int(radii[s])
-        if r not in covered:
-            covered[r] = np.empty((1, *depth.shape), dtype=F32)
-            box_mean(surface[None], r, covered[r])
-        _window_means(current[s], surface, covered[r][0], r, mean, mean_square)
-        _clamp_to_window(history[s], history_moments[s], history_length[s], mean, mean_square,
-                         depth, ks[s], luminance_weights)
-
+    for s in wide:  # a wider window: one signal at a time, in bands of rows
+        _clamp_wide_rows(history[s], history_moments[s], history_length[s], current[s], depth,
+                         ks[s], int(radii[s]), luminance_weights)
 
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
@@ -221,65 +223,92 @@ def _history_clamp_rows(
             m1, m2 = history_moments[s, 0, y], history_moments[s, 1, y]
             for x in range(width):
                 if moved[x]:
-                    after = wr * hr[x] + wg * hg[x] + wb * hb[x]
-                    # Raised more than MAX_RAISE-fold, (l'/l)^2 could overflow m2 to inf:
-                    # such a history counts as black.
-                    if before[x] > _ZERO and after <= MAX_RAISE * before[x]:
-                        ratio = after / before[x]
-                        m1[x] *= ratio
-                        m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)
-                    else:
-                        m1[x] = after
-                        m2[x] = after * after
+                    _follow_luminance(m1, m2, x, before[x], wr * hr[x] + wg * hg[x] + wb * hb[x])
+
+
+# Rows per band of the wider windows' kernel: fixed, so that the sums (and so the outputs)
+# do not depend on the number of threads.
+BAND_ROWS = 32
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
-def _window_means(current: np.ndarray, surface: np.ndarray, coverage: np.ndarray, radius: int,
-                  mean: np.ndarray, mean_square: np.ndarray) -> None:
-    """Per channel of one signal's ``current`` (3, H, W): its mean and the mean of its
-    squares over the surface pixels of the (2 radius + 1)^2 window (``coverage``: the
-    surface's own box mean); six planes, one job each."""
-    for job in prange(6):
-        c = job % 3
-        out = mean[c] if job < 3 else mean_square[c]
-        box_channel(current[c], surface, True, job >= 3, coverage, radius, out)
-
-
-@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
-      error_model="numpy")
-def _clamp_to_window(history: np.ndarray, moments: np.ndarray, length: np.ndarray,
-                     mean: np.ndarray, mean_square: np.ndarray, depth: np.ndarray,
-                     k: np.float32, luminance_weights: tuple[np.float32, np.float32, np.float32],
-                     ) -> None:
-    """One signal's history (3, H, W) clamped per channel to ``mean +- k sigma`` (sigma from
-    ``mean_square``), its moments (2, H, W) following as :func:`history_clamp` says; where
-    it has a history and a surface."""
+def _clamp_wide_rows(history: np.ndarray, moments: np.ndarray, length: np.ndarray,
+                     current: np.ndarray, depth: np.ndarray, k: np.float32, radius: int,
+                     luminance_weights: tuple[np.float32, np.float32, np.float32]) -> None:
+    """One signal's history (3, H, W) clamped per channel to the mean +- ``k`` sigma of the
+    current values (3, H, W) over the surface pixels of the (2 radius + 1)^2 window, its
+    moments (2, H, W) following (:func:`_follow_luminance`); where it has a history and a
+    surface. In bands of :data:`BAND_ROWS` rows, one job each: the window's column sums
+    (float64: count, values, squares) slide down the band, a row entering and one leaving,
+    and each row's window sums run along it."""
     height, width = depth.shape
     wr, wg, wb = luminance_weights
-    for y in prange(height):
-        z, h = depth[y], length[y]
-        hr, hg, hb = history[0, y], history[1, y], history[2, y]
-        m1, m2 = moments[0, y], moments[1, y]
-        for x in range(width):
-            if z[x] <= _ZERO or h[x] <= _ZERO:
-                continue
-            before = wr * hr[x] + wg * hg[x] + wb * hb[x]
-            moved = False
-            for c in range(3):
-                mu = mean[c, y, x]
-                sigma = np.sqrt(max(mean_square[c, y, x] - mu * mu, _ZERO))
-                value = history[c, y, x]
-                clamped = min(max(value, mu - k * sigma), mu + k * sigma)
-                if clamped != value:
-                    history[c, y, x] = clamped
-                    moved = True
-            if moved:
-                after = wr * hr[x] + wg * hg[x] + wb * hb[x]
-                if before > _ZERO and after <= MAX_RAISE * before:
-                    ratio = after / before
-                    m1[x] *= ratio
-                    m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)
-                else:
-                    m1[x] = after
-                    m2[x] = after * after
+    for band in prange((height + BAND_ROWS - 1) // BAND_ROWS):
+        first, last = band * BAND_ROWS, min(band * BAND_ROWS + BAND_ROWS, height)
+        columns = np.zeros((7, width))  # count, then sums and sums of squares of R, G, B
+        window = np.empty((7, width))
+        for yy in range(max(first - radius, 0), min(first + radius, height - 1) + 1):
+            _slide_columns(current, depth, yy, 1.0, columns)
+        for y in range(first, last):
+            if y > first:
+                if y + radius < height:
+                    _slide_columns(current, depth, y + radius, 1.0, columns)
+                if y - radius - 1 >= 0:
+                    _slide_columns(current, depth, y - radius - 1, -1.0, columns)
+            for row in range(7):
+                _running_sums(columns[row], radius, window[row])
+            z, h = depth[y], length[y]
+            hr, hg, hb = history[0, y], history[1, y], history[2, y]
+            m1, m2 = moments[0, y], moments[1, y]
+            for x in range(width):
+                if z[x] <= _ZERO or h[x] <= _ZERO:
+                    continue
+                share = 1.0 / max(window[0, x], 1.0)
+                before = wr * hr[x] + wg * hg[x] + wb * hb[x]
+                moved = False
+                for c in range(3):
+                    mean = window[1 + c, x] * share
+                    sigma = np.sqrt(F32(max(window[4 + c, x] * share - mean * mean, 0.0)))
+                    mu = F32(mean)
+                    value = history[c, y, x]
+                    clamped = min(max(value, mu - k * sigma), mu + k * sigma)
+                    if clamped != value:
+                        history[c, y, x] = clamped
+                        moved = True
+                if moved:
+                    _follow_luminance(m1, m2, x, before, wr * hr[x] + wg * hg[x] + wb * hb[x])
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _slide_columns(current: np.ndarray, depth: np.ndarray, y: int, sign: float,
+                   columns: np.ndarray) -> None:
+    """Add (``sign`` 1) or take away (-1) row ``y``'s surface pixels: their count, values
+    and squares, per channel, to the column sums."""
+    z = depth[y]
+    count = columns[0]
+    for x in range(z.shape[0]):
+        count[x] += sign if z[x] > _ZERO else 0.0
+    for c in range(3):
+        values, total, squares = current[c, y], columns[1 + c], columns[4 + c]
+        for x in range(z.shape[0]):
+            value = np.float64(values[x]) if z[x] > _ZERO else 0.0
+            total[x] += sign * value
+            squares[x] += sign * (value * value)
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _running_sums(column: np.ndarray, radius: int, out: np.ndarray) -> None:
+    """``out[x]`` = the sum of ``column`` over x - radius .. x + radius within the row."""
+    width = column.shape[0]
+    running = 0.0
+    for x in range(min(radius, width)):
+        running += column[x]
+    for x in range(width):
+        if x + radius < width:
+            running += column[x + radius]
+        if x - radius - 1 >= 0:
+            running -= column[x - radius - 1]
+        out[x] = running

@@ -21,7 +21,7 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     keeps only the 2 radius + 2 row sums the column sums still need (a ring of rows): a
     frame-sized float64 temporary made this memory-bound."""
     for c in prange(planes.shape[0]):
-        box_channel(planes[c], planes[c], False, False, planes[c], radius, out[c])
+        _box_channel(planes[c], planes[c], False, False, planes[c], radius, out[c])
 
 
 @njit(**_JIT)
@@ -32,7 +32,7 @@ def covered_average(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarra
     stored divided by its colour, averaged over the window's pixels that have that colour.
     Each step rounds to float32 as the numpy expression of the same steps does."""
     for c in prange(stored.shape[0]):
-        box_channel(stored[c], surface, True, False, coverage, radius, out[c])
+        _box_channel(stored[c], surface, True, False, coverage, radius, out[c])
 
 
 @njit(**_JIT)
@@ -44,7 +44,7 @@ def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray
     at least 1)."""
     area = (2 * radius + 1) ** 2
     for c in prange(stored.shape[0]):
-        box_channel(stored[c], surface, True, True, coverage, radius, out[c])
+        _box_channel(stored[c], surface, True, True, coverage, radius, out[c])
         for y in range(stored.shape[1]):
             row, mean, share = out[c, y], average[c, y], coverage[y]
             for x in range(row.shape[0]):
@@ -54,7 +54,7 @@ def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
-def box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared: bool,
+def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared: bool,
                  coverage: np.ndarray, radius: int, out: np.ndarray) -> None:
     """One channel (H, W) of :func:`box_mean` (``covered`` False: the other planes are not
     read), or of the mean of ``plane`` (``squared``: of its squares) times ``surface`` over

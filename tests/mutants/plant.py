@@ -298,8 +298,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "clamp-keeps-moments", "filters", "history clamp leaves the moments of a clamped outlier",
         "svgf_cli/filters/clamp.py",
-        (("                if moved[x]:\n                    after =",
-          "                if False:\n                    after ="),),
+        (("                if moved[x]:\n                    _follow_luminance(",
+          "                if False:\n                    _follow_luminance("),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -409,16 +409,16 @@ MUTANTS: tuple[Mutant, ...] = (
         "clamp-scales-raised-moments", "filters",
         "a history raised from near black scales its moments by (l'/l)^2 (overflow)",
         "svgf_cli/filters/clamp.py",
-        (("                    if before[x] > _ZERO and after <= MAX_RAISE * before[x]:",
-          "                    if before[x] > _ZERO:"),),
+        (("    if before > _ZERO and after <= MAX_RAISE * before:",
+          "    if before > _ZERO:"),),
         FILTER_TESTS,
     ),
     Mutant(
         "clamp-second-moment-uncapped", "filters",
         "the history clamp's scaled second moment overflows to inf",
         "svgf_cli/filters/clamp.py",
-        (("                        m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)",
-          "                        m2[x] = m2[x] * (ratio * ratio)"),),
+        (("        m2[x] = min(m2[x] * (ratio * ratio), MAX_SECOND_MOMENT)",
+          "        m2[x] = m2[x] * (ratio * ratio)"),),
         FILTER_TESTS,
     ),
     Mutant(
