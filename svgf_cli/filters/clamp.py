@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgf_cli.filters.fastmath import FASTMATH, luminance
+from svgf_cli.filters.shares import row_sums
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -257,7 +258,7 @@ def _clamp_wide_rows(history: np.ndarray, moments: np.ndarray, length: np.ndarra
                 if y - radius - 1 >= 0:
                     _slide_columns(current, depth, y - radius - 1, -1.0, columns)
             for row in range(7):
-                _running_sums(columns[row], radius, window[row])
+                row_sums(columns[row], radius, window[row])
             z, h = depth[y], length[y]
             hr, hg, hb = history[0, y], history[1, y], history[2, y]
             m1, m2 = moments[0, y], moments[1, y]
@@ -296,19 +297,3 @@ def _slide_columns(current: np.ndarray, depth: np.ndarray, y: int, sign: float,
             value = np.float64(values[x]) if z[x] > _ZERO else 0.0
             total[x] += sign * value
             squares[x] += sign * (value * value)
-
-
-@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
-      error_model="numpy")
-def _running_sums(column: np.ndarray, radius: int, out: np.ndarray) -> None:
-    """``out[x]`` = the sum of ``column`` over x - radius .. x + radius within the row."""
-    width = column.shape[0]
-    running = 0.0
-    for x in range(min(radius, width)):
-        running += column[x]
-    for x in range(width):
-        if x + radius < width:
-            running += column[x + radius]
-        if x - radius - 1 >= 0:
-            running -= column[x - radius - 1]
-        out[x] = running

@@ -44,7 +44,7 @@ class HistoryClamp(StageBase):
             return False
         glossy = temporal.glossy or (False,) * len(temporal.names)
         ks = clamp_ks(p, glossy)
-        if max(ks) > 0.0:  # one pass for all signals
+        if max(ks) > 0.0:  # one pass for the 3x3 signals, one per wider signal
             history_clamp(temporal.history_illumination, temporal.history_moments,
                           temporal.history_length, temporal.current, temporal.depth, ks,
                           temporal.luminance_weights,
