@@ -18,14 +18,41 @@ stderr prefixed ``WARNING:``.
 
 from __future__ import annotations
 
+import functools
 import json
 import sys
+import threading
 import time
 from collections import deque
-from typing import Any, TextIO
+from collections.abc import Callable
+from typing import Any, Concatenate, ParamSpec, TextIO, TypeVar
 
 PROGRESS_MODES = ("auto", "bar", "lines", "json")
 RATE_WINDOW = 10
+
+# One lock for every report of every Progress: the writer thread reports written frames
+# while the main and reader threads report the rest, all on the same sys.stdout/stderr.
+# Two threads inside one TextIOWrapper.write interleave their lines, and on CPython 3.11
+# can crash the process (python/cpython#119506: the wrapper's pending text is not
+# guarded while the buffer's write releases the GIL). Measured: a SIGTERM test's child
+# died of SIGSEGV in 3 of 45 runs, its main thread in print() while the writer thread
+# printed a frame_done line.
+_REPORT_LOCK = threading.RLock()
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def _serialised(method: Callable[Concatenate[Progress, _P], _R]
+                ) -> Callable[Concatenate[Progress, _P], _R]:
+    """Run ``method`` holding the report lock (its counters and its lines together)."""
+
+    @functools.wraps(method)
+    def locked(self: Progress, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with _REPORT_LOCK:
+            return method(self, *args, **kwargs)
+
+    return locked
 
 
 def resolve_mode(mode: str, stream: TextIO) -> str:
@@ -71,22 +98,26 @@ class Progress:
         self._bar: Any = None  # tqdm bar, opened on the first frame in bar mode
 
     # -- plain messages ----------------------------------------------------------------
+    @_serialised
     def info(self, message: str) -> None:
         """A start-up / summary line (suppressed by -q)."""
         if self.quiet:
             return
         self._print(message, self.err if self.mode == "json" else self.out)
 
+    @_serialised
     def detail(self, message: str) -> None:
         """A -v line (timings, per-frame details); never on stdout in json mode."""
         if not self.verbose:
             return
         self._print(message, self.err if self.mode == "json" else self.out)
 
+    @_serialised
     def warning(self, message: str) -> None:
         self._print(f"WARNING: {message}", self.err)
 
     # -- progress -----------------------------------------------------------------------
+    @_serialised
     def warmup(self, frame: int, index: int, total: int) -> None:
         """Warm-up frame ``index`` (1-based) of ``total`` was processed (not written)."""
         if not self.show_progress:
@@ -98,6 +129,7 @@ class Progress:
         else:
             print(f"Warmup: {index}/{total} (frame {frame})", file=self.out, flush=True)
 
+    @_serialised
     def forward_done(self, frame: int) -> None:
         """A bidirectional run's forward pass processed output frame ``frame`` (half of its
         work: the percentage counts both passes once ``passes`` is 2)."""
@@ -123,6 +155,7 @@ class Progress:
         total = max(self.total, self.done) * self.passes
         return int(100 * (self.done + self.forward) / total) if total else 100
 
+    @_serialised
     def frame_done(self, frame: int, seconds: float) -> None:
         """An output frame was written; ``seconds`` is its wall time."""
         self.done += 1
@@ -156,6 +189,7 @@ class Progress:
                 flush=True,
             )
 
+    @_serialised
     def finish(self, message: str | None = None) -> None:
         """End of the run: close the bar, print the summary (or a json ``done`` event)."""
         self._end_bar()

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import json
+import os
 import runpy
 import signal
 import sys
@@ -33,7 +34,9 @@ def pause_before(index: int) -> None:
             # Caught before the line is printed, so a signal sent at once is not missed;
             # Python runs the handler in this (the main) thread whichever thread got it.
             runs = {s: signal.signal(s, lambda n, _: received.append(n)) for s in STOP_SIGNALS}
-            print(json.dumps({"event": "paused"}), flush=True)
+            # One write(2) to the descriptor, past sys.stdout: the writer thread may be
+            # printing a frame_done line through it now (svgf_cli.progress's lock).
+            os.write(1, (json.dumps({"event": "paused"}) + "\n").encode())
             while not received:
                 time.sleep(0.01)
             for s, handler in runs.items():

@@ -5,6 +5,8 @@ from __future__ import annotations
 import io
 import json
 import re
+import threading
+from pathlib import Path
 
 from svgf_cli.progress import Progress
 
@@ -73,3 +75,34 @@ def test_bar_rewrites_one_line() -> None:
     assert "100%" in bar and "2/2" in bar and "frame 3" in bar
     assert summary == "Done" and text.endswith("\nDone\n")
     assert err.getvalue() == "WARNING: a warning while the bar is drawn\n"
+
+
+def test_reports_from_two_threads_keep_whole_lines(tmp_path: Path) -> None:
+    """The writer thread reports frames while the main thread warns, on one stream: each
+    line arrives whole and every count is kept (without the lock the two threads' text and
+    newlines interleave through the unbuffered wrapper, as under ``python -u``)."""
+    path = tmp_path / "log"
+    with path.open("wb", buffering=0) as raw:
+        stream = io.TextIOWrapper(raw, write_through=True)  # type: ignore[arg-type]
+        progress = Progress("json", total=4000, out=stream, err=stream)
+
+        def report(writer: bool) -> None:
+            for i in range(2000):
+                if writer:
+                    progress.frame_done(i, 0.1)
+                else:
+                    progress.warning(f"w{i}")
+
+        threads = [threading.Thread(target=report, args=(w,)) for w in (False, True)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        stream.flush()
+        stream.detach()
+    lines = path.read_text().splitlines()
+    warnings = [line for line in lines if line.startswith("WARNING: ")]
+    events = [json.loads(line) for line in lines if not line.startswith("WARNING: ")]
+    assert warnings == [f"WARNING: w{i}" for i in range(2000)]
+    assert [e["index"] for e in events] == list(range(1, 2001))
+    assert progress.done == 2000
