@@ -28,6 +28,8 @@ AUTO_COVERAGE = -1
 AUTO_SAMPLES = -1
 # ``history_clamp_radius`` from the image's size (history_clamp_radius_for).
 AUTO_CLAMP_RADIUS = -1
+# ``luminance_stop_scale`` from the image's size (luminance_stop_scale_for).
+AUTO_STOP_SCALE = -1.0
 
 # The parameter groups, in display order, with a one-line title each.
 GROUPS: dict[str, str] = {
@@ -224,17 +226,11 @@ class SVGFParams:
     # Glossy signals (Signal.glossy: reflections and refractions move with what they show,
     # not with the surface, so their reprojected history is unreliable).
     glossy_history_clamp: float = _p(
-        0.0,
-        "Clamp a glossy signal's reprojected history to the current 3x3 mean +- k*sigma"
-        " (0 = as history_clamp).",
-        group="glossy", valid=Range(0),
-    )
+        0.0, "Clamp a glossy signal's reprojected history to the current 3x3 mean +- k*sigma"
+        " (0 = as history_clamp).", group="glossy", valid=Range(0))
     glossy_sigma_luminance: float = _p(
-        0.0,
-        "sigma_l of glossy signals: reflections carry detail the spatial filter must keep"
-        " (0 = the same as sigma_luminance).",
-        group="glossy", valid=Range(0),
-    )
+        0.0, "sigma_l of glossy signals: reflections carry detail the spatial filter must keep"
+        " (0 = the same as sigma_luminance).", group="glossy", valid=Range(0))
     mixed_sigma_luminance: float = _p(
         0.0,
         "sigma_l of signals holding direct and indirect light together (a combined colour, one"
@@ -278,6 +274,10 @@ class SVGFParams:
                              group="atrous", valid=Range(0, low_open=True))
     sigma_depth: float = _p(1.0, "sigma_z: depth edge-stopping against the depth gradient.",
                             group="atrous", valid=Range(0, low_open=True))
+    luminance_stop_scale: float = _p(
+        1.0, "Factor on every a-trous sigma_l (sigma_luminance, mixed_ and glossy_); auto (-1 in"
+        " svgf/params) = from the image's shorter side: 1 below 120 pixels, 1.5 below 320, else"
+        " 1.75.", group="atrous", valid=Range(0, low_open=True, auto=AUTO_STOP_SCALE))
     # Demodulation (paper section 4).
     albedo_epsilon: float = _p(
         1e-3,
@@ -426,6 +426,10 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   " its history to black: blotches, and the frame darker, on frames larger"
                   f" than the fixtures' 128x72 (history_clamp_radius_for): {_ALG}"
                   "#the-history-clamps-window"),
+        Departure("luminance_stop_scale", AUTO_STOP_SCALE, "on frames larger than the"
+                  " fixtures' 128x72 the stops tuned there keep 1-spp noise apart as detail:"
+                  " blotches, and a video that boils (luminance_stop_scale_for): "
+                  f"{_ALG}#the-luminance-stop-grows-with-the-image"),
         Departure("glossy_history_clamp", 1.0, "reflections move with what they show, so"
                   f" their reprojected history is unreliable: {_GLOSSY}"),
         Departure("sigma_luminance", 2.0, "with the unfiltered history and the warm start,"
@@ -555,6 +559,26 @@ def history_clamp_radius_for(params: SVGFParams, height: int, width: int) -> int
         return params.history_clamp_radius
     side = min(height, width)
     return next(radius for smallest, radius in _CLAMP_SIDES if side >= smallest)
+
+
+# The shorter image side from which each looser luminance stop is used.
+_STOP_SIDES = ((320, 1.75), (120, 1.5), (0, 1.0))
+
+
+def luminance_stop_scale_for(params: SVGFParams, height: int, width: int) -> float:
+    """The factor on the a-trous luminance stops for an image of ``height`` x ``width``: an
+    explicit one is kept; ``AUTO_STOP_SCALE`` loosens the stops as the image grows (1 below
+    120 rows, 1.5 below 320, 1.75 from 320). The stop keeps apart neighbours whose luminance
+    differs by more than sigma_l standard deviations of the noise: the noise per pixel does
+    not change with the resolution, while a smooth gradient's difference between neighbours
+    shrinks as the scene covers more pixels, and each further iteration (the count grows with
+    the image too) stops at the compounded product of its weights. Measured
+    (docs/algorithm.md#the-luminance-stop-grows-with-the-image): 72 rows best at 1, 144
+    and 216 rows at 1.5, 360 rows at 1.75-2."""
+    if params.luminance_stop_scale != AUTO_STOP_SCALE:
+        return params.luminance_stop_scale
+    side = min(height, width)
+    return next(scale for smallest, scale in _STOP_SIDES if side >= smallest)
 
 
 def medium_coverage_radius_for(params: SVGFParams, height: int, width: int) -> int:

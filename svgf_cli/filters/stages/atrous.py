@@ -11,7 +11,7 @@ from svgf_cli.filters.bidirectional import STATIC_MOTION
 from svgf_cli.filters.buffers import free_scratch
 from svgf_cli.filters.context import FrameContext, Spatial, StageBase
 from svgf_cli.filters.feedback import blend_history
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import SVGFParams, luminance_stop_scale_for
 from svgf_cli.frame import Signal
 
 F32 = np.float32
@@ -95,7 +95,8 @@ def atrous_step(ctx: FrameContext, filtered: np.ndarray, filtered_variance: np.n
     p, work, mode, depth = ctx.params, ctx.work, ctx.mode, ctx.depth
     guide_luminance = ctx.plane("guide_luminance")
     guide_inverse_scale = ctx.plane("guide_inverse_scale")
-    sigmas = [signal_sigma_luminance(p, signal) for signal in ctx.frame.signals]
+    scale = luminance_stop_scale_for(p, ctx.frame.height, ctx.frame.width)
+    sigmas = [scale * signal_sigma_luminance(p, signal) for signal in ctx.frame.signals]
     span = filtered_span(zero)
     for part_of_span in signal_groups(span.stop - span.start):
         group = slice(span.start + part_of_span.start, span.start + part_of_span.stop)
