@@ -71,7 +71,7 @@ from svgf_cli.filters.bidirectional import (
     STATIC_FILTERED_SHARE,
     STATIC_MOTION,
 )
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import SVGFParams, antilag_radius_for
 from svgf_cli.frame import Frame, Signal
 
 F64 = np.float64
@@ -1482,7 +1482,8 @@ class ReferenceDenoiser:
         if p.antilag:
             _, length, shortened = antilag(
                 temporal.current, reprojected.moments, reprojected.history_length,
-                temporal.depth, temporal.weights, p.antilag_radius, p.antilag_sigma,
+                temporal.depth, temporal.weights, antilag_radius_for(p, *temporal.depth.shape),
+                p.antilag_sigma,
                 p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha)
             reprojected.history_length = length
         return shortened

@@ -18,11 +18,13 @@ from synthetic import (
 from svgf_cli.filters.bidirectional import STATIC_MOTION
 from svgf_cli.filters.denoiser import Denoiser
 from svgf_cli.filters.params import (
+    AUTO_ANTILAG_RADIUS,
     AUTO_ITERATIONS,
     AUTO_PIXEL_FILTER,
     AUTO_SAMPLES,
     AUTO_STOP_SCALE,
     SVGFParams,
+    antilag_radius_for,
     luminance_stop_scale_for,
     params_for_samples,
     resolve_params,
@@ -614,3 +616,26 @@ def test_luminance_stop_scale_multiplies_every_stop_and_auto_follows_the_image()
     assert luminance_stop_scale_for(base, 1080, 720) == 1.75  # the shorter side
     assert luminance_stop_scale_for(base.replace(luminance_stop_scale=0.5), 1080, 1920) == 0.5
     assert luminance_stop_scale_for(resolve_params("paper"), 1080, 1920) == 1.0
+
+
+def test_antilag_radius_auto_follows_the_image() -> None:
+    """``antilag_radius`` auto is 2 below 320 rows (a small frame filters exactly as the
+    explicit 2: the bundled fixtures are unchanged) and 6 from 320; an explicit radius
+    wins, and a wider window changes what anti-lag does on a lighting change."""
+    base = resolve_params("default")
+    assert base.antilag_radius == AUTO_ANTILAG_RADIUS
+    assert [antilag_radius_for(base, rows, 2 * rows) for rows in (72, 319, 320, 1080)] == [
+        2, 2, 6, 6]
+    assert antilag_radius_for(base, 1080, 720) == 6  # the shorter side
+    assert antilag_radius_for(base.replace(antilag_radius=3), 1080, 1920) == 3
+    frames = static_sequence(4, 40, 24, noise=0.3, split=True)
+    for frame in frames[2:]:  # the light dims to a third: anti-lag's case
+        for signal in frame.signals:
+            signal.radiance *= F32(1 / 3)
+    runs = {name: Denoiser(params) for name, params in {
+        "auto": base, "two": base.replace(antilag_radius=2),
+        "four": base.replace(antilag_radius=4)}.items()}
+    for frame in frames:
+        out = {name: d.process(frame).color for name, d in runs.items()}
+        np.testing.assert_array_equal(out["auto"], out["two"])
+    assert np.any(out["two"] != out["four"])

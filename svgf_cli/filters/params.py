@@ -30,6 +30,8 @@ AUTO_SAMPLES = -1
 AUTO_CLAMP_RADIUS = -1
 # ``luminance_stop_scale`` from the image's size (luminance_stop_scale_for).
 AUTO_STOP_SCALE = -1.0
+# ``antilag_radius`` from the image's size (antilag_radius_for).
+AUTO_ANTILAG_RADIUS = -1
 
 # The parameter groups, in display order, with a one-line title each.
 GROUPS: dict[str, str] = {
@@ -191,9 +193,9 @@ class SVGFParams:
         group="antilag",
     )
     antilag_radius: int = _p(
-        2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels).",
-        group="antilag", valid=Range(1, 16),
-    )
+        2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels); auto"
+        " (-1 in svgf/params) = from the image's shorter side: 2 below 320 pixels, else 6.",
+        group="antilag", valid=Range(1, 16, auto=AUTO_ANTILAG_RADIUS, shown="1..16"))
     antilag_sigma: float = _p(
         3.5,
         "Anti-lag significance: the history is stale where it differs from the frame by more"
@@ -208,8 +210,7 @@ class SVGFParams:
     )
     antilag_tolerance: float = _p(
         0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept.",
-        group="antilag", valid=Range(0),
-    )
+        group="antilag", valid=Range(0))
     antilag_gradients: bool = _p(
         True,
         "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
@@ -416,6 +417,10 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   "#the-default-since-2026-11-27"),
         Departure("antilag", True, "moving lights and shadows, lights switched or dimmed"
                   f" and moving reflections lag otherwise: {_GLOSSY}"),
+        Departure("antilag_radius", AUTO_ANTILAG_RADIUS, "on frames larger than the fixtures'"
+                  " 128x72 the 10x10 window's noise cuts histories short where nothing"
+                  " changed (antilag_radius_for): "
+                  f"{_ALG}#the-anti-lag-window-grows-with-the-image"),
         Departure("object_history", True, "a turning object's points turn away from the"
                   " light: their light's history is at the object's translation, not the"
                   f" material point's: {_ALG}#turning-objects"),
@@ -579,6 +584,26 @@ def luminance_stop_scale_for(params: SVGFParams, height: int, width: int) -> flo
         return params.luminance_stop_scale
     side = min(height, width)
     return next(scale for smallest, scale in _STOP_SIDES if side >= smallest)
+
+
+# The shorter image side from which each wider anti-lag window is used.
+_ANTILAG_SIDES = ((320, 6), (0, 2))
+
+
+def antilag_radius_for(params: SVGFParams, height: int, width: int) -> int:
+    """The anti-lag window's radius (in cells of 2x2 pixels) for an image of ``height`` x
+    ``width``: an explicit one is kept; ``AUTO_ANTILAG_RADIUS`` is 2 (10x10 pixels) below
+    320 rows of the shorter side and 6 (26x26) from 320. Anti-lag tests the history against
+    the window's mean of this frame's samples; the window's noise sets how small a change it
+    can tell from noise, and a false alarm restarts the history from this frame's mostly dark
+    one-sample values (noise, and a darker frame). On a larger image the same change covers
+    more pixels, so a wider window sees it as well with less noise. Measured
+    (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 216 rows about the same at
+    2, 3 and 4; 360 rows better at 4 and 6 than at 2 and 3, 6 best where the light changes."""
+    if params.antilag_radius != AUTO_ANTILAG_RADIUS:
+        return params.antilag_radius
+    side = min(height, width)
+    return next(radius for smallest, radius in _ANTILAG_SIDES if side >= smallest)
 
 
 def medium_coverage_radius_for(params: SVGFParams, height: int, width: int) -> int:

@@ -7,7 +7,7 @@ import numpy as np
 from svgf_cli.filters.antilag import antilag
 from svgf_cli.filters.bidirectional import PASS_ANTILAG_SIGMA_SCALE
 from svgf_cli.filters.context import FrameContext, StageBase
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import SVGFParams, antilag_radius_for
 
 F32 = np.float32
 
@@ -36,7 +36,8 @@ class AntiLag(StageBase):
             scratch = work["antilag_scratch"]
         ctx.counts["antilag"] = antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
-            temporal.depth, np.array(temporal.luminance_weights, dtype=F32), p.antilag_radius,
+            temporal.depth, np.array(temporal.luminance_weights, dtype=F32),
+            antilag_radius_for(p, ctx.frame.height, ctx.frame.width),
             antilag_sigma(p, temporal.bidirectional), p.antilag_spatial_samples,
             p.antilag_tolerance, p.moments_alpha, scratch, work["antilag_lambda"],
             temporal.gradients,

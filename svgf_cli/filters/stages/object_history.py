@@ -11,7 +11,7 @@ from svgf_cli.filters.antilag import CELL, antilag, cell_shape, scratch_shape
 from svgf_cli.filters.clamp import history_clamp
 from svgf_cli.filters.context import FrameContext, StageBase, TemporalState
 from svgf_cli.filters.object_motion import turning_pixels
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import SVGFParams, antilag_radius_for
 from svgf_cli.filters.reproject import reproject
 from svgf_cli.filters.stages.antilag import antilag_sigma
 from svgf_cli.filters.stages.history_clamp import clamp_ks, clamp_radii
@@ -69,7 +69,8 @@ class ObjectHistory(StageBase):
         turning = np.isfinite(translation[0])
         if not turning.any():
             return False
-        rows, columns = _box(turning, CELL * (ctx.params.antilag_radius + 1) + 2)
+        radius = antilag_radius_for(ctx.params, ctx.frame.height, ctx.frame.width)
+        rows, columns = _box(turning, CELL * (radius + 1) + 2)
         ctx.turned = _resample(ctx, temporal, history, translation, turning, rows, columns)
         return True
 
@@ -178,10 +179,11 @@ def _tested(ctx: FrameContext, temporal: TemporalState, current: np.ndarray,
     weights = np.array(temporal.luminance_weights, dtype=F32)
     scratch = np.empty(scratch_shape(num_signals, height, width), F32)
     weight = np.empty((num_signals, *cell_shape(height, width)), F32)
+    radius = antilag_radius_for(p, ctx.frame.height, ctx.frame.width)  # the frame's, not the box's
 
     def tested(moments: np.ndarray, length: np.ndarray,
                gradients: list[tuple[np.ndarray, ...] | None] | None = None) -> np.ndarray:
-        antilag(current, moments, length, depth, weights, p.antilag_radius,
+        antilag(current, moments, length, depth, weights, radius,
                 antilag_sigma(p, temporal.bidirectional), p.antilag_spatial_samples,
                 p.antilag_tolerance, p.moments_alpha, scratch, weight, gradients)
         return length
