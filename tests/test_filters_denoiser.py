@@ -621,13 +621,13 @@ def test_luminance_stop_scale_multiplies_every_stop_and_auto_follows_the_image()
 
 
 def test_antilag_radius_auto_follows_the_image() -> None:
-    """``antilag_radius`` auto is 2 below 320 rows (a small frame filters exactly as the
-    explicit 2: the bundled fixtures are unchanged) and 6 from 320; an explicit radius
+    """``antilag_radius`` auto is 2 below 160 rows (a small frame filters exactly as the
+    explicit 2: the bundled fixtures are unchanged), 4 below 320, 6 from 320; an explicit radius
     wins, and a wider window changes what anti-lag does on a lighting change."""
     base = resolve_params("default")
     assert base.antilag_radius == AUTO_ANTILAG_RADIUS
-    assert [antilag_radius_for(base, rows, 2 * rows) for rows in (72, 319, 320, 1080)] == [
-        2, 2, 6, 6]
+    rows = (72, 159, 160, 319, 320, 1080)
+    assert [antilag_radius_for(base, r, 2 * r) for r in rows] == [2, 2, 4, 4, 6, 6]
     assert antilag_radius_for(base, 1080, 720) == 6  # the shorter side
     assert antilag_radius_for(base.replace(antilag_radius=3), 1080, 1920) == 3
     frames = static_sequence(4, 40, 24, noise=0.3, split=True)

@@ -194,7 +194,8 @@ class SVGFParams:
     )
     antilag_radius: int = _p(
         2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels); auto"
-        " (-1 in svgf/params) = from the image's shorter side: 2 below 320 pixels, else 6.",
+        " (-1 in svgf/params) = from the image's shorter side: 2 below 160 pixels, 4 below"
+        " 320, else 6.",
         group="antilag", valid=Range(1, 16, auto=AUTO_ANTILAG_RADIUS, shown="1..16"))
     antilag_sigma: float = _p(
         3.5,
@@ -587,19 +588,21 @@ def luminance_stop_scale_for(params: SVGFParams, height: int, width: int) -> flo
 
 
 # The shorter image side from which each wider anti-lag window is used.
-_ANTILAG_SIDES = ((320, 6), (0, 2))
+_ANTILAG_SIDES = ((320, 6), (160, 4), (0, 2))
 
 
 def antilag_radius_for(params: SVGFParams, height: int, width: int) -> int:
     """The anti-lag window's radius (in cells of 2x2 pixels) for an image of ``height`` x
     ``width``: an explicit one is kept; ``AUTO_ANTILAG_RADIUS`` is 2 (10x10 pixels) below
-    320 rows of the shorter side and 6 (26x26) from 320. Anti-lag tests the history against
-    the window's mean of this frame's samples; the window's noise sets how small a change it
-    can tell from noise, and a false alarm restarts the history from this frame's mostly dark
-    one-sample values (noise, and a darker frame). On a larger image the same change covers
-    more pixels, so a wider window sees it as well with less noise. Measured
-    (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 216 rows about the same at
-    2, 3 and 4; 360 rows better at 4 and 6 than at 2 and 3, 6 best where the light changes."""
+    160 rows of the shorter side, 4 (18x18) below 320 and 6 (26x26) from 320. Anti-lag tests
+    the history against the window's mean of this frame's samples; the window's noise sets
+    how small a change it can tell from noise, and a false alarm restarts the history from
+    this frame's mostly dark one-sample values (noise, and a darker frame). On a larger image
+    the same change covers more pixels, so a wider window sees it as well with less noise.
+    Measured
+    (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 144 rows best at 2, 216
+    rows at 4 (a Blender shot with moving lights on a metal sphere +0.04 JOD), 360 rows at
+    4-6, 6 best where the light changes."""
     if params.antilag_radius != AUTO_ANTILAG_RADIUS:
         return params.antilag_radius
     side = min(height, width)
