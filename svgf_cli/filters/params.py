@@ -599,10 +599,9 @@ def antilag_radius_for(params: SVGFParams, height: int, width: int) -> int:
     how small a change it can tell from noise, and a false alarm restarts the history from
     this frame's mostly dark one-sample values (noise, and a darker frame). On a larger image
     the same change covers more pixels, so a wider window sees it as well with less noise.
-    Measured
-    (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 144 rows best at 2, 216
-    rows at 4 (a Blender shot with moving lights on a metal sphere +0.04 JOD), 360 rows at
-    4-6, 6 best where the light changes."""
+    Measured (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 144 rows best at
+    2, 216 rows at 4 (a Blender shot with moving lights on a metal sphere +0.04 JOD), 360
+    rows at 4-6, 6 best where the light changes."""
     if params.antilag_radius != AUTO_ANTILAG_RADIUS:
         return params.antilag_radius
     side = min(height, width)
