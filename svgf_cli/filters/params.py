@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 # ``atrous_iterations`` value that picks the count from the image size.
 AUTO_ITERATIONS = -1
@@ -561,10 +561,8 @@ def history_clamp_radius_for(params: SVGFParams, height: int, width: int) -> int
     samples. On a small image a wider window reaches across other surfaces and lights
     instead. Measured (docs/algorithm.md#the-history-clamps-window): 72 rows best at 1 (and
     a Blender render at 144), 216 and 360 rows at 2-3."""
-    if params.history_clamp_radius != AUTO_CLAMP_RADIUS:
-        return params.history_clamp_radius
-    side = min(height, width)
-    return next(radius for smallest, radius in _CLAMP_SIDES if side >= smallest)
+    return _by_image_side(params.history_clamp_radius, AUTO_CLAMP_RADIUS, _CLAMP_SIDES,
+                          height, width)
 
 
 # The shorter image side from which each looser luminance stop is used.
@@ -581,10 +579,8 @@ def luminance_stop_scale_for(params: SVGFParams, height: int, width: int) -> flo
     the image too) stops at the compounded product of its weights. Measured
     (docs/algorithm.md#the-luminance-stop-grows-with-the-image): 72 rows best at 1, 144
     and 216 rows at 1.5, 360 rows at 1.75-2."""
-    if params.luminance_stop_scale != AUTO_STOP_SCALE:
-        return params.luminance_stop_scale
-    side = min(height, width)
-    return next(scale for smallest, scale in _STOP_SIDES if side >= smallest)
+    return _by_image_side(params.luminance_stop_scale, AUTO_STOP_SCALE, _STOP_SIDES,
+                          height, width)
 
 
 # The shorter image side from which each wider anti-lag window is used.
@@ -602,10 +598,21 @@ def antilag_radius_for(params: SVGFParams, height: int, width: int) -> int:
     Measured (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 144 rows best at
     2, 216 rows at 4 (a Blender shot with moving lights on a metal sphere +0.04 JOD), 360
     rows at 4-6, 6 best where the light changes."""
-    if params.antilag_radius != AUTO_ANTILAG_RADIUS:
-        return params.antilag_radius
+    return _by_image_side(params.antilag_radius, AUTO_ANTILAG_RADIUS, _ANTILAG_SIDES,
+                          height, width)
+
+
+_T = TypeVar("_T", int, float)
+
+
+def _by_image_side(value: _T, auto: _T, sides: tuple[tuple[int, _T], ...], height: int,
+                   width: int) -> _T:
+    """``value`` where it is not ``auto``; else the value ``sides`` (pairs of the smallest
+    shorter side and its value, largest first, the last from 0) gives this image."""
+    if value != auto:
+        return value
     side = min(height, width)
-    return next(radius for smallest, radius in _ANTILAG_SIDES if side >= smallest)
+    return next(chosen for smallest, chosen in sides if side >= smallest)
 
 
 def medium_coverage_radius_for(params: SVGFParams, height: int, width: int) -> int:
