@@ -152,11 +152,13 @@ def history_clamp(
     wide = [s for s in range(num_signals) if radii[s] > 1 and ks[s] > 0]
     narrow = ks.copy()
     narrow[wide] = _ZERO  # clamped by _clamp_wide_rows below
-    _history_clamp_rows(history, history_moments, history_length, current, depth, narrow,
-                        luminance_weights)
+    if narrow.max() > _ZERO:  # a signal left for the 3x3 pass (none when all are wider)
+        _history_clamp_rows(history, history_moments, history_length, current, depth, narrow,
+                            luminance_weights)
     for s in wide:  # a wider window: one signal at a time, in bands of rows
         _clamp_wide_rows(history[s], history_moments[s], history_length[s], current[s], depth,
                          ks[s], int(radii[s]), luminance_weights)
+
 
 @njit(
     parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy"
