@@ -19,8 +19,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 TEMPORAL = ["values", "gradients", "demodulate", "reproject"]
 DEFAULT_TEMPORAL = ["values", "fill_medium", "medium_coverage", "gradients",
-                    "reflected_lights", "demodulate", "reproject", "object_history",
-                    "history_clamp", "antilag", "adopt_object_history", "spread_fireflies"]
+                    "reflected_lights", "reflected_albedo", "demodulate", "reproject",
+                    "object_history", "history_clamp", "antilag", "adopt_object_history",
+                    "spread_fireflies"]
 
 
 @pytest.mark.parametrize(("preset", "kind", "expected"), [
@@ -50,6 +51,7 @@ def test_stage_order_per_preset(preset: str, kind: str, expected: list[str]) -> 
 
 @pytest.mark.parametrize(("changes", "stages"), [
     ({"glossy_emitter_radiance": True}, ("reflected_lights",)),
+    ({"reflected_albedo": True}, ("reflected_albedo",)),
     ({"firefly_clamp": 3.0}, ("firefly_clamp",)),
     ({"history_clamp": 3.0}, ("history_clamp",)),
     ({"glossy_history_clamp": 1.0}, ("history_clamp",)),

@@ -99,14 +99,10 @@ class SVGFParams:
     """Resolved SVGF parameters. Defaults are Schied et al. 2017 (``--preset paper``)."""
 
     # Temporal accumulation (paper section 4.1).
-    alpha: float = _p(
-        0.2, "Minimum colour blend factor; alpha = max(alpha, 1/history_length).",
-        group="temporal", valid=Range(0, 1, low_open=True),
-    )
-    moments_alpha: float = _p(
-        0.2, "Minimum blend factor of the luminance moments.",
-        group="temporal", valid=Range(0, 1, low_open=True),
-    )
+    alpha: float = _p(0.2, "Minimum colour blend factor; alpha = max(alpha, 1/history_length).",
+                      group="temporal", valid=Range(0, 1, low_open=True))
+    moments_alpha: float = _p(0.2, "Minimum blend factor of the luminance moments.",
+                              group="temporal", valid=Range(0, 1, low_open=True))
     samples_per_pixel: int = _p(
         1, "Samples per pixel of the inputs: a frame of N samples is blended as N one-sample"
         " frames, alpha and moments_alpha -> 1 - (1 - alpha)^N; auto (-1 in svgf/params) = the"
@@ -250,6 +246,10 @@ class SVGFParams:
         " around it.",
         group="glossy",
     )
+    reflected_albedo: bool = _p(
+        False, "Demodulate a glossy signal by the G-buffer albedo on diffuse-free objects whose"
+        " albedo shows a sharp reflection (Cycles' Denoising Albedo follows specular bounces).",
+        group="glossy")
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
         5,
@@ -446,6 +446,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   " must keep: docs/signals.md"),
         Departure("glossy_emitter_radiance", True, "a reflected light is filtered as radiance,"
                   " not blurred into the surface around it: docs/signals.md"),
+        Departure("reflected_albedo", True, "a mirror's reflected texture is detail the"
+                  " glossy stop keeps, and its noise with it: docs/algorithm.md"
+                  "#reflected-albedo"),
         Departure("mixed_sigma_luminance", 1.5, "a combined colour's variance is the indirect"
                   f" light's, which would blur the direct light's detail: {_ALG}"
                   "#4-à-trous-wavelet-filter-paper-43 (2.5 before docs/stability.md"

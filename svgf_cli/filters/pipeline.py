@@ -33,6 +33,7 @@ from svgf_cli.filters.stages.medium_coverage import MediumCoverage
 from svgf_cli.filters.stages.object_history import AdoptObjectHistory, ObjectHistory
 from svgf_cli.filters.stages.pass_history import PassHistory
 from svgf_cli.filters.stages.pixel_filter import PixelFilter
+from svgf_cli.filters.stages.reflected_albedo import ReflectedAlbedo
 from svgf_cli.filters.stages.reflected_lights import MarkReflectedLights
 from svgf_cli.filters.stages.release import ReleaseCombination
 from svgf_cli.filters.stages.remodulate import Remodulate
@@ -55,6 +56,7 @@ def temporal() -> list[Stage]:
         MediumCoverage(),  # medium_coverage_radius, frames with medium pixels
         Gradients(),
         MarkReflectedLights(),  # glossy_emitter_radiance
+        ReflectedAlbedo(),  # reflected_albedo
         Demodulate(),
         FireflyClamp(),  # firefly_clamp
         Reproject(),

@@ -1,0 +1,49 @@
+"""Reflected albedo (optional): sharp reflections demodulated by the albedo they reflect."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from svgf_cli.filters.context import FrameContext, StageBase
+from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.reflected_albedo import reflected_albedo
+
+F32 = np.float32
+
+
+class ReflectedAlbedo(StageBase):
+    """Each glossy signal's demodulation colour replaced, on diffuse-free pixels of objects
+    whose G-buffer albedo shows a sharp reflection, by that albedo (floored) or a mix of
+    the two by how sharp (``filters.reflected_albedo``); demodulation and remodulation both
+    read the new colour. New arrays (the caller's planes are never modified);
+    ``counts["reflected_albedo.<signal>"]`` gets the pixels changed."""
+
+    name = "reflected_albedo"
+    reads = ("frame.signals", "frame.albedo", "frame.mesh_id", "depth")
+    writes = ("frame.signals",)
+    clock = "demodulate"
+
+    def enabled(self, params: SVGFParams) -> bool:
+        return params.reflected_albedo
+
+    def run(self, ctx: FrameContext) -> bool:
+        frame = ctx.frame
+        glossy = [i for i, signal in enumerate(frame.signals) if signal.glossy]
+        if not glossy:
+            return False
+        diffuse = np.zeros((frame.height, frame.width), dtype=F32)
+        for signal in frame.signals:
+            if not signal.glossy:
+                np.maximum(diffuse, signal.albedo.max(axis=0), out=diffuse)
+        signals = list(frame.signals)
+        for index in glossy:
+            signal = signals[index]
+            found = reflected_albedo(signal.albedo, frame.albedo, diffuse, ctx.depth,
+                                     frame.mesh_id)
+            if found is not None:
+                signals[index] = dataclasses.replace(signal, albedo=found[0])
+                ctx.counts[f"reflected_albedo.{signal.name}"] = found[1]
+        ctx.frame = dataclasses.replace(frame, signals=signals)
+        return True

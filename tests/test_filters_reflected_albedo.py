@@ -1,0 +1,219 @@
+"""Reflected albedo (``filters.reflected_albedo``): glossy light on diffuse-free objects
+whose G-buffer albedo shows a sharp reflection is demodulated by that albedo."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from svgf_cli.filters import reflected_albedo as ra
+from svgf_cli.filters.denoiser import Denoiser
+from svgf_cli.filters.params import PRESETS
+from svgf_cli.frame import Frame, Signal
+
+F32 = np.float32
+HEIGHT, WIDTH = 24, 40
+
+
+def _agreement_reference(floored: np.ndarray) -> np.ndarray:
+    """``albedo_agreement`` in float64 with explicit loops and clamped indices."""
+    level = np.log(np.maximum(floored.astype(np.float64).mean(axis=0), 1e-4))
+    height, width = level.shape
+    agree = np.zeros((height, width))
+    for y in range(height):
+        for x in range(width):
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    if dy or dx:
+                        qy = min(max(y + dy, 0), height - 1)
+                        qx = min(max(x + dx, 0), width - 1)
+                        agree[y, x] += abs(level[qy, qx] - level[y, x]) < np.log(ra.AGREE)
+    return agree / 8.0
+
+
+def _checker(height: int, width: int, size: int, dark: float, light: float) -> np.ndarray:
+    yy, xx = np.mgrid[0:height, 0:width]
+    return np.where((yy // size + xx // size) % 2 == 0, light, dark).astype(F32)
+
+
+def test_agreement_matches_the_float64_reference():
+    rng = np.random.default_rng(5)
+    floored = np.empty((3, 17, 23), F32)
+    floored[:] = _checker(17, 23, 4, 0.1, 0.7)[None]  # patches: agreement near 1
+    floored[:, 9:, :] = rng.uniform(0.05, 0.9, (3, 8, 23))  # noise: agreement low
+    floored[:, 2, 3] = 0.0  # below the luminance floor
+    want = _agreement_reference(floored)
+    got = ra.albedo_agreement(floored)
+    assert got.dtype == F32
+    np.testing.assert_array_equal(got, want)  # shares of 8: exact
+    assert got[:6, :].mean() > 0.7 > 0.5 > got[12:, :].mean()
+
+
+def test_candidates_are_diffuse_free_pixels_whose_albedo_is_a_reflected_reflectance():
+    gloss = np.full((3, 1, 9), 0.9, F32)
+    albedo = np.full((3, 1, 9), 0.5, F32)
+    diffuse = np.zeros((1, 9), F32)
+    depth = np.ones((1, 9), F32)
+    diffuse[0, 1] = 0.2  # a diffuse colour: the albedo AOV is not the reflection's
+    albedo[1, 0, 2] = 0.9 * 1.05 + 2e-4  # above the gloss colour: no reflectance through it
+    albedo[:, 0, 3] = 0.0  # no albedo (a renderer that writes none there)
+    albedo[0, 0, 4] = np.nan  # non-finite
+    depth[0, 5] = 0.0  # background
+    gloss[:, 0, 6] = 0.0  # no gloss colour
+    albedo[:, 0, 7] = 0.9 * 1.05  # at the limit: still a candidate
+    # A reflected light: its emission in the albedo AOV and, put there by the reflected-light
+    # stage, in the gloss colour too; no reflectance.
+    albedo[:, 0, 8] = gloss[:, 0, 8] = 40.0
+    got = ra.reflected_candidates(gloss, albedo, diffuse, depth)
+    np.testing.assert_array_equal(got[0], [True, False, False, False, False, False, False,
+                                           True, False])
+
+
+def test_candidates_match_the_reference_on_random_pixels():
+    rng = np.random.default_rng(11)
+    shape = (37, 53)
+    gloss = rng.uniform(0.0, 1.0, (3, *shape)).astype(F32)
+    gloss[:, rng.uniform(size=shape) < 0.1] = 0.0
+    albedo = (gloss * rng.uniform(0.0, 1.2, (3, *shape))).astype(F32)
+    albedo[:, rng.uniform(size=shape) < 0.05] = 2.0
+    albedo[1, rng.uniform(size=shape) < 0.05] = np.inf
+    diffuse = np.where(rng.uniform(size=shape) < 0.3, 0.5, 0.0).astype(F32)
+    depth = np.where(rng.uniform(size=shape) < 0.1, 0.0, 3.0).astype(F32)
+    a = albedo.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        want = ((depth > 0) & (diffuse < 1e-3) & (gloss.max(axis=0) > 0)
+                & np.all(np.isfinite(a), axis=0) & (a.max(axis=0) > 0)
+                & (a.max(axis=0) <= np.float64(F32(1.05)))
+                & np.all(a <= gloss * F32(1.05) + F32(1e-4), axis=0))
+    got = ra.reflected_candidates(gloss, albedo, diffuse, depth)
+    np.testing.assert_array_equal(got, want)
+    assert 0 < got.sum() < got.size
+
+
+def test_object_weights_ramp_the_mean_agreement_of_each_object():
+    agreement = np.zeros((4, 6), F32)
+    agreement[0] = 1.0  # object 1: sharp
+    agreement[1] = 0.5  # object 2: noise
+    agreement[2] = (0.75, 0.75, 0.75, 0.875, 0.875, 0.75)  # object 3: mean 0.79166
+    agreement[3] = 0.0  # object 1 again, but no candidates there
+    mesh = np.array([[1] * 6, [2] * 6, [3] * 6, [1] * 6], np.int32)
+    candidates = np.ones((4, 6), bool)
+    candidates[3] = False
+    got = ra.object_weights(agreement, candidates, mesh)
+    low, high = ra.RAMP
+    np.testing.assert_array_equal(got[0], 1.0)
+    np.testing.assert_array_equal(got[1], 0.0)
+    np.testing.assert_allclose(got[2], (4.75 / 6 - low) / (high - low), rtol=1e-6)
+    assert 0.0 < got[2, 0] < 1.0
+    np.testing.assert_array_equal(got[3], 0.0)
+    assert ra.object_weights(agreement, np.zeros((4, 6), bool), mesh).max() == 0.0
+
+
+def test_reflected_colour_mixes_geometrically_and_keeps_the_ends_exact():
+    rng = np.random.default_rng(9)
+    gloss = rng.uniform(0.2, 1.0, (3, 2, 5)).astype(F32)
+    floored = rng.uniform(0.05, 1.0, (3, 2, 5)).astype(F32)
+    weights = np.array([[0.0, 1.0, 0.5, 0.25, 0.0], [1.0, 0.75, 0.0, 1.0, 0.5]], F32)
+    got = ra.reflected_colour(gloss, floored, weights)
+    want = np.exp(weights.astype(np.float64) * np.log(floored.astype(np.float64))
+                  + (1 - weights.astype(np.float64)) * np.log(gloss.astype(np.float64)))
+    np.testing.assert_allclose(got, want, rtol=2e-6)
+    np.testing.assert_array_equal(got[:, weights == 1.0], floored[:, weights == 1.0])
+    np.testing.assert_array_equal(got[:, weights == 0.0], gloss[:, weights == 0.0])
+
+
+def _mirror_scene(height: int = HEIGHT, width: int = WIDTH, seed: int = 0, shift: int = 0):
+    """A sharp mirror (object 1, left half: it reflects a checker of 12 px squares, moved
+    right by ``shift`` px) and a rough one (object 2, right half: one random reflected albedo
+    per pixel), both diffuse-free."""
+    rng = np.random.default_rng(seed)
+    gloss = np.full((3, height, width), 0.9, F32)
+    reflected = np.roll(_checker(height, width + 24, 12, 0.1, 0.8), shift, axis=1)[:, :width]
+    half = width // 2
+    reflected[:, half:] = rng.choice(np.array([0.1, 0.8], F32), (height, width - half))
+    albedo = np.ascontiguousarray(gloss * reflected[None])
+    mesh = np.ones((height, width), np.int32)
+    mesh[:, half:] = 2
+    return gloss, albedo, reflected, mesh
+
+
+def test_sharp_mirrors_take_the_albedo_rough_ones_keep_their_gloss_colour():
+    gloss, albedo, _, mesh = _mirror_scene()
+    diffuse = np.zeros((HEIGHT, WIDTH), F32)
+    depth = np.ones((HEIGHT, WIDTH), F32)
+    found = ra.reflected_albedo(gloss, albedo, diffuse, depth, mesh)
+    assert found is not None
+    colour, changed = found
+    half = WIDTH // 2
+    assert changed == HEIGHT * half
+    np.testing.assert_array_equal(colour[:, :, :half],
+                                  np.maximum(albedo, F32(ra.FLOOR) * gloss)[:, :, :half])
+    np.testing.assert_array_equal(colour[:, :, half:], gloss[:, :, half:])
+    # The caller's planes are left alone; with a diffuse colour there is nothing to do.
+    assert colour is not gloss and np.all(gloss == 0.9)
+    assert ra.reflected_albedo(gloss, albedo, diffuse + 0.5, depth, mesh) is None
+    # A renderer whose albedo AOV is the gloss colour itself: every object coherent, and the
+    # colour the same.
+    same = ra.reflected_albedo(gloss, gloss.copy(), diffuse, depth, mesh)
+    assert same is not None
+    np.testing.assert_array_equal(same[0], gloss)
+
+
+def test_the_cropped_computation_equals_the_whole_frame():
+    """Only the candidates' bounding box (grown by a pixel) is computed; the weights there
+    are those of the whole frame."""
+    gloss, albedo, _, mesh = _mirror_scene(40, 60, seed=2)
+    diffuse = np.full((40, 60), 0.5, F32)
+    diffuse[11:25, 7:50] = 0.0  # the mirrors' visible part only
+    depth = np.ones((40, 60), F32)
+    found = ra.reflected_albedo(gloss, albedo, diffuse, depth, mesh)
+    assert found is not None
+    candidates = ra.reflected_candidates(gloss, albedo, diffuse, depth)
+    floored = ra.floored_albedo(gloss, albedo)
+    weights = ra.object_weights(ra.albedo_agreement(floored), candidates, mesh)
+    np.testing.assert_array_equal(found[0], ra.reflected_colour(gloss, floored, weights))
+    assert found[1] == np.count_nonzero(weights) > 0
+
+
+def _mirror_frame(t: int) -> Frame:
+    """Frame ``t`` of a still diffuse-free mirror reflecting a textured, evenly lit floor that
+    slides 2 px a frame (the camera or the floor moves; the mirror does not): glossy light =
+    gloss colour x reflected albedo x irradiance (1.5) x 1-spp noise."""
+    gloss, albedo, reflected, mesh = _mirror_scene(shift=2 * t)
+    rng = np.random.default_rng(200 + t)
+    noise = rng.exponential(1.0, (HEIGHT, WIDTH)).astype(F32)
+    glossy = np.ascontiguousarray(albedo * F32(1.5) * noise[None])
+    black = np.zeros((3, HEIGHT, WIDTH), F32)
+    normal = np.zeros((3, HEIGHT, WIDTH), F32)
+    normal[2] = 1.0
+    return Frame(
+        signals=[Signal("diffuse", black.copy(), black.copy()),
+                 Signal("glossy", glossy, gloss.copy(), glossy=True)],
+        normal=normal, depth=np.full((HEIGHT, WIDTH), 4.0, F32),
+        motion=np.zeros((2, HEIGHT, WIDTH), F32), mesh_id=mesh, albedo=albedo,
+    )
+
+
+def _mirror_error(params) -> tuple[float, dict[str, int]]:
+    """relMSE of the sharp mirror's output (frame 6) against its truth, and the counts."""
+    denoiser = Denoiser(params)
+    for t in range(6):
+        out = denoiser.process(_mirror_frame(t))
+    truth = _mirror_scene(shift=10)[1] * F32(1.5)
+    half = WIDTH // 2
+    err = (out.color - truth) ** 2 / (truth ** 2 + 1e-2)
+    return float(err[:, 2:-2, 2:half - 3].mean()), out.counts
+
+
+@pytest.mark.parametrize("preset", ["default"])
+def test_a_sharp_mirror_is_filtered_by_the_texture_it_reflects(preset: str):
+    """Demodulated by the flat gloss colour the reflected checker is in the light, and the
+    history of a sliding reflection is a different checker, which the glossy clamp cuts
+    short: 1-spp noise. Demodulated by the reflected albedo the light is the floor's even
+    irradiance, whose history stays valid as the reflection slides."""
+    on, counts = _mirror_error(PRESETS[preset])
+    off, counts_off = _mirror_error(PRESETS[preset].replace(reflected_albedo=False))
+    assert counts["reflected_albedo.glossy"] == HEIGHT * (WIDTH // 2)
+    assert "reflected_albedo.glossy" not in counts_off
+    assert on < 0.5 * off
+    assert PRESETS["paper"].reflected_albedo is False
