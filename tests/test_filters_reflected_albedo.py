@@ -15,20 +15,34 @@ F32 = np.float32
 HEIGHT, WIDTH = 24, 40
 
 
-def _agreement_reference(floored: np.ndarray) -> np.ndarray:
-    """``albedo_agreement`` in float64 with explicit loops and clamped indices."""
-    level = np.log(np.maximum(floored.astype(np.float64).mean(axis=0), 1e-4))
+def _agreement_reference(gloss: np.ndarray, albedo: np.ndarray, candidates: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """``albedo_agreement`` in float64 with explicit loops and clamped indices, and where a
+    neighbour pair lies within 1e-5 of the factor (float32 may round either way there)."""
+    clean = np.where(np.isfinite(albedo), albedo, 0.0).astype(np.float64)
+    level = np.maximum(np.maximum(clean, gloss.astype(np.float64) * ra.FLOOR).mean(axis=0),
+                       1e-4)
     height, width = level.shape
     agree = np.zeros((height, width))
+    close = np.zeros((height, width), bool)
     for y in range(height):
         for x in range(width):
+            if not candidates[y, x]:
+                continue
             for dy in (-1, 0, 1):
                 for dx in (-1, 0, 1):
                     if dy or dx:
-                        qy = min(max(y + dy, 0), height - 1)
-                        qx = min(max(x + dx, 0), width - 1)
-                        agree[y, x] += abs(level[qy, qx] - level[y, x]) < np.log(ra.AGREE)
-    return agree / 8.0
+                        other = level[min(max(y + dy, 0), height - 1),
+                                      min(max(x + dx, 0), width - 1)]
+                        ratio = max(other, level[y, x]) / min(other, level[y, x])
+                        agree[y, x] += ratio < ra.AGREE
+                        close[y, x] |= abs(ratio - ra.AGREE) < 1e-5
+    return agree / 8.0, close
+
+
+def _grey(plane: np.ndarray) -> np.ndarray:
+    """A (3, H, W) colour with the (H, W) plane in every channel."""
+    return np.ascontiguousarray(np.broadcast_to(plane, (3, *plane.shape)), dtype=F32)
 
 
 def _checker(height: int, width: int, size: int, dark: float, light: float) -> np.ndarray:
@@ -38,15 +52,19 @@ def _checker(height: int, width: int, size: int, dark: float, light: float) -> n
 
 def test_agreement_matches_the_float64_reference():
     rng = np.random.default_rng(5)
-    floored = np.empty((3, 17, 23), F32)
-    floored[:] = _checker(17, 23, 4, 0.1, 0.7)[None]  # patches: agreement near 1
-    floored[:, 9:, :] = rng.uniform(0.05, 0.9, (3, 8, 23))  # noise: agreement low
-    floored[:, 2, 3] = 0.0  # below the luminance floor
-    want = _agreement_reference(floored)
-    got = ra.albedo_agreement(floored)
+    gloss = np.full((3, 17, 23), 0.9, F32)
+    albedo = np.empty((3, 17, 23), F32)
+    albedo[:] = _checker(17, 23, 4, 0.1, 0.7)[None]  # patches: agreement near 1
+    albedo[:, 9:, :] = rng.uniform(0.05, 0.9, (3, 8, 23))  # noise: agreement low
+    albedo[:, 2, 3] = 0.0  # floored at 0.25 of the gloss colour
+    albedo[0, 4, 4] = np.nan  # counted as 0, then floored
+    candidates = rng.uniform(size=(17, 23)) < 0.7
+    want, close = _agreement_reference(gloss, albedo, candidates)
+    got = ra.albedo_agreement(gloss, albedo, candidates)
     assert got.dtype == F32
-    np.testing.assert_array_equal(got, want)  # shares of 8: exact
-    assert got[:6, :].mean() > 0.7 > 0.5 > got[12:, :].mean()
+    np.testing.assert_array_equal(got[~close], want[~close])  # shares of 8: exact
+    assert np.all(got[~candidates] == 0.0)
+    assert got[:6][candidates[:6]].mean() > 0.7 > 0.5 > got[12:][candidates[12:]].mean()
 
 
 def test_candidates_are_diffuse_free_pixels_whose_albedo_is_a_reflected_reflectance():
@@ -64,7 +82,7 @@ def test_candidates_are_diffuse_free_pixels_whose_albedo_is_a_reflected_reflecta
     # A reflected light: its emission in the albedo AOV and, put there by the reflected-light
     # stage, in the gloss colour too; no reflectance.
     albedo[:, 0, 8] = gloss[:, 0, 8] = 40.0
-    got = ra.reflected_candidates(gloss, albedo, diffuse, depth)
+    got = ra.reflected_candidates(gloss, albedo, [_grey(diffuse)], depth)
     np.testing.assert_array_equal(got[0], [True, False, False, False, False, False, False,
                                            True, False])
 
@@ -81,13 +99,21 @@ def test_candidates_match_the_reference_on_random_pixels():
     depth = np.where(rng.uniform(size=shape) < 0.1, 0.0, 3.0).astype(F32)
     a = albedo.astype(np.float64)
     with np.errstate(invalid="ignore"):
-        want = ((depth > 0) & (diffuse < 1e-3) & (gloss.max(axis=0) > 0)
+        free = ((depth > 0) & (gloss.max(axis=0) > 0)
                 & np.all(np.isfinite(a), axis=0) & (a.max(axis=0) > 0)
                 & (a.max(axis=0) <= np.float64(F32(1.05)))
                 & np.all(a <= gloss * F32(1.05) + F32(1e-4), axis=0))
-    got = ra.reflected_candidates(gloss, albedo, diffuse, depth)
+    want = free & (diffuse < 1e-3)
+    # Two diffuse colours: each must be dark; one channel above is enough to exclude.
+    first = np.zeros((3, *shape), F32)
+    second = np.zeros((3, *shape), F32)
+    second[2] = diffuse
+    got = ra.reflected_candidates(gloss, albedo, [first, second], depth)
     np.testing.assert_array_equal(got, want)
     assert 0 < got.sum() < got.size
+    none = ra.reflected_candidates(gloss, albedo, [], depth)  # no diffuse signal at all
+    np.testing.assert_array_equal(none, free)
+    assert none.sum() > got.sum()
 
 
 def test_object_weights_ramp_the_mean_agreement_of_each_object():
@@ -141,7 +167,7 @@ def test_sharp_mirrors_take_the_albedo_rough_ones_keep_their_gloss_colour():
     gloss, albedo, _, mesh = _mirror_scene()
     diffuse = np.zeros((HEIGHT, WIDTH), F32)
     depth = np.ones((HEIGHT, WIDTH), F32)
-    found = ra.reflected_albedo(gloss, albedo, diffuse, depth, mesh)
+    found = ra.reflected_albedo(gloss, albedo, [_grey(diffuse)], depth, mesh)
     assert found is not None
     colour, changed = found
     half = WIDTH // 2
@@ -151,28 +177,39 @@ def test_sharp_mirrors_take_the_albedo_rough_ones_keep_their_gloss_colour():
     np.testing.assert_array_equal(colour[:, :, half:], gloss[:, :, half:])
     # The caller's planes are left alone; with a diffuse colour there is nothing to do.
     assert colour is not gloss and np.all(gloss == 0.9)
-    assert ra.reflected_albedo(gloss, albedo, diffuse + 0.5, depth, mesh) is None
+    assert ra.reflected_albedo(gloss, albedo, [_grey(diffuse + 0.5)], depth, mesh) is None
     # A renderer whose albedo AOV is the gloss colour itself: every object coherent, and the
     # colour the same.
-    same = ra.reflected_albedo(gloss, gloss.copy(), diffuse, depth, mesh)
+    same = ra.reflected_albedo(gloss, gloss.copy(), [], depth, mesh)
     assert same is not None
     np.testing.assert_array_equal(same[0], gloss)
 
 
-def test_the_cropped_computation_equals_the_whole_frame():
-    """Only the candidates' bounding box (grown by a pixel) is computed; the weights there
-    are those of the whole frame."""
+def test_only_the_objects_pixels_change_and_a_frame_without_mirrors_is_left_alone():
     gloss, albedo, _, mesh = _mirror_scene(40, 60, seed=2)
     diffuse = np.full((40, 60), 0.5, F32)
     diffuse[11:25, 7:50] = 0.0  # the mirrors' visible part only
     depth = np.ones((40, 60), F32)
-    found = ra.reflected_albedo(gloss, albedo, diffuse, depth, mesh)
+    found = ra.reflected_albedo(gloss, albedo, [_grey(diffuse)], depth, mesh)
     assert found is not None
-    candidates = ra.reflected_candidates(gloss, albedo, diffuse, depth)
-    floored = ra.floored_albedo(gloss, albedo)
-    weights = ra.object_weights(ra.albedo_agreement(floored), candidates, mesh)
-    np.testing.assert_array_equal(found[0], ra.reflected_colour(gloss, floored, weights))
-    assert found[1] == np.count_nonzero(weights) > 0
+    candidates = ra.reflected_candidates(gloss, albedo, [_grey(diffuse)], depth)
+    weights = ra.object_weights(ra.albedo_agreement(gloss, albedo, candidates), candidates,
+                                mesh)
+    changed = weights > 0
+    assert found[1] == changed.sum() > 0 and not np.any(changed & ~candidates)
+    np.testing.assert_array_equal(found[0][:, ~changed], gloss[:, ~changed])
+    want = ra.reflected_colour(gloss, ra.floored_albedo(gloss, albedo), weights)
+    np.testing.assert_allclose(found[0][:, changed], want[:, changed], rtol=1e-6)
+    assert 0.0 < weights.max() < 1.0  # the mixed colour, not an end
+    # Rough mirrors only: nothing to change, no copy made.
+    rough = mesh == 2
+    assert ra.reflected_albedo(gloss, albedo, [_grey(np.where(rough, 0.0, 0.5))], depth,
+                               mesh) is None
+    # Object ids as hashes (beyond the dense table) take the sorting path: the same colour.
+    hashed = ra.reflected_albedo(gloss, albedo, [_grey(diffuse)], depth,
+                                 mesh * np.int32(1_000_003) - 7)
+    assert hashed is not None and hashed[1] == found[1]
+    np.testing.assert_allclose(hashed[0], found[0], rtol=1e-6)
 
 
 def _mirror_frame(t: int) -> Frame:

@@ -32,6 +32,8 @@ apart per object from the albedo itself:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numba import njit, prange
 
@@ -57,33 +59,34 @@ AGREE = 1.25
 RAMP = (0.78, 0.88)
 
 
-def reflected_candidates(
-    gloss_colour: np.ndarray, albedo: np.ndarray, diffuse_colour: np.ndarray, depth: np.ndarray
-) -> np.ndarray:
-    """(H, W) bool: surface pixels (``depth > 0``) whose ``diffuse_colour`` (H, W: the
-    brightest channel of the non-glossy signals' colours) is below 1e-3, whose
+def reflected_candidates(gloss_colour: np.ndarray, albedo: np.ndarray,
+                         diffuse_colours: Sequence[np.ndarray], depth: np.ndarray
+                         ) -> np.ndarray:
+    """(H, W) bool: surface pixels (``depth > 0``) where every one of ``diffuse_colours``
+    (the non-glossy signals' (3, H, W) colours) is below 1e-3 in every channel, whose
     ``gloss_colour`` (3, H, W) has a channel above 0, and whose ``albedo`` (3, H, W: the
     G-buffer albedo) is a reflectance (a channel above 0, none above ``MAX_REFLECTANCE``)
     with every channel at most ``1.05 c + 1e-4``. Non-finite albedo is no candidate. (A
     reflected light's emission, which ``stages.reflected_lights`` has put in the gloss
     colour, is no reflectance: it must not count in its object's agreement.)"""
     out = np.empty(depth.shape, dtype=np.bool_)
-    _candidate_rows(gloss_colour, albedo, diffuse_colour, depth, out)
+    darks = tuple(diffuse_colours) or (np.zeros((3, 1, 1), dtype=F32),)
+    _candidate_rows(gloss_colour, albedo, darks, bool(diffuse_colours), depth, out)
     return out
 
 
 @njit(parallel=True, **_JIT)
-def _candidate_rows(gloss: np.ndarray, albedo: np.ndarray, diffuse: np.ndarray,
+def _candidate_rows(gloss: np.ndarray, albedo: np.ndarray, darks: tuple, use_darks: bool,
                     depth: np.ndarray, out: np.ndarray) -> None:
-    """:func:`reflected_candidates` row by row (one pass instead of numpy's six frame-sized
-    temporaries: 16 ms a 1080p frame)."""
+    """:func:`reflected_candidates` row by row, in one pass (no frame-sized temporaries:
+    fresh pages are slow on these machines, docs/performance.md)."""
     height, width = depth.shape
     slack, bound, floor = F32(1.05), F32(1e-4), F32(1e-3)
     limit = F32(MAX_REFLECTANCE)
     for y in prange(height):
         row = out[y]
         for x in range(width):
-            ok = depth[y, x] > _ZERO and diffuse[y, x] < floor
+            ok = depth[y, x] > _ZERO
             brightest = _ZERO
             glossiest = _ZERO
             for c in range(3):
@@ -92,7 +95,13 @@ def _candidate_rows(gloss: np.ndarray, albedo: np.ndarray, diffuse: np.ndarray,
                 ok = ok and not is_nonfinite(a) and a <= g * slack + bound
                 brightest = max(brightest, a)
                 glossiest = max(glossiest, g)
-            row[x] = ok and brightest > _ZERO and brightest <= limit and glossiest > _ZERO
+            ok = ok and brightest > _ZERO and brightest <= limit and glossiest > _ZERO
+            # The diffuse colours last: most pixels fail above, and three colours are
+            # most of the memory this pass would read.
+            if ok and use_darks:
+                for dark in darks:
+                    ok = ok and max(dark[0, y, x], max(dark[1, y, x], dark[2, y, x])) < floor
+            row[x] = ok
 
 
 def floored_albedo(gloss_colour: np.ndarray, albedo: np.ndarray) -> np.ndarray:
@@ -101,43 +110,136 @@ def floored_albedo(gloss_colour: np.ndarray, albedo: np.ndarray) -> np.ndarray:
     return np.maximum(clean, gloss_colour * F32(FLOOR)).astype(F32, copy=False)
 
 
-def albedo_agreement(floored: np.ndarray) -> np.ndarray:
-    """(H, W) float32: per pixel the share of its 8 neighbours whose mean-channel luminance
-    of ``floored`` (3, H, W) is within a factor ``AGREE`` of its own (outside the image: the
-    edge pixel repeated)."""
-    level = np.log(np.maximum(floored.mean(axis=0, dtype=F32), F32(1e-4)))
-    height, width = level.shape
-    padded = np.pad(level, 1, mode="edge")
-    limit = F32(np.log(AGREE))
-    agree = np.zeros((height, width), dtype=F32)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy or dx:
-                shifted = padded[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
-                agree += (np.abs(shifted - level) < limit).astype(F32)
-    return agree / F32(8.0)
+def albedo_agreement(gloss_colour: np.ndarray, albedo: np.ndarray, candidates: np.ndarray
+                     ) -> np.ndarray:
+    """(H, W) float32: on each candidate the share of its 8 neighbours whose level is
+    within a factor ``AGREE`` of its own (the larger below ``AGREE`` times the smaller;
+    outside the image: the edge pixel repeated), 0 elsewhere. A pixel's level is the mean
+    over the channels of the floored albedo (:func:`floored_albedo`), at least 1e-4."""
+    out = np.empty(candidates.shape, dtype=F32)
+    _agreement_rows(gloss_colour, albedo, candidates, out)
+    return out
+
+
+@njit(inline="always", **_JIT)
+def _level(gloss: np.ndarray, albedo: np.ndarray, y: int, x: int) -> np.float32:
+    total = _ZERO
+    for c in range(3):
+        a = albedo[c, y, x]
+        total += max(_ZERO if is_nonfinite(a) else a, gloss[c, y, x] * F32(FLOOR))
+    return max(total / F32(3.0), F32(1e-4))
+
+
+@njit(parallel=True, **_JIT)
+def _agreement_rows(gloss: np.ndarray, albedo: np.ndarray, candidates: np.ndarray,
+                    out: np.ndarray) -> None:
+    """:func:`albedo_agreement` row by row, on the candidates only (a frame pays for its
+    mirrors' area, not for its size)."""
+    height, width = candidates.shape
+    for y in prange(height):
+        row = out[y]
+        for x in range(width):
+            if not candidates[y, x]:
+                row[x] = _ZERO
+                continue
+            row[x] = _agreement(gloss, albedo, y, x)
+
+
+@njit(inline="always", **_JIT)
+def _agreement(gloss: np.ndarray, albedo: np.ndarray, y: int, x: int) -> np.float32:
+    """One pixel's share of its 8 neighbours (clamped at the edges) within ``AGREE``."""
+    height, width = albedo.shape[1], albedo.shape[2]
+    factor = F32(AGREE)
+    own = _level(gloss, albedo, y, x)
+    count = 0
+    for dy in range(-1, 2):
+        qy = min(max(y + dy, 0), height - 1)
+        for dx in range(-1, 2):
+            if dy == 0 and dx == 0:
+                continue
+            other = _level(gloss, albedo, qy, min(max(x + dx, 0), width - 1))
+            count += 1 if max(own, other) < factor * min(own, other) else 0
+    return F32(count) / F32(8.0)
 
 
 def object_weights(agreement: np.ndarray, candidates: np.ndarray, mesh_id: np.ndarray
                    ) -> np.ndarray:
     """(H, W) float32: on each candidate the weight of its object (``mesh_id``): the mean
-    of the object's candidates' ``agreement`` (float64 sum) mapped linearly from 0 at
+    of the object's candidates' ``agreement`` (float64 sums) mapped linearly from 0 at
     ``RAMP[0]`` to 1 at ``RAMP[1]``; 0 elsewhere."""
     weights = np.zeros(agreement.shape, dtype=F32)
     ids = mesh_id[candidates]
-    if not ids.size:
-        return weights
-    values = agreement[candidates]
-    order = np.argsort(ids, kind="stable")
-    ids, values = ids[order], values[order]
-    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
-    low, high = RAMP
-    for start, end in zip(starts, [*starts[1:], ids.size], strict=True):
-        mean = float(values[start:end].sum(dtype=np.float64)) / (end - start)
-        weight = min(max((mean - low) / (high - low), 0.0), 1.0)
-        if weight > 0.0:
-            weights[candidates & (mesh_id == ids[start])] = F32(weight)
+    if ids.size:
+        objects, members = np.unique(ids, return_inverse=True)
+        sums = np.bincount(members, weights=agreement[candidates].astype(np.float64))
+        weights[candidates] = _ramp(sums / np.bincount(members))[members]
     return weights
+
+
+def _ramp(means: np.ndarray) -> np.ndarray:
+    low, high = RAMP
+    return np.clip((means - low) / (high - low), 0.0, 1.0).astype(F32)
+
+
+# Object ids spanning fewer values than this are summed in a dense table by
+# :func:`reflected_albedo`; wider (ids as hashes) go through :func:`object_weights`.
+_DENSE_IDS = 1 << 16
+
+
+@njit(**_JIT)
+def _id_range(candidates: np.ndarray, mesh_id: np.ndarray) -> tuple[int, int]:
+    """The smallest and largest id among the candidates ((0, -1) when there are none)."""
+    low, high = np.int64(1) << 40, -(np.int64(1) << 40)
+    height, width = candidates.shape
+    for y in range(height):
+        for x in range(width):
+            if candidates[y, x]:
+                low = min(low, np.int64(mesh_id[y, x]))
+                high = max(high, np.int64(mesh_id[y, x]))
+    return (low, high) if high >= low else (0, -1)
+
+
+@njit(**_JIT)
+def _agreement_sums(gloss: np.ndarray, albedo: np.ndarray, candidates: np.ndarray,
+                    mesh_id: np.ndarray, low_id: int, sums: np.ndarray, counts: np.ndarray
+                    ) -> None:
+    """Per object (index ``id - low_id``): the sum of its candidates' agreement (as
+    :func:`albedo_agreement`; float64, in row order) and their count, without a plane of
+    agreements."""
+    height, width = candidates.shape
+    for y in range(height):
+        for x in range(width):
+            if candidates[y, x]:
+                k = np.int64(mesh_id[y, x]) - low_id
+                sums[k] += np.float64(_agreement(gloss, albedo, y, x))
+                counts[k] += 1
+
+
+@njit(parallel=True, **_JIT)
+def _reflected_rows(gloss: np.ndarray, albedo: np.ndarray, candidates: np.ndarray,
+                    mesh_id: np.ndarray, low_id: int, per_object: np.ndarray,
+                    out: np.ndarray, changed: np.ndarray) -> None:
+    """:func:`reflected_colour` with each candidate's object weight, the gloss colour
+    elsewhere, row by row into ``out``; ``changed`` (H,) counts the pixels per row."""
+    height, width = candidates.shape
+    tiny = F32(1e-6)
+    for y in prange(height):
+        count = 0
+        for x in range(width):
+            w = per_object[np.int64(mesh_id[y, x]) - low_id] if candidates[y, x] else _ZERO
+            count += 1 if w > _ZERO else 0
+            for c in range(3):
+                g = gloss[c, y, x]
+                if w > _ZERO:
+                    a = albedo[c, y, x]
+                    d = max(_ZERO if is_nonfinite(a) else a, g * F32(FLOOR))
+                    if w < F32(1.0):
+                        d = np.exp(w * np.log(max(d, tiny))
+                                   + (F32(1.0) - w) * np.log(max(g, tiny)))
+                    out[c, y, x] = d
+                else:
+                    out[c, y, x] = g
+        changed[y] = count
 
 
 def reflected_colour(gloss_colour: np.ndarray, floored: np.ndarray, weights: np.ndarray
@@ -151,26 +253,37 @@ def reflected_colour(gloss_colour: np.ndarray, floored: np.ndarray, weights: np.
     return np.ascontiguousarray(out, dtype=F32)
 
 
-def reflected_albedo(gloss_colour: np.ndarray, albedo: np.ndarray, diffuse_colour: np.ndarray,
-                     depth: np.ndarray, mesh_id: np.ndarray) -> tuple[np.ndarray, int] | None:
+def reflected_albedo(gloss_colour: np.ndarray, albedo: np.ndarray,
+                     diffuse_colours: Sequence[np.ndarray], depth: np.ndarray,
+                     mesh_id: np.ndarray) -> tuple[np.ndarray, int] | None:
     """A glossy signal's demodulation colour with sharp reflections demodulated by the
     albedo they reflect (module docstring), and how many pixels changed; None where no
-    pixel is a candidate or no object's weight is above 0. The agreement is computed on
-    the candidates' bounding box only (grown by a pixel), so a frame pays for its mirrors'
-    area."""
-    candidates = reflected_candidates(gloss_colour, albedo, diffuse_colour, depth)
-    if not candidates.any():
+    pixel is a candidate or no object's weight is above 0. Without a candidate it costs
+    two passes over the frame; the agreement is computed on the candidates alone and no
+    frame-sized plane is made but the result."""
+    candidates = reflected_candidates(gloss_colour, albedo, diffuse_colours, depth)
+    low_id, high_id = _id_range(candidates, mesh_id)
+    if high_id < low_id:
         return None
-    rows, columns = np.nonzero(candidates)
-    height, width = depth.shape
-    box = (slice(max(int(rows.min()) - 1, 0), min(int(rows.max()) + 2, height)),
-           slice(max(int(columns.min()) - 1, 0), min(int(columns.max()) + 2, width)))
-    crop = (slice(None), *box)
-    floored = floored_albedo(gloss_colour[crop], albedo[crop])
-    weights = object_weights(albedo_agreement(floored), candidates[box], mesh_id[box])
-    changed = int(np.count_nonzero(weights))
-    if not changed:
+    if high_id - low_id >= _DENSE_IDS:  # ids as hashes (the rare case): sort them
+        weights = object_weights(albedo_agreement(gloss_colour, albedo, candidates),
+                                 candidates, mesh_id)
+        rows, columns = np.nonzero(weights)
+        if not rows.size:
+            return None
+        out = np.array(gloss_colour, dtype=F32, copy=True)
+        gloss = gloss_colour[:, rows, columns]
+        out[:, rows, columns] = reflected_colour(
+            gloss, floored_albedo(gloss, albedo[:, rows, columns]), weights[rows, columns])
+        return out, int(rows.size)
+    sums = np.zeros(high_id - low_id + 1, dtype=np.float64)
+    counts = np.zeros(high_id - low_id + 1, dtype=np.int64)
+    _agreement_sums(gloss_colour, albedo, candidates, mesh_id, np.int64(low_id), sums, counts)
+    per_object = _ramp(sums / np.maximum(counts, 1))
+    if not (per_object > 0).any():
         return None
-    out = np.array(gloss_colour, dtype=F32, copy=True)
-    out[crop] = reflected_colour(gloss_colour[crop], floored, weights)
-    return out, changed
+    out = np.empty_like(gloss_colour, dtype=F32)
+    changed = np.zeros(depth.shape[0], dtype=np.int64)
+    _reflected_rows(gloss_colour, albedo, candidates, mesh_id, np.int64(low_id), per_object,
+                    out, changed)
+    return out, int(changed.sum())

@@ -4,13 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
-
 from svgf_cli.filters.context import FrameContext, StageBase
 from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.reflected_albedo import reflected_albedo
-
-F32 = np.float32
 
 
 class ReflectedAlbedo(StageBase):
@@ -33,10 +29,7 @@ class ReflectedAlbedo(StageBase):
         glossy = [i for i, signal in enumerate(frame.signals) if signal.glossy]
         if not glossy:
             return False
-        diffuse = np.zeros((frame.height, frame.width), dtype=F32)
-        for signal in frame.signals:
-            if not signal.glossy:
-                np.maximum(diffuse, signal.albedo.max(axis=0), out=diffuse)
+        diffuse = [signal.albedo for signal in frame.signals if not signal.glossy]
         signals = list(frame.signals)
         for index in glossy:
             signal = signals[index]
