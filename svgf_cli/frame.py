@@ -367,6 +367,9 @@ COUNT_KEYS = {
     "reflected_light.<signal>": "surface pixels of a glossy signal filtered as radiance"
     " because the G-buffer albedo marks a reflected light there (not counted as implausible;"
     " information, not a problem)",
+    "reflected_albedo.<signal>": "surface pixels of a glossy signal demodulated by the"
+    " G-buffer albedo because their object reflects a sharp image there (information, not a"
+    " problem)",
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
     "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
     " matched them (information, not a problem)",
