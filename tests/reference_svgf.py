@@ -87,6 +87,9 @@ MIN_BILINEAR_WEIGHT = 0.01  # passing bilinear weights summing below this are re
 WHOLE_SNAP = 1e-3  # a resampled history length this close to a whole count is that count
 VALUE_LIMIT = 1e15  # inputs beyond it are blow-ups; demodulated values are clamped to it
 MAX_REFLECTANCE = 1.05  # a demodulation colour brighter than this is not a reflectance
+# A reflected light's pixel has this many lit neighbours or more (the rule off sharp
+# mirrors: the reference has no reflected albedo, and its scenes no sharp mirror).
+MIN_LIT_NEIGHBOURS = 2
 RELATIVE_ALBEDO_FLOOR = 0.02  # per-channel floor relative to the brightest channel
 NO_HISTORY_MOTION = 1e15  # what non-finite motion becomes: a position far outside the image
 
@@ -358,7 +361,7 @@ def effective_albedo(albedo: np.ndarray, black: float,
 
 def reflected_lights(guide: np.ndarray) -> np.ndarray:
     """(H, W) bool: the (cleaned) G-buffer albedo is above ``MAX_REFLECTANCE`` at the pixel
-    and at one or more of its 8 neighbours (``modulate.emitter_colour``)."""
+    and at ``MIN_LIT_NEIGHBOURS`` or more of its 8 neighbours (``modulate.emitter_colour``)."""
     lit = np.pad(guide.max(axis=0) > MAX_REFLECTANCE, 1)
     height, width = guide.shape[1:]
     neighbours = np.zeros((height, width), dtype=np.int64)
@@ -366,7 +369,7 @@ def reflected_lights(guide: np.ndarray) -> np.ndarray:
         for dx in (-1, 0, 1):
             if dy or dx:
                 neighbours += lit[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
-    return lit[1:-1, 1:-1] & (neighbours > 0)
+    return lit[1:-1, 1:-1] & (neighbours >= MIN_LIT_NEIGHBOURS)
 
 
 def demodulation_floor(params: SVGFParams, clean: CleanFrame, index: int) -> float:
@@ -1497,7 +1500,7 @@ class ReferenceDenoiser:
         marked: dict[int, int] = {}
         if p.glossy_emitter_radiance:
             # A glossy signal is radiance where the G-buffer albedo is no reflectance (a
-            # specular path reached a light) at the pixel and at one of its 8 neighbours:
+            # specular path reached a light) at the pixel and at two of its 8 neighbours:
             # its colour becomes that albedo there.
             guide = clean_albedo(frame.albedo)
             emitter = reflected_lights(guide)

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 TEMPORAL = ["values", "gradients", "demodulate", "reproject"]
 DEFAULT_TEMPORAL = ["values", "fill_medium", "medium_coverage", "gradients",
-                    "reflected_lights", "reflected_albedo", "demodulate", "reproject",
+                    "reflected_albedo", "reflected_lights", "demodulate", "reproject",
                     "object_history", "history_clamp", "antilag", "adopt_object_history",
                     "spread_fireflies"]
 

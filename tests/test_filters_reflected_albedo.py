@@ -170,9 +170,10 @@ def test_sharp_mirrors_take_the_albedo_rough_ones_keep_their_gloss_colour():
     depth = np.ones((HEIGHT, WIDTH), F32)
     found = ra.reflected_albedo(gloss, albedo, [_grey(diffuse)], depth, mesh)
     assert found is not None
-    colour, changed = found
+    colour, changed, sharp = found
     half = WIDTH // 2
     assert changed == HEIGHT * half
+    np.testing.assert_array_equal(sharp.holds(np.array([0, 1, 2, 3])), [False, True, False, False])
     np.testing.assert_array_equal(colour[:, :, :half],
                                   np.maximum(albedo, F32(ra.FLOOR) * gloss)[:, :, :half])
     np.testing.assert_array_equal(colour[:, :, half:], gloss[:, :, half:])
@@ -211,6 +212,17 @@ def test_only_the_objects_pixels_change_and_a_frame_without_mirrors_is_left_alon
                                  mesh * np.int32(1_000_003) - 7)
     assert hashed is not None and hashed[1] == found[1]
     np.testing.assert_allclose(hashed[0], found[0], rtol=1e-6)
+    assert found[2].holds(np.array([1]))[0] and not found[2].holds(np.array([2]))[0]
+    assert hashed[2].holds(np.array([1_000_003 - 7, 2 * 1_000_003 - 7])).tolist() == [True, False]
+
+
+def test_sharp_objects_by_id():
+    table = ra._sharp_table(np.array([5, 7], np.int64))
+    ids = np.array([[4, 5, 6], [7, 8, -3]])
+    np.testing.assert_array_equal(table.holds(ids), [[False, True, False], [True, False, False]])
+    # Ids as hashes too far apart for a table: no object counts as sharp (the rough rule).
+    spread = ra._sharp_table(np.array([3, 3 + (1 << 20)], np.int64))
+    assert spread.table.size == 0 and not spread.holds(np.array([3, 3 + (1 << 20)])).any()
 
 
 def _mirror_frame(t: int) -> Frame:

@@ -135,6 +135,9 @@ class FrameContext:
     depth_slope: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
     normal_width: np.ndarray = field(default_factory=lambda: np.empty((0, 0), F32))
     marked: dict[str, int] = field(default_factory=dict)  # reflected lights per signal
+    # Per glossy signal's index, the objects whose reflections are sharp
+    # (filters.reflected_albedo.SharpObjects; stages.reflected_albedo); absent: none.
+    sharp_objects: dict[int, Any] = field(default_factory=dict)
     # The pixels given a medium's G-buffer (filters.stages.fill_medium); None: none.
     medium_pixels: np.ndarray | None = None
     # The index of the medium's signal in ``frame.signals`` (fill_medium); None: none.

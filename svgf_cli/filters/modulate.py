@@ -283,14 +283,27 @@ def reflected_lights(guide: np.ndarray, max_reflectance: np.float32, out_lit: np
     return bool(out_lit.any())
 
 
+# A reflected light is marked where at least this many of the pixel's 8 neighbours also
+# saw it: on an object whose reflections are sharp (``filters.reflected_albedo``) one, as
+# a small light's image may be a pair of pixels; elsewhere two, as a rough metal's samples
+# of a light are scattered hits, a lone pixel or a pair (Cycles' rough gold bust at 4 spp:
+# a pair at 26 and 18 where the reference is 2 and its 5x5 maximum 5), which marked were
+# filtered only with each other and kept.
+LIT_NEIGHBOURS_SHARP = 1
+LIT_NEIGHBOURS_ROUGH = 2
+
+
 @njit(parallel=True, **_JIT)
 def emitter_colour(
     albedo: np.ndarray, guide: np.ndarray, lit: np.ndarray, depth: np.ndarray,
-    out: np.ndarray, marked: np.ndarray,
+    mesh_id: np.ndarray, low_id: int, sharp: np.ndarray, out: np.ndarray, marked: np.ndarray,
 ) -> None:
     """A glossy signal's demodulation colour with reflected lights marked radiance:
     ``out = clean(guide)`` where the G-buffer albedo is no reflectance at the pixel and at
-    one or more of its 8 neighbours (``lit`` from :func:`reflected_lights`; ``clean(guide)``
+    ``LIT_NEIGHBOURS_SHARP`` or more of its 8 neighbours on a sharp object
+    (``sharp[mesh_id - low_id] > 0``, uint8; ids outside the table are not),
+    ``LIT_NEIGHBOURS_ROUGH`` or more elsewhere (``lit`` from
+    :func:`reflected_lights`; ``clean(guide)``
     then puts the pixel in radiance mode, :func:`effective_albedo`), else ``out = albedo``.
     ``marked`` (H,) int64 receives per row the surface pixels (depth > 0) so marked.
 
@@ -299,23 +312,27 @@ def emitter_colour(
     the light's sharp reflected image, hundreds of times brighter than the neighbours whose
     samples missed it; demodulated by the glossy colour they would be averaged with those
     neighbours (a sharp highlight blurred into a dim blob). In radiance mode they are
-    filtered among themselves, as the combined signal does. A hit with no such neighbour is
-    a sample of a rough surface's blurry reflection: it stays demodulated, so the a-trous
+    filtered among themselves, as the combined signal does. A hit with fewer such neighbours
+    is a sample of a rough surface's blurry reflection: it stays demodulated, so the a-trous
     spreads its light (alone in its mode it would only be clamped by the despike). A
     renderer whose albedo AOV stays a reflectance changes nothing.
     """
     height, width = albedo.shape[1], albedo.shape[2]
+    size = np.int64(sharp.size)
     for y in prange(height):
         above, here, below = lit[y], lit[y + 1], lit[y + 2]
         g_r, g_g, g_b = guide[0, y], guide[1, y], guide[2, y]
         a_r, a_g, a_b = albedo[0, y], albedo[1, y], albedo[2, y]
         o_r, o_g, o_b = out[0, y], out[1, y], out[2, y]
-        z = depth[y]
+        z, ids = depth[y], mesh_id[y]
         count = np.int32(0)
         for x in range(width):
             neighbours = (above[x] + above[x + 1] + above[x + 2] + here[x] + here[x + 2]
                           + below[x] + below[x + 1] + below[x + 2])
-            emitter = (here[x + 1] > 0) & (neighbours > 0)
+            k = np.int64(ids[x]) - low_id
+            on_sharp = (k >= 0) & (k < size) and sharp[min(max(k, 0), size - 1)] > 0
+            needed = LIT_NEIGHBOURS_SHARP if on_sharp else LIT_NEIGHBOURS_ROUGH
+            emitter = (here[x + 1] > 0) & (neighbours >= needed)
             o_r[x] = clean_albedo(g_r[x]) if emitter else a_r[x]
             o_g[x] = clean_albedo(g_g[x]) if emitter else a_g[x]
             o_b[x] = clean_albedo(g_b[x]) if emitter else a_b[x]

@@ -55,8 +55,8 @@ def temporal() -> list[Stage]:
         FillMedium(),  # medium_fill_radius, frames with volume passes
         MediumCoverage(),  # medium_coverage_radius, frames with medium pixels
         Gradients(),
-        MarkReflectedLights(),  # glossy_emitter_radiance
         ReflectedAlbedo(),  # reflected_albedo
+        MarkReflectedLights(),  # glossy_emitter_radiance
         Demodulate(),
         FireflyClamp(),  # firefly_clamp
         Reproject(),

@@ -28,11 +28,16 @@ apart per object from the albedo itself:
 * **colour** (:func:`reflected_colour`): on candidates ``c^(1 - w) a'^w`` with
   ``a' = max(albedo, FLOOR c)`` per channel (a geometric mix of the gloss colour ``c`` and
   the floored albedo), elsewhere ``c``. The signal is demodulated and remodulated by it.
+
+The objects found sharp (weight above 0) are handed on (:class:`SharpObjects`): on them a
+reflected light's pair of pixels is a piece of a light's image, elsewhere a rough
+reflection's scattered hits (``modulate.emitter_colour``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
@@ -61,6 +66,33 @@ AGREE = 1.25
 RAMP = (0.84, 0.92)
 
 
+@dataclass(frozen=True)
+class SharpObjects:
+    """The objects whose reflections are sharp, by id: ``table[id - low_id] > 0`` (uint8;
+    ids outside the table are not)."""
+
+    low_id: int
+    table: np.ndarray
+
+    def holds(self, ids: np.ndarray) -> np.ndarray:
+        """Bool per id (any shape): whether that object is sharp."""
+        k = np.asarray(ids, dtype=np.int64) - self.low_id
+        inside = (k >= 0) & (k < self.table.size)
+        return inside & (self.table[np.where(inside, k, 0)] > 0) if self.table.size else inside
+
+
+def _sharp_table(ids: np.ndarray) -> SharpObjects:
+    """:class:`SharpObjects` of these object ids (sorted, at least one). Ids spanning
+    ``_DENSE_IDS`` or more (hashes) get an empty table: no object counts as sharp, the
+    rule for rough reflections applies everywhere."""
+    low, high = int(ids[0]), int(ids[-1])
+    if high - low >= _DENSE_IDS:
+        return SharpObjects(0, np.zeros(0, dtype=np.uint8))
+    table = np.zeros(high - low + 1, dtype=np.uint8)
+    table[ids.astype(np.int64) - low] = 1
+    return SharpObjects(low, table)
+
+
 def reflected_candidates(gloss_colour: np.ndarray, albedo: np.ndarray,
                          diffuse_colours: Sequence[np.ndarray], depth: np.ndarray
                          ) -> np.ndarray:
@@ -69,8 +101,8 @@ def reflected_candidates(gloss_colour: np.ndarray, albedo: np.ndarray,
     ``gloss_colour`` (3, H, W) has a channel above 0, and whose ``albedo`` (3, H, W: the
     G-buffer albedo) is a reflectance (a channel above 0, none above ``MAX_REFLECTANCE``)
     with every channel at most ``1.05 c + 1e-4``. Non-finite albedo is no candidate. (A
-    reflected light's emission, which ``stages.reflected_lights`` has put in the gloss
-    colour, is no reflectance: it must not count in its object's agreement.)"""
+    reflected light's emission in the albedo AOV is no reflectance: it must not count in its
+    object's agreement; ``stages.reflected_lights`` marks those pixels afterwards.)"""
     out = np.empty(depth.shape, dtype=np.bool_)
     darks = tuple(diffuse_colours) or (np.zeros((3, 1, 1), dtype=F32),)
     _candidate_rows(gloss_colour, albedo, darks, bool(diffuse_colours), depth, out)
@@ -257,12 +289,12 @@ def reflected_colour(gloss_colour: np.ndarray, floored: np.ndarray, weights: np.
 
 def reflected_albedo(gloss_colour: np.ndarray, albedo: np.ndarray,
                      diffuse_colours: Sequence[np.ndarray], depth: np.ndarray,
-                     mesh_id: np.ndarray) -> tuple[np.ndarray, int] | None:
+                     mesh_id: np.ndarray) -> tuple[np.ndarray, int, SharpObjects] | None:
     """A glossy signal's demodulation colour with sharp reflections demodulated by the
-    albedo they reflect (module docstring), and how many pixels changed; None where no
-    pixel is a candidate or no object's weight is above 0. Without a candidate it costs
-    two passes over the frame; the agreement is computed on the candidates alone and no
-    frame-sized plane is made but the result."""
+    albedo they reflect (module docstring), how many pixels changed and the objects whose
+    weight is above 0; None where no pixel is a candidate or no object's weight is above
+    0. Without a candidate it costs two passes over the frame; the agreement is computed on
+    the candidates alone and no frame-sized plane is made but the result."""
     candidates = reflected_candidates(gloss_colour, albedo, diffuse_colours, depth)
     low_id, high_id = _id_range(candidates, mesh_id)
     if high_id < low_id:
@@ -277,7 +309,7 @@ def reflected_albedo(gloss_colour: np.ndarray, albedo: np.ndarray,
         gloss = gloss_colour[:, rows, columns]
         out[:, rows, columns] = reflected_colour(
             gloss, floored_albedo(gloss, albedo[:, rows, columns]), weights[rows, columns])
-        return out, int(rows.size)
+        return out, int(rows.size), _sharp_table(np.unique(mesh_id[rows, columns]))
     sums = np.zeros(high_id - low_id + 1, dtype=np.float64)
     counts = np.zeros(high_id - low_id + 1, dtype=np.int64)
     _agreement_sums(gloss_colour, albedo, candidates, mesh_id, np.int64(low_id), sums, counts)
@@ -288,4 +320,5 @@ def reflected_albedo(gloss_colour: np.ndarray, albedo: np.ndarray,
     changed = np.zeros(depth.shape[0], dtype=np.int64)
     _reflected_rows(gloss_colour, albedo, candidates, mesh_id, np.int64(low_id), per_object,
                     out, changed)
-    return out, int(changed.sum())
+    sharp = SharpObjects(low_id, (per_object > 0).astype(np.uint8))
+    return out, int(changed.sum()), sharp

@@ -515,10 +515,9 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "emitter-lone-hits", "filters",
-        "a lone reflected-light sample (no lit neighbour) filtered as radiance too",
+        "a reflected-light pair (one lit neighbour) filtered as radiance too",
         "svgf_cli/filters/modulate.py",
-        (("            emitter = (here[x + 1] > 0) & (neighbours > 0)",
-          "            emitter = (here[x + 1] > 0) & (neighbours >= 0)"),),
+        (("LIT_NEIGHBOURS_ROUGH = 2", "LIT_NEIGHBOURS_ROUGH = 1"),),
         FILTER_TESTS,
     ),
     Mutant(

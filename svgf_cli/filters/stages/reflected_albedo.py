@@ -14,11 +14,12 @@ class ReflectedAlbedo(StageBase):
     whose G-buffer albedo shows a sharp reflection, by that albedo (floored) or a mix of
     the two by how sharp (``filters.reflected_albedo``); demodulation and remodulation both
     read the new colour. New arrays (the caller's planes are never modified);
-    ``counts["reflected_albedo.<signal>"]`` gets the pixels changed."""
+    ``counts["reflected_albedo.<signal>"]`` gets the pixels changed, ``ctx.sharp_objects``
+    the objects found sharp per signal (for ``reflected_lights``, after it)."""
 
     name = "reflected_albedo"
     reads = ("frame.signals", "frame.albedo", "frame.mesh_id", "depth")
-    writes = ("frame.signals",)
+    writes = ("frame.signals", "sharp_objects")
     clock = "demodulate"
 
     def enabled(self, params: SVGFParams) -> bool:
@@ -38,5 +39,6 @@ class ReflectedAlbedo(StageBase):
             if found is not None:
                 signals[index] = dataclasses.replace(signal, albedo=found[0])
                 ctx.counts[f"reflected_albedo.{signal.name}"] = found[1]
+                ctx.sharp_objects[index] = found[2]
         ctx.frame = dataclasses.replace(frame, signals=signals)
         return True
