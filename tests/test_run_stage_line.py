@@ -59,3 +59,36 @@ def test_a_layered_denoiser_reports_its_light_layers_after_its_filters() -> None
         colour, groups, layers = line.split("; ")
         assert colour.startswith("colour: values ") and groups.startswith("groups: values ")
         assert layers.startswith("layers: passes ") and ", groups " in layers
+
+
+class _Detailed:
+    def __init__(self) -> None:
+        self.stage_seconds = {"reproject": 0.03}
+        self.stage_detail_seconds = {"reproject": 0.01, "history_clamp": 0.02}
+
+
+def test_stage_line_of_every_stage_reads_the_detail() -> None:
+    assert stage_line(_Detailed(), "stage_detail_seconds") == "reproject 10, history_clamp 20"
+    assert stage_line(_Detailed()) == "reproject 30"
+    assert stage_line(_Pipeline({"values": 0.0}), "stage_detail_seconds") == ""
+
+
+def test_a_denoiser_times_every_stage_that_ran_under_its_own_name() -> None:
+    """The clocks group stages (reproject holds the history clamp and the anti-lag); the
+    detail names each stage that ran, in pipeline order, and none that did not."""
+    from test_filters_glossy import _highlight_frame
+
+    from svgf_cli.filters.denoiser import Denoiser
+    from svgf_cli.filters.params import PRESETS
+
+    denoiser = Denoiser(PRESETS["default"])
+    denoiser.process(_highlight_frame(0, marked=True))
+    first = list(denoiser.stage_detail_seconds)
+    assert "history_clamp" not in first  # no history to clamp on the first frame
+    denoiser.process(_highlight_frame(1, marked=True))
+    detail = list(denoiser.stage_detail_seconds)
+    assert {"reproject", "history_clamp", "antilag", "atrous"} <= set(detail)
+    assert "history_clamp" not in denoiser.stage_seconds  # it is in the reproject clock
+    order = list(denoiser.stages)
+    assert detail == sorted(detail, key=order.index)
+    assert all(seconds >= 0.0 for seconds in denoiser.stage_detail_seconds.values())

@@ -169,6 +169,8 @@ class FrameContext:
     layers: dict[str, np.ndarray] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     cpu_timings: dict[str, float] = field(default_factory=dict)
+    # Wall seconds of each stage that ran, by its own name (the clocks above group several).
+    stage_timings: dict[str, float] = field(default_factory=dict)
     clock: tuple[float, float] = field(
         default_factory=lambda: (time.perf_counter(), time.process_time()))
 
@@ -220,8 +222,13 @@ class Pipeline:
 
     def run(self, ctx: FrameContext) -> None:
         for stage in self.stages:
-            if stage.run(ctx) is not False and stage.clock is not None:
+            started = time.perf_counter()
+            if stage.run(ctx) is False:
+                continue  # nothing to do on this frame: neither clock counts it
+            if stage.clock is not None:
                 ctx.lap(stage.clock)
+            spent = time.perf_counter() - started
+            ctx.stage_timings[stage.name] = ctx.stage_timings.get(stage.name, 0.0) + spent
 
 
 def add_count(counts: dict[str, int], kind: str, plane: str, value: int) -> None:

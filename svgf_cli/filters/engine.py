@@ -40,6 +40,7 @@ class PipelineFilter:
         self.resident = Resident()
         self.stage_seconds: dict[str, float] = {}
         self.stage_cpu_seconds: dict[str, float] = {}
+        self.stage_detail_seconds: dict[str, float] = {}
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -81,6 +82,7 @@ class PipelineFilter:
         self.resident.frames_processed += 1
         self.stage_seconds = ctx.timings
         self.stage_cpu_seconds = ctx.cpu_timings
+        self.stage_detail_seconds = ctx.stage_timings
         return ctx
 
     def _start_frame(self, frame: Frame, **fields: Any) -> FrameContext:

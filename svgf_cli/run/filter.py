@@ -25,16 +25,18 @@ if TYPE_CHECKING:
     from svgf_cli.io.exr import ReadResult
 
 
-def stage_line(pass_filter: object) -> str:
-    """The wall milliseconds of each stage of the last frame (a pipeline filter's
-    ``stage_seconds``, in pipeline order) as ``name ms, ...``; a filter made of pipeline
-    filters (its attributes) as ``attribute: name ms, ...; ...``; empty for other filters."""
-    seconds = getattr(pass_filter, "stage_seconds", None)
+def stage_line(pass_filter: object, clocks: str = "stage_seconds") -> str:
+    """The wall milliseconds of the last frame by clock (a pipeline filter's ``clocks``
+    attribute, in pipeline order: ``stage_seconds``, the clocks that group stages, or
+    ``stage_detail_seconds``, every stage that ran) as ``name ms, ...``; a filter made of
+    pipeline filters (its attributes) as ``attribute: name ms, ...; ...``; empty for other
+    filters."""
+    seconds = getattr(pass_filter, clocks, None)
     if isinstance(seconds, dict):
         return ", ".join(f"{name} {1000 * value:.0f}" for name, value in seconds.items())
     parts = [f"{name}: {line}" for name, inner in getattr(pass_filter, "__dict__", {}).items()
-             if isinstance(getattr(inner, "stage_seconds", None), dict)
-             and (line := stage_line(inner))]
+             if isinstance(getattr(inner, clocks, None), dict)
+             and (line := stage_line(inner, clocks))]
     return "; ".join(parts)
 
 
@@ -189,6 +191,9 @@ class FrameFilter(Generic[F]):
         line = stage_line(self.filter)
         if line:
             self._progress.detail(f"frame {task.frame} stages (ms): {line}")
+        line = stage_line(self.filter, "stage_detail_seconds")
+        if line:
+            self._progress.detail(f"frame {task.frame} every stage (ms): {line}")
         return output, seconds
 
     def save_history(self, path: Path, last_input: Path) -> None:
