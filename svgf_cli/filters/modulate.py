@@ -330,7 +330,7 @@ def emitter_colour(
             neighbours = (above[x] + above[x + 1] + above[x + 2] + here[x] + here[x + 2]
                           + below[x] + below[x + 1] + below[x + 2])
             k = np.int64(ids[x]) - low_id
-            on_sharp = (k >= 0) & (k < size) and sharp[min(max(k, 0), size - 1)] > 0
+            on_sharp = (k >= 0) & (k < size) and sharp[k] > 0  # read only inside the table
             needed = LIT_NEIGHBOURS_SHARP if on_sharp else LIT_NEIGHBOURS_ROUGH
             emitter = (here[x + 1] > 0) & (neighbours >= needed)
             o_r[x] = clean_albedo(g_r[x]) if emitter else a_r[x]

@@ -156,11 +156,16 @@ def albedo_agreement(gloss_colour: np.ndarray, albedo: np.ndarray, candidates: n
 
 
 @njit(inline="always", **_JIT)
+def _floored(a: np.float32, g: np.float32) -> np.float32:
+    """One channel of :func:`floored_albedo`."""
+    return max(_ZERO if is_nonfinite(a) else a, g * F32(FLOOR))
+
+
+@njit(inline="always", **_JIT)
 def _level(gloss: np.ndarray, albedo: np.ndarray, y: int, x: int) -> np.float32:
     total = _ZERO
     for c in range(3):
-        a = albedo[c, y, x]
-        total += max(_ZERO if is_nonfinite(a) else a, gloss[c, y, x] * F32(FLOOR))
+        total += _floored(albedo[c, y, x], gloss[c, y, x])
     return max(total / F32(3.0), F32(1e-4))
 
 
@@ -265,8 +270,7 @@ def _reflected_rows(gloss: np.ndarray, albedo: np.ndarray, candidates: np.ndarra
             for c in range(3):
                 g = gloss[c, y, x]
                 if w > _ZERO:
-                    a = albedo[c, y, x]
-                    d = max(_ZERO if is_nonfinite(a) else a, g * F32(FLOOR))
+                    d = _floored(albedo[c, y, x], g)
                     if w < F32(1.0):
                         d = np.exp(w * np.log(max(d, tiny))
                                    + (F32(1.0) - w) * np.log(max(g, tiny)))
