@@ -1373,13 +1373,15 @@ def antilag_gradient_change(mask, previous, current, radius, sigma):
 
 
 def antilag(current, moments, history_length, depth, weights, radius, sigma, spatial_samples,
-            tolerance, moments_alpha, gradients=None, min_samples=4):
+            tolerance, moments_alpha, gradients=None, min_samples=4, sigma_start=None):
     """Anti-lag (``filters.antilag``), every cell window the obvious way: per signal, over
     the pixels with history in the (2r+1)^2 cells of 2x2 pixels around a cell, the current
     luminance's mean and Bessel-corrected variance, the reprojected first moment's mean, the
     mean temporal variance and history length; stale where the squared difference exceeds
-    sigma^2 var/n (1 + max(1/h, a/(2-a))) + (tolerance level)^2; weight b^2 / (b^2 +
-    var / N) with b^2 = diff^2 - var/n (and the gradient samples' bias when given); 3x3
+    start^2 var/n (1 + max(1/h, a/(2-a))) + (tolerance level)^2; weight r b^2 / (b^2 +
+    var / N) with b^2 = diff^2 - var/n and r the difference's standard errors' linear ramp
+    from ``sigma_start`` (default ``sigma``: a step) to ``sigma`` (and the gradient
+    samples' bias when given); 3x3
     cell maximum; ``h = min(h, 1/lambda - 1)``. Returns (lambda per cell (S, Hc, Wc), new
     history length (S, H, W), how many histories were shortened)."""
     w = np.asarray(weights, dtype=np.float64)
@@ -1388,6 +1390,7 @@ def antilag(current, moments, history_length, depth, weights, radius, sigma, spa
     lam = np.zeros((num_signals, cells_y, cells_x))
     new_length = np.asarray(history_length, dtype=np.float64).copy()
     stationary = moments_alpha / (2.0 - moments_alpha)
+    start = sigma if sigma_start is None else min(sigma_start, sigma)
     for s in range(num_signals):
         lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
         m1 = moments[s, 0].astype(np.float64)
@@ -1413,9 +1416,12 @@ def antilag(current, moments, history_length, depth, weights, radius, sigma, spa
                 share = max(1.0 / max(length[window][v].mean(), 1.0), stationary)
                 diff2 = (mean_h - mean_c) ** 2
                 level = max(mean_c, mean_h)
-                if diff2 > sigma**2 * var / n * (1 + share) + (tolerance * level) ** 2:
+                error2 = var / n * (1 + share)
+                if diff2 > start**2 * error2 + (tolerance * level) ** 2:
                     bias2 = diff2 - var / n
-                    raw[cy, cx] = bias2 / (bias2 + var / spatial_samples)
+                    z = np.sqrt(diff2 / error2) if error2 > 0 else np.inf
+                    ramp = min((z - start) / (sigma - start), 1.0) if sigma > start else 1.0
+                    raw[cy, cx] = ramp * bias2 / (bias2 + var / spatial_samples)
                 if change is not None:
                     bias2 = (change[cy, cx] * mean_h) ** 2
                     if bias2 > 0:
@@ -1487,7 +1493,8 @@ class ReferenceDenoiser:
                 temporal.current, reprojected.moments, reprojected.history_length,
                 temporal.depth, temporal.weights, antilag_radius_for(p, *temporal.depth.shape),
                 p.antilag_sigma,
-                p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha)
+                p.antilag_spatial_samples, p.antilag_tolerance, p.moments_alpha,
+                sigma_start=p.antilag_sigma_start)
             reprojected.history_length = length
         return shortened
 

@@ -13,6 +13,7 @@ from moving_scene import ACESCG_LUMINANCE, scene_sequence
 from svgf_cli.filters.bidirectional import (
     CONSISTENCY_SIGMA,
     GLOSSY_REFERENCE_COUNT,
+    PASS_ANTILAG_SIGMA_SCALE,
     STATIC_FILTERED_SHARE,
     STATIC_MOTION,
     SideHistory,
@@ -239,7 +240,9 @@ def test_forward_pass_keeps_the_unfiltered_history_where_pixels_move(preset: str
     frames = scene_sequence(4)
     assert not any(np.any(np.all(np.abs(f.motion) < STATIC_MOTION, axis=0) & (f.depth > 0))
                    for f in frames)
-    causal = Denoiser(params.replace(feedback_iteration=-1))
+    # The causal run a pass is: its anti-lag at the pass's significance.
+    pass_sigma = params.antilag_sigma * PASS_ANTILAG_SIGMA_SCALE
+    causal = Denoiser(params.replace(feedback_iteration=-1, antilag_sigma=pass_sigma))
     forward = ForwardPass(params)
     filtered = Denoiser(params.replace(moving_feedback_share=1.0))
     for frame in frames:
@@ -253,7 +256,7 @@ def test_forward_pass_keeps_the_unfiltered_history_where_pixels_move(preset: str
     # a still wall (first frame: no history carries one pixel's difference to another):
     # the history there is not the unfiltered one, elsewhere it is
     still_frames = scene_sequence(1, wall_speed=0.0)
-    causal = Denoiser(params.replace(feedback_iteration=-1))
+    causal = Denoiser(params.replace(feedback_iteration=-1, antilag_sigma=pass_sigma))
     forward = ForwardPass(params)
     for frame in still_frames:
         causal.process(frame)

@@ -70,10 +70,14 @@ def test_glossy_history_follows_the_reflection_not_the_surface():
     iteration: the default feeds nothing back since 2026-11-27 (docs/stability.md), and an
     unfiltered glossy history under this wide stop keeps a trail of 0.022 (7.6x fainter than
     the surface's); under the default's own stop both trails shrink with it (surface 0.034
-    -> 0.024, glossy 0.0054 -> 0.0032: the test below)."""
+    -> 0.024, glossy 0.0054 -> 0.0032: the test below). Anti-lag as a step at 3.5 standard
+    errors: the default's ramp from 2 shortens the glossy history as the highlight leaves,
+    and under this wide stop the spatial variance of the short history spreads the
+    highlight behind it (glossy trail 0.033 against the surface's 0.090; under the
+    default's stop 0.00325 against 0.00316 with the step)."""
     truth = 0.09
     wide = PRESETS["default"].replace(spatial_variance_sigma_luminance=10.0,
-                                      feedback_iteration=0)
+                                      feedback_iteration=0, antilag_sigma_start=3.5)
     surface_error = _trail(glossy=False, params=wide) - truth
     reflection_error = abs(_trail(glossy=True, params=wide) - truth)
     assert surface_error > 0.05

@@ -168,8 +168,11 @@ def test_denoiser_matches_the_float64_reference(case: str) -> None:
     # The sequence exercises what it should: cold pixels after frame 0 (disocclusions), long
     # history elsewhere, and every frame has both short- and long-history variance.
     lengths = np.stack([out.history_length for out in outputs[1:]])
-    assert np.sum(lengths == 1.0) >= 10 and lengths.max() == 6.0
     params, scene, extreme_frame = CASES[case]
+    # A light step everywhere may leave no full history past it: the longest reaches the
+    # step's frame at least.
+    longest = scene["light_step"][0] if params.antilag and "light_step" in scene else 6
+    assert np.sum(lengths == 1.0) >= 10 and lengths.max() >= longest
     if params.antilag and "light_step" in scene:
         # The light change is seen: anti-lag shortens many histories at that frame, while
         # before it (no change but the moving object) it stays nearly silent.

@@ -20,13 +20,20 @@ Statistics are gathered on cells of 2x2 pixels (a quarter of the work) over a wi
 * the noise of ``m_h``: a share ``max(1/h_mean, alpha_m / (2 - alpha_m))`` of a sample's
   (short histories are averages of few frames; a long exponential average keeps
   ``alpha_m / (2 - alpha_m)``);
-* stale where ``(m_h - m_c)^2 > k^2 (var / n) (1 + share) + (tolerance max(m_c, m_h))^2``:
-  more than ``k`` (``sigma``) standard errors of the difference plus a small relative
-  tolerance;
+* stale where ``(m_h - m_c)^2 > k0^2 (var / n) (1 + share) + (tolerance max(m_c, m_h))^2``:
+  more than ``k0`` (``sigma_start``) standard errors of the difference plus a small
+  relative tolerance;
 * there ``b^2 = (m_h - m_c)^2 - var / n`` (the history's squared bias, unbiased) and
-  ``lambda = b^2 / (b^2 + var / N)``, the blend weight of the current frame that minimises
-  the expected squared error ``(1 - a)^2 b^2 + a^2 var / N`` of a result the spatial filter
-  averages over ``N`` pixels (``spatial_samples``); elsewhere ``lambda = 0``.
+  ``lambda = r b^2 / (b^2 + var / N)``: ``b^2 / (b^2 + var / N)`` is the blend weight of
+  the current frame that minimises the expected squared error ``(1 - a)^2 b^2 + a^2 var /
+  N`` of a result the spatial filter averages over ``N`` pixels (``spatial_samples``), and
+  ``r`` ramps linearly in the difference's standard errors ``z`` from 0 at ``k0`` to 1 at
+  ``k`` (``sigma``); elsewhere ``lambda = 0``. A light that moves a little every frame
+  leaves a lag of a few standard errors that a test at ``k`` alone never sees, while a
+  full weight from ``k0`` on would restart a blotch of history wherever the noise of one
+  frame crosses it (a static shot's false alarms, many more under 1-spp noise than a
+  Gaussian's): the ramp gives a change not yet sure a share of the frame and a false alarm
+  little. ``sigma_start >= sigma`` is the step at ``k`` alone.
 
 ``lambda`` is dilated by the 3x3 cell maximum (a change seen by a window reaches its border
 pixels) and each pixel with history gets ``h <= 1/lambda - 1`` (``lambda = 1`` drops the
@@ -90,6 +97,7 @@ def antilag(
     scratch: np.ndarray,
     out_lambda: np.ndarray,
     gradients: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = None,
+    sigma_start: float | None = None,
 ) -> int:
     """Lower ``history_length`` (S, H, W) in place where the history disagrees with the frame.
 
@@ -99,7 +107,8 @@ def antilag(
     receives the dilated blend weight per cell (see :func:`cell_shape`). ``gradients``
     optionally holds, per signal, temporal gradient samples ``(mask, prev, curr)`` as (H, W)
     float32 planes (``mask`` 1 where a sample sits), or None. Returns how many (signal,
-    pixel) histories were shortened. Three parallel passes for all signals together (each
+    pixel) histories were shortened. ``sigma_start`` (default: ``sigma``) is where the weight
+    starts to ramp in (module docstring). Three parallel passes for all signals together (each
     launch costs a thread wake-up, which dominates small kernels on a busy machine).
     """
     num_signals = illumination.shape[0]
@@ -115,7 +124,8 @@ def antilag(
             if samples is not None:
                 has_gradients[s] = True
                 _gradient_row_sums(*samples, radius, gradient_sums[s])
-    _window_weight(row_sums, gradient_sums, has_gradients, radius, F32(sigma),
+    start = sigma if sigma_start is None else min(sigma_start, sigma)
+    _window_weight(row_sums, gradient_sums, has_gradients, radius, F32(sigma), F32(start),
                    F32(spatial_samples), F32(tolerance), F32(moments_alpha), weight)
     return int(_dilate_and_shorten(weight, history_length, out_lambda))
 
@@ -218,6 +228,7 @@ def _window_weight(
     has_gradients: np.ndarray,
     radius: int,
     sigma: np.float32,
+    sigma_start: np.float32,
     spatial_samples: np.float32,
     tolerance: np.float32,
     moments_alpha: np.float32,
@@ -228,6 +239,9 @@ def _window_weight(
     gradient samples' (module docstring)."""
     num_signals, cells_y, cells_x = out.shape
     k2 = sigma * sigma
+    k0_2 = sigma_start * sigma_start
+    # 1 / (k - k0): the ramp's slope per standard error (0: a step at k).
+    ramp_slope = _ONE / (sigma - sigma_start) if sigma > sigma_start else _ZERO
     tol2 = tolerance * tolerance
     inv_spatial = _ONE / spatial_samples
     stationary = moments_alpha / (F32(2.0) - moments_alpha)
@@ -261,11 +275,16 @@ def _window_weight(
             diff = mean_h - mean_c
             diff2 = diff * diff
             level = max(mean_c, mean_h)
-            stale = diff2 > k2 * var * inv_n * (_ONE + share) + tol2 * level * level
+            stale = diff2 > k0_2 * var * inv_n * (_ONE + share) + tol2 * level * level
             stale = stale and n >= F32(MIN_SAMPLES)
             bias2 = max(diff2 - var * inv_n, _ZERO)
             noise = var * inv_spatial + F32(1e-30)
-            weight = bias2 / (bias2 + noise) if stale else _ZERO
+            ramp = _ONE
+            if stale and diff2 < k2 * var * inv_n * (_ONE + share):
+                # z: the difference in its standard errors, between k0 and k.
+                z = np.sqrt(diff2 / max(var * inv_n * (_ONE + share), F32(1e-30)))
+                ramp = min((z - sigma_start) * ramp_slope, _ONE)
+            weight = ramp * bias2 / (bias2 + noise) if stale else _ZERO
             if use_gradients and n >= F32(MIN_SAMPLES):
                 # The samples' relative change, where their mean delta is significant.
                 g_n = g[0, cx]

@@ -194,17 +194,16 @@ class SVGFParams:
         " 320, else 6.",
         group="antilag", valid=Range(1, 16, auto=AUTO_ANTILAG_RADIUS, shown="1..16"))
     antilag_sigma: float = _p(
-        3.5,
-        "Anti-lag significance: the history is stale where it differs from the frame by more"
-        " than this many standard errors of the window's noise.",
-        group="antilag", valid=Range(0),
-    )
+        3.5, "Anti-lag significance: the history is stale, with its full weight, where it"
+        " differs from the frame by more than this many standard errors of the window's noise.",
+        group="antilag", valid=Range(0))
+    antilag_sigma_start: float = _p(
+        2.0, "Anti-lag: from this many standard errors the weight ramps in, linearly, to full at"
+        " antilag_sigma (at or above it: a step there).", group="antilag", valid=Range(0))
     antilag_spatial_samples: float = _p(
-        64.0,
-        "Anti-lag strength: pixels the spatial filter is assumed to average; the current frame"
-        " gets weight b^2 / (b^2 + var / N) for a stale history of bias b.",
-        group="antilag", valid=Range(1),
-    )
+        64.0, "Anti-lag strength: pixels the spatial filter is assumed to average; the current"
+        " frame gets weight b^2 / (b^2 + var / N) for a stale history of bias b.",
+        group="antilag", valid=Range(1))
     antilag_tolerance: float = _p(
         0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept.",
         group="antilag", valid=Range(0))

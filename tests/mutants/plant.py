@@ -261,8 +261,15 @@ MUTANTS: tuple[Mutant, ...] = (
         "antilag-no-history-share", "filters",
         "anti-lag ignores the history's own noise (short histories look stale)",
         "svgf_cli/filters/antilag.py",
-        (("stale = diff2 > k2 * var * inv_n * (_ONE + share) + tol2 * level * level",
-          "stale = diff2 > k2 * var * inv_n + tol2 * level * level"),),
+        (("stale = diff2 > k0_2 * var * inv_n * (_ONE + share) + tol2 * level * level",
+          "stale = diff2 > k0_2 * var * inv_n + tol2 * level * level"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "antilag-no-ramp", "filters",
+        "anti-lag gives its full weight from the ramp's start (a step at antilag_sigma_start)",
+        "svgf_cli/filters/antilag.py",
+        (("ramp = min((z - sigma_start) * ramp_slope, _ONE)", "ramp = _ONE"),),
         FILTER_TESTS,
     ),
     Mutant(

@@ -14,10 +14,11 @@ F32 = np.float32
 
 class AntiLag(StageBase):
     """Per signal, the history length lowered where the history differs from this frame by
-    more than ``antilag_sigma`` standard errors of the window's noise (``filters.antilag``;
-    with A-SVGF temporal gradient samples when the frame has them, Schied et al. 2018), so
-    the blend gives the frame more weight there. A bidirectional pass tests at
-    ``PASS_ANTILAG_SIGMA_SCALE`` of the sigma. Only where there is a history; counted."""
+    more than ``antilag_sigma`` standard errors of the window's noise, and by a share of
+    that from ``antilag_sigma_start`` on (``filters.antilag``; with A-SVGF temporal
+    gradient samples when the frame has them, Schied et al. 2018), so the blend gives the
+    frame more weight there. A bidirectional pass tests at ``PASS_ANTILAG_SIGMA_SCALE`` of
+    the sigma (the start stays). Only where there is a history; counted."""
 
     name = "antilag"
     reads = ("demodulated", "moments", "history_length", "depth")
@@ -40,7 +41,7 @@ class AntiLag(StageBase):
             antilag_radius_for(p, ctx.frame.height, ctx.frame.width),
             antilag_sigma(p, temporal.bidirectional), p.antilag_spatial_samples,
             p.antilag_tolerance, p.moments_alpha, scratch, work["antilag_lambda"],
-            temporal.gradients,
+            temporal.gradients, p.antilag_sigma_start,
         )
         return True
 

@@ -185,7 +185,8 @@ def _tested(ctx: FrameContext, temporal: TemporalState, current: np.ndarray,
                gradients: list[tuple[np.ndarray, ...] | None] | None = None) -> np.ndarray:
         antilag(current, moments, length, depth, weights, radius,
                 antilag_sigma(p, temporal.bidirectional), p.antilag_spatial_samples,
-                p.antilag_tolerance, p.moments_alpha, scratch, weight, gradients)
+                p.antilag_tolerance, p.moments_alpha, scratch, weight, gradients,
+                p.antilag_sigma_start)
         return length
 
     return tested
