@@ -280,10 +280,12 @@ def _window_weight(
             bias2 = max(diff2 - var * inv_n, _ZERO)
             noise = var * inv_spatial + F32(1e-30)
             ramp = _ONE
-            if stale and diff2 < k2 * var * inv_n * (_ONE + share):
-                # z: the difference in its standard errors, between k0 and k.
-                z = np.sqrt(diff2 / max(var * inv_n * (_ONE + share), F32(1e-30)))
-                ramp = min((z - sigma_start) * ramp_slope, _ONE)
+            if stale and ramp_slope > _ZERO:  # no ramp: a step at k, as the test alone
+                error2 = var * inv_n * (_ONE + share)  # the difference's squared std. error
+                if diff2 < k2 * error2:
+                    # z: the difference in its standard errors, between k0 and k.
+                    z = np.sqrt(diff2 / max(error2, F32(1e-30)))
+                    ramp = min((z - sigma_start) * ramp_slope, _ONE)
             weight = ramp * bias2 / (bias2 + noise) if stale else _ZERO
             if use_gradients and n >= F32(MIN_SAMPLES):
                 # The samples' relative change, where their mean delta is significant.
