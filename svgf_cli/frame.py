@@ -371,6 +371,8 @@ COUNT_KEYS = {
     " G-buffer albedo because their object reflects a sharp image there (information, not a"
     " problem)",
     "history_resets": "pixel histories reset because a stage produced a non-finite value",
+    "history_gain": "(signal, pixel) histories rescaled because the light around them changed"
+    " by one factor (a light switched or dimmed; information, not a problem)",
     "antilag": "(signal, pixel) histories shortened by anti-lag because the frame no longer"
     " matched them (information, not a problem)",
     "fireflies_spread.<signal>": "current samples above their history's m1 + k sigma and 4x"

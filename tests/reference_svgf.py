@@ -1438,6 +1438,82 @@ def antilag(current, moments, history_length, depth, weights, radius, sigma, spa
     return lam, new_length, shortened
 
 
+def _window_statistics(lum, m1, temporal, length, valid, cy, cx, radius, stationary):
+    """A cell's window of (2r+1)^2 cells: count, current and first-moment means and their
+    difference's squared standard error (anti-lag's statistics)."""
+    window = (slice(2 * max(cy - radius, 0), 2 * (cy + radius + 1)),
+              slice(2 * max(cx - radius, 0), 2 * (cx + radius + 1)))
+    v = valid[window]
+    n = int(v.sum())
+    if n == 0:
+        return 0, 0.0, 0.0, 0.0
+    c = lum[window][v]
+    var = max(c.var(ddof=1) if n > 1 else 0.0, temporal[window][v].mean())
+    share = max(1.0 / max(length[window][v].mean(), 1.0), stationary)
+    return n, c.mean(), m1[window][v].mean(), var / n * (1 + share)
+
+
+def history_gain(current, illumination, moments, history_length, depth, weights, radius,
+                 sigma, sigma_start, tolerance, moments_alpha, scale=5, checks=(2, 1),
+                 gain_max=4.0, min_samples=4):
+    """The history gain (``filters.history_gain``), every window the obvious way: per
+    signal and cell, over the pixels with history in the wide window (radius ``scale r``
+    cells) the gain ``g = m_c / m_h`` where ``(m_c - m_h)^2 > sigma^2 e^2 + (tolerance
+    level)^2`` and ``g`` lies in ``[1 / gain_max, gain_max]``, shrunk to ``1 + b^2 / (b^2 +
+    e^2) (g - 1)`` with ``b^2 = (m_c - m_h)^2 - e^2``; kept where every check window (radius
+    ``c r`` for ``c`` in ``checks``) has ``(m_c - g m_h)^2 <= sigma_start^2 e^2 +
+    (tolerance level)^2``. Returns (illumination, moments, gain per cell (S, Hc, Wc), how
+    many histories were rescaled)."""
+    w = np.asarray(weights, dtype=np.float64)
+    num_signals, _, height, width = current.shape
+    cells_y, cells_x = (height + 1) // 2, (width + 1) // 2
+    gain = np.ones((num_signals, cells_y, cells_x))
+    out = np.asarray(illumination, dtype=np.float64).copy()
+    out_moments = np.asarray(moments, dtype=np.float64).copy()
+    stationary = moments_alpha / (2.0 - moments_alpha)
+    start = min(sigma_start, sigma)
+    count = 0
+    for s in range(num_signals):
+        lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
+        m1 = moments[s, 0].astype(np.float64)
+        temporal = np.maximum(moments[s, 1].astype(np.float64) - m1 * m1, 0.0)
+        valid = (history_length[s] > 0) & (depth > 0)
+        length = np.asarray(history_length[s], dtype=np.float64)
+        statistics = (lum, m1, temporal, length, valid)
+        for cy in range(cells_y):
+            for cx in range(cells_x):
+                n, mean_c, mean_h, error2 = _window_statistics(
+                    *statistics, cy, cx, scale * radius, stationary)
+                diff2 = (mean_c - mean_h) ** 2
+                level = max(mean_c, mean_h)
+                if (n < min_samples or mean_h <= 0
+                        or diff2 <= sigma**2 * error2 + (tolerance * level) ** 2):
+                    continue
+                ratio = mean_c / mean_h
+                if not 1.0 / gain_max <= ratio <= gain_max:
+                    continue
+                bias2 = max(diff2 - error2, 0.0)
+                g = 1.0 + bias2 / (bias2 + error2) * (ratio - 1.0)
+                for check in checks:
+                    n_r, mean_c_r, mean_h_r, error2_r = _window_statistics(
+                        *statistics, cy, cx, check * radius, stationary)
+                    level_r = max(mean_c_r, g * mean_h_r)
+                    if (n_r < min_samples or (mean_c_r - g * mean_h_r) ** 2
+                            > start**2 * error2_r + (tolerance * level_r) ** 2):
+                        break
+                else:
+                    gain[s, cy, cx] = g
+        for y in range(height):
+            for x in range(width):
+                g = gain[s, y // 2, x // 2]
+                if valid[y, x] and g != 1.0:
+                    out[s, :, y, x] *= g
+                    out_moments[s, 0, y, x] *= g
+                    out_moments[s, 1, y, x] *= g * g
+                    count += 1
+    return out, out_moments, gain, count
+
+
 @dataclass
 class FrameState:
     """A frame between the anti-lag hook and the blend: the cleaned frame, its geometry, its
@@ -1455,11 +1531,12 @@ class ReferenceDenoiser:
 
     Per frame: value policy -> geometry -> demodulate each signal by its own colour, with
     its mode (+ firefly clamp) -> reproject each signal (mode-matched taps) ->
-    :meth:`before_accumulation` (the history clamp; anti-lag) -> accumulate each signal with
-    its own history length -> variance (+ colour blur) -> a-trous at steps 2^i, the output
-    of ``feedback_iteration`` (clamped to the last iteration; -1 or no iterations: the colour
-    entering the a-trous) becoming the colour history -> history guard -> remodulate,
-    restore background, sum the signals, add the emission once -> TAA.
+    :meth:`before_accumulation` (the history gain; the history clamp; anti-lag) ->
+    accumulate each signal with its own history length -> variance (+ colour blur) ->
+    a-trous at steps 2^i, the output of ``feedback_iteration`` (clamped to the last
+    iteration; -1 or no iterations: the colour entering the a-trous) becoming the colour
+    history -> history guard -> remodulate, restore background, sum the signals, add the
+    emission once -> TAA.
     """
 
     def __init__(self, params: SVGFParams) -> None:
@@ -1467,16 +1544,24 @@ class ReferenceDenoiser:
         self.history: History | None = None
         self.taa_previous: np.ndarray | None = None
         self.last_reprojected: Reprojected | None = None  # for tests and diagnosis
+        self.rescaled: int | None = None  # the history gain's count this frame
         # temporal_albedo: each signal's colour mean (S, 3, H, W) and its length (S, H, W)
         self.albedo_mean: np.ndarray | None = None
         self.albedo_length: np.ndarray | None = None
 
     def before_accumulation(self, temporal: TemporalState) -> int | None:
-        """Adjust the reprojected history before it is blended: the optional history clamp,
-        then anti-lag. Lowering ``temporal.history.history_length[s]`` raises signal ``s``'s
-        blend factor there. Returns anti-lag's count (None when it is off)."""
+        """Adjust the reprojected history before it is blended: the optional history gain,
+        the history clamp, then anti-lag. Lowering ``temporal.history.history_length[s]``
+        raises signal ``s``'s blend factor there. Returns anti-lag's count (None when it is off)."""
         p = self.params
         reprojected = temporal.history
+        self.rescaled = None
+        if p.antilag and p.antilag_gain:  # the history gain, before the clamp sees it
+            reprojected.illumination, reprojected.moments, _, self.rescaled = history_gain(
+                temporal.current, reprojected.illumination, reprojected.moments,
+                reprojected.history_length, temporal.depth, temporal.weights,
+                antilag_radius_for(p, *temporal.depth.shape), p.antilag_sigma,
+                p.antilag_sigma_start, p.antilag_tolerance, p.moments_alpha)
         # The history clamp, one signal at a time: glossy signals at their own k.
         glossy = temporal.glossy or (False,) * reprojected.illumination.shape[0]
         for s, is_glossy in enumerate(glossy):
@@ -1544,6 +1629,8 @@ class ReferenceDenoiser:
                 clean.glossy))
             if shortened is not None:
                 counts["antilag"] = shortened
+            if self.rescaled is not None:
+                counts["history_gain"] = self.rescaled
             if p.spread_fireflies > 0.0:  # against the history anti-lag left
                 illumination, found = spread_fireflies(
                     illumination, radiance_mode, reprojected.moments, geom.depth,
@@ -1893,7 +1980,8 @@ def reference_bidirectional(frames: Sequence[Frame], params: SVGFParams
     in frame order."""
     # Each pass keeps its accumulation unfiltered as its history (feedback_iteration -1).
     # Their anti-lag tests at a share of the causal significance (the other side refills).
-    passes = params.replace(feedback_iteration=-1,
+    # The history gain runs in causal runs only.
+    passes = params.replace(feedback_iteration=-1, antilag_gain=False,
                             antilag_sigma=params.antilag_sigma * PASS_ANTILAG_SIGMA_SCALE)
     forward = _Capturing(passes)
     kept = []

@@ -63,6 +63,9 @@ CASES: dict[str, tuple[SVGFParams, dict[str, Any], int | None]] = {
     "default, light step": (resolve_params("default"), {"light_step": (3, 0.3)}, None),
     "three signals, default, light step": (resolve_params("default"),
                                            {**THREE, "light_step": (4, 0.4)}, None),
+    # the light step left to anti-lag alone (no history gain)
+    "default without the gain, light step": (resolve_params("default", antilag_gain=False),
+                                             {"light_step": (3, 0.3)}, None),
     "default+extras, moving edge": (resolve_params("default", **EXTRAS),
                                     {"moving_edge": True}, None),
     # Cycles at 1 spp (the header says pixel centres): the pixel filter, with every extra
@@ -174,11 +177,15 @@ def test_denoiser_matches_the_float64_reference(case: str) -> None:
     longest = scene["light_step"][0] if params.antilag and "light_step" in scene else 6
     assert np.sum(lengths == 1.0) >= 10 and lengths.max() >= longest
     if params.antilag and "light_step" in scene:
-        # The light change is seen: anti-lag shortens many histories at that frame, while
-        # before it (no change but the moving object) it stays nearly silent.
+        # The light change is seen: at that frame the history gain rescales many histories
+        # (the light scaled by one factor everywhere), or without it anti-lag shortens them,
+        # while before it (no change but the moving object) it stays nearly silent.
         step = scene["light_step"][0]
-        assert outputs[step].counts["antilag"] > 100
-        assert outputs[step - 1].counts["antilag"] < outputs[step].counts["antilag"] // 4
+        seen = "history_gain" if params.antilag_gain else "antilag"
+        assert outputs[step].counts[seen] > 100
+        assert outputs[step - 1].counts[seen] < outputs[step].counts[seen] // 4
+        if params.antilag_gain:  # rescaled, the longest histories run through the step
+            assert outputs[step].history_length.max() > step
     if extreme_frame is not None:
         counts = outputs[extreme_frame].counts
         assert counts["nonfinite"] >= 12 and counts["extreme"] == 5

@@ -116,7 +116,7 @@ def antilag(
     gradient_sums = scratch[:, _TERMS:_TERMS + _GRADIENT_TERMS]
     weight = scratch[:, _TERMS + _GRADIENT_TERMS]
     radius = np.int64(radius)
-    _statistics_row_sums(illumination, history_moments, history_length, depth,
+    statistics_row_sums(illumination, history_moments, history_length, depth,
                          luminance_weights, radius, row_sums)
     has_gradients = np.zeros(num_signals, dtype=np.bool_)
     if gradients is not None:
@@ -149,7 +149,7 @@ def _box_row(row: np.ndarray, radius: int, out: np.ndarray) -> None:
 
 
 @njit(parallel=True, **_JIT)
-def _statistics_row_sums(
+def statistics_row_sums(
     current: np.ndarray,
     moments: np.ndarray,
     history_length: np.ndarray,

@@ -119,8 +119,9 @@ SHARING: tuple[Share, ...] = (
     Share("variance_b", "variance_b", ATROUS, LAST_ATROUS, "a-trous variance ping-pong"),
     Share("history_illumination", "history_illumination", ("values",), RESAMPLING,
           "last frame's colour history"),
-    Share("antilag_scratch", "history_illumination", ("antilag",), ("antilag",),
-          "anti-lag's statistics, a prefix of the stale colour"),
+    Share("antilag_scratch", "history_illumination", ("history_gain", "antilag"),
+          ("antilag",), "the history gain's and anti-lag's statistics, a prefix of the stale"
+          " colour"),
     Share("stale_colour", "history_illumination", ATROUS, ("store_history",),
           "an a-trous colour buffer"),
     Share("history_moments", "history_moments", ("values",), RESAMPLING,

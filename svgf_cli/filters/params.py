@@ -207,6 +207,10 @@ class SVGFParams:
     antilag_tolerance: float = _p(
         0.02, "Anti-lag relative tolerance: history within this fraction of the frame is kept.",
         group="antilag", valid=Range(0))
+    antilag_gain: bool = _p(
+        False, "Anti-lag first rescales the history where a wide neighbourhood's light changed"
+        " by one factor (a light switched or dimmed) and its own window agrees; causal runs.",
+        group="antilag")
     antilag_gradients: bool = _p(
         True,
         "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
@@ -421,6 +425,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   " 128x72 the 10x10 window's noise cuts histories short where nothing"
                   " changed (antilag_radius_for): "
                   f"{_ALG}#the-anti-lag-window-grows-with-the-image"),
+        Departure("antilag_gain", True, "a light switched or dimmed changes the level of"
+                  " the light, not its shape: the history rescaled keeps its length:"
+                  f" {_ALG}#the-history-gain"),
         Departure("object_history", True, "a turning object's points turn away from the"
                   " light: their light's history is at the object's translation, not the"
                   f" material point's: {_ALG}#turning-objects"),

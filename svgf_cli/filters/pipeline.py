@@ -29,6 +29,7 @@ from svgf_cli.filters.stages.fill_medium import FillMedium
 from svgf_cli.filters.stages.firefly_clamp import FireflyClamp
 from svgf_cli.filters.stages.gradients import Gradients
 from svgf_cli.filters.stages.history_clamp import HistoryClamp
+from svgf_cli.filters.stages.history_gain import HistoryGain
 from svgf_cli.filters.stages.medium_coverage import MediumCoverage
 from svgf_cli.filters.stages.object_history import AdoptObjectHistory, ObjectHistory
 from svgf_cli.filters.stages.pass_history import PassHistory
@@ -48,7 +49,7 @@ from svgf_cli.filters.stages.variance import Variance
 KINDS = ("causal", "forward", "reverse")
 
 
-def temporal() -> list[Stage]:
+def temporal(causal: bool = False) -> list[Stage]:
     """Values to the reprojected history, before the blend (every pipeline)."""
     return [
         CleanGeometry(),
@@ -61,6 +62,8 @@ def temporal() -> list[Stage]:
         FireflyClamp(),  # firefly_clamp
         Reproject(),
         ObjectHistory(),  # object_history
+        # antilag_gain; causal only: a pass's shortened history is refilled by the other
+        *([HistoryGain()] if causal else []),
         HistoryClamp(),  # history_clamp, glossy_history_clamp
         AntiLag(),  # antilag
         AdoptObjectHistory(),  # object_history
@@ -75,7 +78,7 @@ def composition() -> list[Stage]:
 
 def causal() -> list[Stage]:
     return [
-        *temporal(),
+        *temporal(causal=True),
         Accumulate(),
         TemporalAlbedo(),  # temporal_albedo
         Variance(),

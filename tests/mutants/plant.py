@@ -55,6 +55,7 @@ FILTER_TESTS = (
     "tests/test_filters_values.py",
     "tests/test_filters_scale.py",
     "tests/test_filters_antilag.py",
+    "tests/test_filters_history_gain.py",
     "tests/test_filters_glossy.py",
     "tests/test_filters_bidirectional.py",
 )
@@ -270,6 +271,21 @@ MUTANTS: tuple[Mutant, ...] = (
         "anti-lag gives its full weight from the ramp's start (a step at antilag_sigma_start)",
         "svgf_cli/filters/antilag.py",
         (("ramp = min((z - sigma_start) * ramp_slope, _ONE)", "ramp = _ONE"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "history-gain-no-check", "filters",
+        "the history gain rescales by the wide window's factor without the narrower windows'"
+        " check (a light reaching part of the window rescales the rest)",
+        "svgf_cli/filters/history_gain.py",
+        (("GAIN_CHECK_SCALES = (2, 1)", "GAIN_CHECK_SCALES = ()"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "history-gain-unshrunk", "filters",
+        "the history gain applies the wide window's ratio unshrunk by its noise",
+        "svgf_cli/filters/history_gain.py",
+        (("g = _ONE + bias2 / (bias2 + error2 + F32(1e-30)) * (ratio - _ONE)", "g = ratio"),),
         FILTER_TESTS,
     ),
     Mutant(
