@@ -50,8 +50,8 @@ F32 = np.float32
 _ZERO = F32(0.0)
 _ONE = F32(1.0)
 # The wide window's radius in anti-lag radii: its level is measured over 25x the anti-lag
-# window's pixels, so its noise is a fifth of the narrow window's (measured 3 / 5 / 8 on the
-# light-step and metal fixtures: 5 best or level with the best on each).
+# window's pixels, so its noise is a fifth of the narrow window's (3 measured worse on the
+# light steps, 8 no better in a first version: docs/algorithm.md#the-history-gain).
 GAIN_WINDOW_SCALE = 5
 # Gains beyond this factor either way are left to anti-lag (a light from nothing: no level
 # to rescale).
@@ -60,7 +60,7 @@ GAIN_MAX = 4.0
 # and one between (less noisy: a change with structure wider than the anti-lag window but
 # within its noise is caught there).
 GAIN_CHECK_SCALES = (2, 1)
-# Planes of the scratch: the x-window sums of anti-lag's six terms, then the gain per cell.
+# Planes of the scratch: each cell's sums of anti-lag's six terms, then the gain per cell.
 _SUMS = 6
 _JIT = dict(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 
