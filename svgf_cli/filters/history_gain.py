@@ -92,11 +92,10 @@ def history_gain(
     # Each cell's own sums (a window of one cell), boxed below for every window size.
     statistics_row_sums(illumination, history_moments, history_length, depth,
                         luminance_weights, np.int64(0), cells)
-    every = np.ones(gain.shape[0], dtype=np.bool_)
-    _window_pass(cells, np.int64(radius * GAIN_WINDOW_SCALE), False, every, stationary,
+    # Which signals have a gain: most frames change no signal's light, and skip the rest.
+    active = np.ones(gain.shape[0], dtype=np.bool_)
+    _window_pass(cells, np.int64(radius * GAIN_WINDOW_SCALE), False, active, stationary,
                  F32(sigma), F32(tolerance), gain)
-    # Most frames change no signal's light: their checks and rescaling are skipped.
-    active = np.array([bool(np.any(plane != _ONE)) for plane in gain], dtype=np.bool_)
     if not active.any():
         return 0
     for scale in GAIN_CHECK_SCALES:
@@ -146,7 +145,8 @@ def _window_pass(cells: np.ndarray, radius: int, check: bool, active: np.ndarray
     (``check`` False) the wide window's shrunk gain where its change exceeds ``sigma``
     standard errors, else 1, or (``check`` True) a gain set back to 1 unless this window's
     history times it is within ``sigma`` standard errors (plus the tolerance) of its
-    current mean. Signals not ``active`` are left as they are."""
+    current mean. Signals not ``active`` are left as they are; the gain pass sets
+    ``active[s]`` to whether any of signal ``s``'s cells got a gain."""
     num_signals, cells_y, cells_x = gain.shape
     k2 = sigma * sigma
     tol2 = tolerance * tolerance
@@ -158,6 +158,7 @@ def _window_pass(cells: np.ndarray, radius: int, check: bool, active: np.ndarray
             continue
         ring = np.zeros((span, _SUMS, cells_x))
         sums = np.zeros((_SUMS, cells_x))
+        found = False
         boxed = np.empty(cells_x)
         for y in range(-radius, cells_y):
             entering = y + radius
@@ -197,7 +198,10 @@ def _window_pass(cells: np.ndarray, radius: int, check: bool, active: np.ndarray
                     if low <= ratio <= high:
                         bias2 = max(diff2 - error2, _ZERO)
                         g = _ONE + bias2 / (bias2 + error2 + F32(1e-30)) * (ratio - _ONE)
+                        found = True
                 o[cx] = g
+        if not check:
+            active[s] = found
 
 
 @njit(parallel=True, **_JIT)
