@@ -209,7 +209,7 @@ class SVGFParams:
         group="antilag", valid=Range(0))
     antilag_gain: bool = _p(
         False, "Anti-lag first rescales the history where a wide neighbourhood's light changed"
-        " by one factor (a light switched or dimmed) and its own window agrees; causal runs.",
+        " by one factor (a light switched or dimmed) and narrower windows agree; causal runs.",
         group="antilag")
     antilag_gradients: bool = _p(
         True,
