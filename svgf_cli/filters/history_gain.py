@@ -54,7 +54,8 @@ _ONE = F32(1.0)
 # light steps, 8 no better in a first version: docs/algorithm.md#the-history-gain).
 GAIN_WINDOW_SCALE = 5
 # Gains beyond this factor either way are left to anti-lag (a light from nothing: no level
-# to rescale).
+# to rescale). Measured: 16 within 0.003 JOD of 4 on every fixture (none has a larger
+# step); 2 loses all of the light steps' gain (their factor is 0.3).
 GAIN_MAX = 4.0
 # The check windows' radii in anti-lag radii: its own window, where anti-lag tests next,
 # and one between (less noisy: a change with structure wider than the anti-lag window but
