@@ -117,7 +117,7 @@ def antilag(
     weight = scratch[:, _TERMS + _GRADIENT_TERMS]
     radius = np.int64(radius)
     statistics_row_sums(illumination, history_moments, history_length, depth,
-                         luminance_weights, radius, row_sums)
+                        luminance_weights, radius, row_sums)
     has_gradients = np.zeros(num_signals, dtype=np.bool_)
     if gradients is not None:
         for s, samples in enumerate(gradients):

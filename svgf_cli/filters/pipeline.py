@@ -50,7 +50,8 @@ KINDS = ("causal", "forward", "reverse")
 
 
 def temporal(causal: bool = False) -> list[Stage]:
-    """Values to the reprojected history, before the blend (every pipeline)."""
+    """Values to the reprojected history, before the blend (every pipeline; ``causal``: the
+    causal run's, with the history gain)."""
     return [
         CleanGeometry(),
         FillMedium(),  # medium_fill_radius, frames with volume passes
