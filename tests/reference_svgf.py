@@ -1372,6 +1372,17 @@ def antilag_gradient_change(mask, previous, current, radius, sigma):
     return out
 
 
+def _signal_statistics(current, moments, history_length, depth, w, s):
+    """Signal ``s``'s per-pixel terms for anti-lag's windows (float64): the current
+    luminance, the first moment, the temporal variance ``m2 - m1^2`` (at least 0), the
+    history length, and which pixels have a history on a surface."""
+    lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
+    m1 = moments[s, 0].astype(np.float64)
+    temporal = np.maximum(moments[s, 1].astype(np.float64) - m1 * m1, 0.0)
+    valid = (history_length[s] > 0) & (depth > 0)
+    return lum, m1, temporal, np.asarray(history_length[s], dtype=np.float64), valid
+
+
 def antilag(current, moments, history_length, depth, weights, radius, sigma, spatial_samples,
             tolerance, moments_alpha, gradients=None, min_samples=4, sigma_start=None):
     """Anti-lag (``filters.antilag``), every cell window the obvious way: per signal, over
@@ -1392,11 +1403,8 @@ def antilag(current, moments, history_length, depth, weights, radius, sigma, spa
     stationary = moments_alpha / (2.0 - moments_alpha)
     start = sigma if sigma_start is None else min(sigma_start, sigma)
     for s in range(num_signals):
-        lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
-        m1 = moments[s, 0].astype(np.float64)
-        temporal = np.maximum(moments[s, 1].astype(np.float64) - m1 * m1, 0.0)
-        valid = (history_length[s] > 0) & (depth > 0)
-        length = np.asarray(history_length[s], dtype=np.float64)
+        lum, m1, temporal, length, valid = _signal_statistics(
+            current, moments, history_length, depth, w, s)
         change = None
         if gradients is not None and gradients[s] is not None:
             change = antilag_gradient_change(*gradients[s], radius, sigma)
@@ -1474,11 +1482,8 @@ def history_gain(current, illumination, moments, history_length, depth, weights,
     start = min(sigma_start, sigma)
     count = 0
     for s in range(num_signals):
-        lum = np.einsum("c,chw->hw", w, current[s].astype(np.float64))
-        m1 = moments[s, 0].astype(np.float64)
-        temporal = np.maximum(moments[s, 1].astype(np.float64) - m1 * m1, 0.0)
-        valid = (history_length[s] > 0) & (depth > 0)
-        length = np.asarray(history_length[s], dtype=np.float64)
+        lum, m1, temporal, length, valid = _signal_statistics(
+            current, moments, history_length, depth, w, s)
         statistics = (lum, m1, temporal, length, valid)
         for cy in range(cells_y):
             for cx in range(cells_x):

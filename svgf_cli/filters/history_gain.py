@@ -45,6 +45,7 @@ from numba import njit, prange
 
 from svgf_cli.filters.antilag import MIN_SAMPLES, statistics_row_sums
 from svgf_cli.filters.fastmath import FASTMATH
+from svgf_cli.filters.shares import row_sums
 
 F32 = np.float32
 _ZERO = F32(0.0)
@@ -121,28 +122,13 @@ def _window_means(sums: np.ndarray, cx: int, stationary: np.float32
     return n, mean_c, mean_h, var * inv_n * (_ONE + share)
 
 
-@njit(inline="always", **_JIT)
-def _box_row(row: np.ndarray, radius: int, out: np.ndarray) -> None:
-    """``out[x] = sum of row[x - r .. x + r]`` (cells outside count 0), by a running sum:
-    the same cost at any radius."""
-    count = row.shape[0]
-    total = 0.0
-    for x in range(min(radius, count)):
-        total += row[x]
-    for x in range(count):
-        if x + radius < count:
-            total += row[x + radius]
-        if x - radius - 1 >= 0:
-            total -= row[x - radius - 1]
-        out[x] = total
-
-
 @njit(parallel=True, **_JIT)
 def _window_pass(cells: np.ndarray, radius: int, check: bool, active: np.ndarray,
                  stationary: np.float32, sigma: np.float32, tolerance: np.float32,
                  gain: np.ndarray) -> None:
     """Per signal, the ``(2r+1)^2``-cell window sums of ``cells`` (S, 6, Hc, Wc) by running
-    sums down the rows (float64, a ring of the rows in the window), and per cell either
+    sums along and down the rows (float64, a ring of the rows in the window: the same cost at
+    any radius), and per cell either
     (``check`` False) the wide window's shrunk gain where its change exceeds ``sigma``
     standard errors, else 1, or (``check`` True) a gain set back to 1 unless this window's
     history times it is within ``sigma`` standard errors (plus the tolerance) of its
@@ -171,7 +157,7 @@ def _window_pass(cells: np.ndarray, radius: int, check: bool, active: np.ndarray
             if entering < cells_y:
                 slot = ring[entering % span]
                 for t in range(_SUMS):
-                    _box_row(cells[s, t, entering], radius, boxed)
+                    row_sums(cells[s, t, entering], radius, boxed)
                     for cx in range(cells_x):
                         slot[t, cx] = boxed[cx]
                         sums[t, cx] += boxed[cx]
