@@ -1641,6 +1641,12 @@ class ReferenceDenoiser:
                     illumination, radiance_mode, reprojected.moments, geom.depth,
                     [not g for g in clean.glossy], p.spread_fireflies, clean.weights,
                     albedo=clean.albedo, guide=clean.guide)
+                if p.glossy_spread_fireflies:  # the glossy signals', over their 3x3
+                    illumination, glossy_found = spread_fireflies(
+                        illumination, radiance_mode, reprojected.moments, geom.depth,
+                        list(clean.glossy), p.spread_fireflies, clean.weights, radius=1,
+                        albedo=clean.albedo, guide=clean.guide)
+                    found = [a + b for a, b in zip(found, glossy_found, strict=True)]
                 counts.update({f"fireflies_spread.{name}": count
                                for name, count in zip(clean.names, found, strict=True)})
             self.last_reprojected = reprojected

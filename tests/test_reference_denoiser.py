@@ -186,6 +186,9 @@ def test_denoiser_matches_the_float64_reference(case: str) -> None:
         assert outputs[step - 1].counts[seen] < outputs[step].counts[seen] // 4
         if params.antilag_gain:  # rescaled, the longest histories run through the step
             assert outputs[step].history_length.max() > step
+    if params.spread_fireflies > 0 and params.glossy_spread_fireflies and scene.get(
+            "layout") == "three":  # the glossy signal's fireflies are spread (in its 3x3)
+        assert sum(out.counts.get("fireflies_spread.glossy", 0) for out in outputs) >= 2
     if extreme_frame is not None:
         counts = outputs[extreme_frame].counts
         assert counts["nonfinite"] >= 12 and counts["extreme"] == 5

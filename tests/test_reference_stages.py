@@ -30,7 +30,7 @@ from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
 from svgf_cli.filters.fastmath import REC709, float32_weights
-from svgf_cli.filters.fireflies import spread_fireflies
+from svgf_cli.filters.fireflies import GLOSSY_RADIUS, RADIUS, spread_fireflies
 from svgf_cli.filters.gradients import depth_gradients, normal_gradient, unit_normals
 from svgf_cli.filters.modulate import (
     DEMODULATE_COUNTERS,
@@ -437,7 +437,7 @@ def _firefly_case(seed: int) -> tuple[np.ndarray, ...]:
     """Three signals over 14x16 with a history (moments of a steady level), fireflies on
     flat ground, at the border, next to a depth edge and between radiance-mode pixels, a
     lit block (a lighting change: every pixel above its history), and the third signal
-    glossy (never spread)."""
+    glossy (a firefly at (5, 5))."""
     height, width = 14, 16
     rng = np.random.default_rng(seed)
     current = rng.gamma(2.0, 0.25, (3, 3, height, width)).astype(F32)
@@ -465,7 +465,7 @@ def test_firefly_spreading_matches_reference(weights: tuple) -> None:
     keep = np.empty(depth.shape, F32)
     albedo = [np.full((3, *depth.shape), 0.5, F32)] * 3
     counts = spread_fireflies(got, albedo, (False,) * 3, moments, mask, depth,
-                              (True, True, False), 10.0, weights, keep)
+                              (RADIUS, RADIUS, 0), 10.0, weights, keep)
     want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
                                        [True, True, False], 10.0, weights)
     _close(got, want, 2e-6, "firefly spreading")
@@ -499,12 +499,45 @@ def test_firefly_spreading_leaves_a_converged_history_alone() -> None:
     got = current.copy()
     albedo = [np.full((3, *depth.shape), 0.5, F32)] * 3
     counts = spread_fireflies(got, albedo, (False,) * 3, moments, mask, depth,
-                              (True, True, False), 10.0, REC709, np.empty(depth.shape, F32))
+                              (RADIUS, RADIUS, 0), 10.0, REC709, np.empty(depth.shape, F32))
     want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
                                        [True, True, False], 10.0)
     _close(got, want, 2e-6, "firefly spreading")
     assert counts == found
     assert ref.luminance(want, REC709)[0, 5, 5] >= ref.luminance(current, REC709)[0, 5, 5]
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_firefly_spreading_keeps_a_glossy_firefly_in_its_3x3(seed: int) -> None:
+    """A glossy signal's firefly (spread with ``GLOSSY_RADIUS``) is brought down and its
+    excess shared over its own 3x3 alone: a rare hit of a small highlight stays where the
+    highlight is. Other signals keep the 9x9; a signal with radius 0 is left alone."""
+    current, moments, mask, radiance_mode, depth = _firefly_case(seed)
+    got = current.copy()
+    albedo = [np.full((3, *depth.shape), 0.5, F32)] * 3
+    counts = spread_fireflies(got, albedo, (False,) * 3, moments, mask, depth,
+                              (RADIUS, 0, GLOSSY_RADIUS), 10.0, REC709,
+                              np.empty(depth.shape, F32))
+    want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
+                                       [True, False, False], 10.0)
+    want, found_glossy = ref.spread_fireflies(want, radiance_mode, moments, depth,
+                                              [False, False, True], 10.0, radius=1)
+    _close(got, want, 2e-6, "firefly spreading, glossy")
+    assert counts == [a + b for a, b in zip(found, found_glossy, strict=True)]
+    assert counts[2] >= 1 and counts[1] == 0
+    assert np.array_equal(got[1], current[1])
+    lum, after = ref.luminance(current, REC709), ref.luminance(want, REC709)
+    assert after[2, 5, 5] < lum[2, 5, 5] / 4  # the planted glossy firefly
+    changed = np.any(got[2] != current[2], axis=0)
+    # Every change lies within one pixel of a glossy firefly the reference found.
+    lowered = ref.luminance(want, REC709)[2] < lum[2] - 1e-6
+    near = np.zeros_like(changed)
+    for y, x in zip(*np.nonzero(lowered), strict=True):
+        near[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2] = True
+    assert changed[5, 5] and not np.any(changed & ~near)
+    assert np.any(changed[4:7, 4:7] & (got[2, 0, 4:7, 4:7] > current[2, 0, 4:7, 4:7]))
+    np.testing.assert_allclose(got[2].astype(np.float64).sum(),
+                               current[2].astype(np.float64).sum(), rtol=1e-5)
 
 
 def test_firefly_spreading_keeps_to_its_colour_under_the_g_buffer_albedo() -> None:
@@ -531,7 +564,7 @@ def test_firefly_spreading_keeps_to_its_colour_under_the_g_buffer_albedo() -> No
     for guide in (True, False):
         got = current.copy()
         counts = spread_fireflies(got, [albedo[0]], (guide,), moments, mode_mask(radiance_mode),
-                                  depth, (True,), 10.0, REC709, np.empty(depth.shape, F32))
+                                  depth, (RADIUS,), 10.0, REC709, np.empty(depth.shape, F32))
         want, found = ref.spread_fireflies(current, radiance_mode, moments, depth, [True], 10.0,
                                            albedo=albedo, guide=[guide])
         _close(got, want, 2e-6, "firefly spreading")

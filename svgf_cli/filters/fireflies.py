@@ -23,8 +23,13 @@ equally among the surface pixels ``q`` of the ``(2 RADIUS + 1)^2`` window around
 signal demodulated by the G-buffer albedo also ``|a(q) - a(p)| <= ALBEDO_TOLERANCE a(p)``
 (``a`` the luminance of its colour: the same material, see ``ALBEDO_TOLERANCE``). The
 signal's demodulated light over the image is unchanged; only where it sits moves by a few
-pixels, which the converged image also spreads it over. Glossy signals are left alone: a
-small bright highlight that moves is the signal there, not an outlier.
+pixels, which the converged image also spreads it over.
+
+A glossy signal's firefly is shared over its 3x3 alone (``GLOSSY_RADIUS``, when asked): there
+a lone bright sample is most often a rare hit of a small highlight or of its glow (a light
+seen in a polished or refracting surface, which one sample in a few dozen finds), whose
+converged image is a few pixels wide; the 9x9 would smear it into a square, and left alone
+its energy is dropped by the glossy history clamp, whose 3x3 rarely holds another hit.
 """
 
 from __future__ import annotations
@@ -55,6 +60,10 @@ ALBEDO_TOLERANCE = F32(0.25)
 ANY_COLOUR = F32(1e30)  # no colour test (finite: times a colour it must not overflow)
 # How many times its second-brightest same-mode neighbour a sample must be.
 NEIGHBOUR_RATIO = F32(4.0)
+# A glossy signal's window: the 3x3. Measured (docs/algorithm.md, "Glossy fireflies"):
+# the 9x9 turned a 1-pixel reflected highlight of the 128x72 metal fixture into a 9x9 square
+# 16 times its surroundings (relMSE of that frame 0.04 -> 0.52).
+GLOSSY_RADIUS = 1
 
 
 @njit(
@@ -138,8 +147,10 @@ def _share(
     bit: np.uint16,
     keep: np.ndarray,
     flagged: np.ndarray,
+    radius: np.int64,
 ) -> int:
-    """One signal: bound every firefly, then share each one's excess over its window.
+    """One signal: bound every firefly, then share each one's excess over its
+    ``(2 radius + 1)^2`` window.
     Serial, in row order (fireflies are rare), so the sums are the same on every run; every
     excess is taken before any is shared, so the result does not depend on that order."""
     height, width = depth.shape
@@ -168,8 +179,8 @@ def _share(
         y, x = ys[i], xs[i]
         z = depth[y, x]
         a = wr * albedo[0, y, x] + wg * albedo[1, y, x] + wb * albedo[2, y, x]
-        y0, y1 = max(y - RADIUS, 0), min(y + RADIUS + 1, height)
-        x0, x1 = max(x - RADIUS, 0), min(x + RADIUS + 1, width)
+        y0, y1 = max(y - radius, 0), min(y + radius + 1, height)
+        x0, x1 = max(x - radius, 0), min(x + radius + 1, width)
         receivers = 0
         for yy in range(y0, y1):
             for xx in range(x0, x1):
@@ -193,23 +204,24 @@ def spread_fireflies(
     moments: np.ndarray,
     mode: np.ndarray,
     depth: np.ndarray,
-    spread: tuple[bool, ...],
+    radii: tuple[int, ...],
     k: float,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
     keep: np.ndarray,
 ) -> list[int]:
     """In place on the current samples ``illumination`` (S, 3, H, W): per signal ``s`` with
-    ``spread[s]``, bound each firefly to ``L(p)`` and share its excess over its window (the
-    module docstring's rule); ``moments`` (S, 2, H, W) are the reprojected history's,
-    ``albedo`` the signals' demodulation colours (3, H, W) each and ``guide`` whether each
-    is the G-buffer albedo (``Signal.guide_albedo``), ``mode`` the (H, W) uint16
-    modes (bit ``s`` set: radiance). ``keep`` is an (H, W) float32 scratch plane. Returns
-    the number of fireflies per signal."""
+    ``radii[s] > 0``, bound each firefly to ``L(p)`` and share its excess over the
+    ``(2 radii[s] + 1)^2`` window around it (the module docstring's rule); ``moments``
+    (S, 2, H, W) are the reprojected history's, ``albedo`` the signals' demodulation
+    colours (3, H, W) each and ``guide`` whether each is the G-buffer albedo
+    (``Signal.guide_albedo``), ``mode`` the (H, W) uint16 modes (bit ``s`` set: radiance).
+    ``keep`` is an (H, W) float32 scratch plane. Returns the number of fireflies per
+    signal."""
     height = depth.shape[0]
     flagged = np.zeros(height, dtype=np.int64)
     counts = []
-    for s, wanted in enumerate(spread):
-        if not wanted:
+    for s, radius in enumerate(radii):
+        if radius <= 0:
             counts.append(0)
             continue
         bit = np.uint16(1 << s)
@@ -217,5 +229,5 @@ def spread_fireflies(
                 luminance_weights, keep, flagged)
         tolerance = ALBEDO_TOLERANCE if guide[s] else ANY_COLOUR
         counts.append(int(_share(illumination[s], albedo[s], tolerance, luminance_weights,
-                                 mode, depth, bit, keep, flagged)))
+                                 mode, depth, bit, keep, flagged, np.int64(radius))))
     return counts

@@ -114,9 +114,7 @@ class SVGFParams:
                         group="temporal")
     depth_tolerance: float = _p(
         10.0, "Reprojection rejects a tap when |z_prev - z| > tolerance * (depth_gradient"
-        " + depth_slack * z).",
-        group="temporal", valid=Range(0),
-    )
+        " + depth_slack * z).", group="temporal", valid=Range(0))
     depth_slack: float = _p(
         0.002, "Depth-relative slack of the reprojection depth test (scale-free stand-in for"
         " Falcor's absolute 0.01).",
@@ -124,9 +122,7 @@ class SVGFParams:
     )
     normal_tolerance: float = _p(
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient"
-        " + 0.01).",
-        group="temporal", valid=Range(0),
-    )
+        " + 0.01).", group="temporal", valid=Range(0))
     history_catmull_rom: bool = _p(
         False, "Resample the reprojected colour history and moments with a Catmull-Rom spline over"
         " the 4x4 taps (clamped to the bilinear taps' range) where all 16 pass the"
@@ -253,6 +249,9 @@ class SVGFParams:
         False, "Demodulate a glossy signal by the G-buffer albedo on diffuse-free objects whose"
         " albedo shows a sharp reflection (Cycles' Denoising Albedo follows specular bounces).",
         group="glossy")
+    glossy_spread_fireflies: bool = _p(
+        False, "With spread_fireflies, also spread a glossy signal's fireflies, over their 3x3"
+        " (rare hits of a highlight or its glow, kept where they are).", group="glossy")
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
         5,
@@ -328,7 +327,8 @@ class SVGFParams:
         0.0,
         "Before accumulation, a sample above both its history's m1 + k*sigma and 4x its"
         " second-brightest same-mode neighbour is bounded there and its excess shared over the"
-        " same surface in the 9x9 around it (energy kept; glossy signals excepted; 0 = off).",
+        " same surface in the 9x9 around it (energy kept; glossy signals: glossy_spread_"
+        "fireflies; 0 = off).",
         group="guards", valid=Range(0),
     )
     history_clamp: float = _p(
@@ -465,6 +465,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("despike", 2.0, f"bounds the fireflies the a-trous kept: {_FIREFLIES}"),
         Departure("spread_fireflies", 10.0, "shares a firefly's excess over its surface,"
                   f" energy kept: {_FIREFLIES}"),
+        Departure("glossy_spread_fireflies", True, "a glossy signal's lone bright sample is a"
+                  " rare hit of a highlight or its glow, which the glossy history clamp would"
+                  f" drop: {_ALG}#glossy-fireflies"),
         Departure("guide_albedo_floor", 0.1, "glossy light over a dark diffuse base is not"
                   " amplified by dividing by the G-buffer albedo: "
                   f"{_ALG}#1-signals-and-demodulation"),

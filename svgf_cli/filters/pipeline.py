@@ -68,7 +68,7 @@ def temporal(causal: bool = False) -> list[Stage]:
         HistoryClamp(),  # history_clamp, glossy_history_clamp
         AntiLag(),  # antilag
         AdoptObjectHistory(),  # object_history
-        SpreadFireflies(),  # spread_fireflies
+        SpreadFireflies(),  # spread_fireflies (glossy signals: glossy_spread_fireflies)
     ]
 
 

@@ -398,10 +398,18 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "fireflies-spread-glossy", "filters",
-        "firefly spreading also runs on glossy signals (a moving highlight is spread)",
+        "a glossy signal's firefly is spread over the 9x9 (a small highlight smeared)",
         "svgf_cli/filters/stages/spread_fireflies.py",
-        (('            tuple(not g for g in glossy), ctx.params.spread_fireflies,',
-          '            tuple(True for g in glossy), ctx.params.spread_fireflies,'),),
+        (('            tuple(glossy_radius if g else RADIUS for g in glossy),',
+          '            tuple(RADIUS for g in glossy),'),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "fireflies-glossy-left-alone", "filters",
+        "glossy_spread_fireflies is ignored: a glossy signal's fireflies are never spread",
+        "svgf_cli/filters/stages/spread_fireflies.py",
+        (("        glossy_radius = GLOSSY_RADIUS if ctx.params.glossy_spread_fireflies else 0",
+          "        glossy_radius = 0"),),
         FILTER_TESTS,
     ),
     Mutant(
