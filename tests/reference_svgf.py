@@ -522,7 +522,7 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
                      weights: Sequence[float] = REC709, ratio: float = 4.0, radius: int = 4,
                      depth_tolerance: float = 0.1, albedo: np.ndarray | None = None,
                      guide: Sequence[bool] = (), albedo_tolerance: float = 0.25,
-                     ) -> tuple[np.ndarray, list[int]]:
+                     cap: bool = False) -> tuple[np.ndarray, list[int]]:
     """Per signal ``s`` with ``spread[s]``: a demodulated surface sample whose luminance
     exceeds ``L = max(m1 + k sqrt(max(m2 - m1^2, 0)), ratio * max(M, 0))`` (``m1``, ``m2``
     the history's luminance moments; ``M`` the second-largest luminance among its in-image
@@ -532,8 +532,10 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
     ``(2 radius + 1)^2`` window around it (itself included) whose depth is within
     ``depth_tolerance`` of its own, relatively; for a signal with ``guide[s]`` (demodulated
     by the G-buffer albedo) also whose colour ``albedo[s]`` has a luminance within
-    ``albedo_tolerance`` of the firefly's, relatively. Returns the result and the number of
-    fireflies per signal."""
+    ``albedo_tolerance`` of the firefly's, relatively. With ``cap`` no receiver gains more
+    than the firefly's bounded luminance ``L``: the shares are scaled by
+    ``min(1, n L / luminance(excess))`` for ``n`` receivers (the rest is dropped). Returns
+    the result and the number of fireflies per signal."""
     c = np.array(current, dtype=F64)
     z = np.asarray(depth, dtype=F64)
     m = np.asarray(moments, dtype=F64)
@@ -561,10 +563,10 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
                 bound = max(m1 + k * math.sqrt(max(m2 - m1 * m1, 0.0)),
                             ratio * max(reference, 0.0))
                 if lum[s, y, x] > bound:
-                    found.append((y, x, c[s, :, y, x] * (1.0 - bound / lum[s, y, x])))
-        for y, x, excess in found:
+                    found.append((y, x, c[s, :, y, x] * (1.0 - bound / lum[s, y, x]), bound))
+        for y, x, excess, _ in found:
             c[s, :, y, x] -= excess
-        for y, x, excess in found:
+        for y, x, excess, bound in found:
             ys = slice(max(y - radius, 0), y + radius + 1)
             xs = slice(max(x - radius, 0), x + radius + 1)
             receives = demodulated[ys, xs] & (np.abs(z[ys, xs] - z[y, x])
@@ -572,8 +574,11 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
             if guided:
                 receives &= np.abs(colour[ys, xs] - colour[y, x]) <= (
                     albedo_tolerance * colour[y, x])
-            c[s][:, ys, xs] += np.where(receives, 1.0, 0.0) * (excess / receives.sum())[
-                :, None, None]
+            share = 1.0 / receives.sum()
+            lost = float(np.dot(np.asarray(weights, dtype=F64), excess))
+            if cap and lost > bound * receives.sum():
+                share *= bound * receives.sum() / lost
+            c[s][:, ys, xs] += np.where(receives, 1.0, 0.0) * (excess * share)[:, None, None]
         counts[s] = len(found)
     return c, counts
 
@@ -1645,7 +1650,7 @@ class ReferenceDenoiser:
                     illumination, glossy_found = spread_fireflies(
                         illumination, radiance_mode, reprojected.moments, geom.depth,
                         list(clean.glossy), p.spread_fireflies, clean.weights, radius=1,
-                        albedo=clean.albedo, guide=clean.guide)
+                        albedo=clean.albedo, guide=clean.guide, cap=True)
                     found = [a + b for a, b in zip(found, glossy_found, strict=True)]
                 counts.update({f"fireflies_spread.{name}": count
                                for name, count in zip(clean.names, found, strict=True)})

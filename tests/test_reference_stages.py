@@ -517,11 +517,11 @@ def test_firefly_spreading_keeps_a_glossy_firefly_in_its_3x3(seed: int) -> None:
     albedo = [np.full((3, *depth.shape), 0.5, F32)] * 3
     counts = spread_fireflies(got, albedo, (False,) * 3, moments, mask, depth,
                               (RADIUS, 0, GLOSSY_RADIUS), 10.0, REC709,
-                              np.empty(depth.shape, F32))
+                              np.empty(depth.shape, F32), capped=(False, False, True))
     want, found = ref.spread_fireflies(current, radiance_mode, moments, depth,
                                        [True, False, False], 10.0)
     want, found_glossy = ref.spread_fireflies(want, radiance_mode, moments, depth,
-                                              [False, False, True], 10.0, radius=1)
+                                              [False, False, True], 10.0, radius=1, cap=True)
     _close(got, want, 2e-6, "firefly spreading, glossy")
     assert counts == [a + b for a, b in zip(found, found_glossy, strict=True)]
     assert counts[2] >= 1 and counts[1] == 0
@@ -536,8 +536,48 @@ def test_firefly_spreading_keeps_a_glossy_firefly_in_its_3x3(seed: int) -> None:
         near[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2] = True
     assert changed[5, 5] and not np.any(changed & ~near)
     assert np.any(changed[4:7, 4:7] & (got[2, 0, 4:7, 4:7] > current[2, 0, 4:7, 4:7]))
-    np.testing.assert_allclose(got[2].astype(np.float64).sum(),
-                               current[2].astype(np.float64).sum(), rtol=1e-5)
+    # No pixel gains more than the bounded fireflies beside it keep (the cap), so nothing
+    # is created: the signal's light can only fall.
+    gain = ref.luminance(got, REC709)[2] - lum[2]
+    assert gain[~lowered].max() <= after[2][lowered].max() * (1 + 1e-5)
+    assert got[2].astype(np.float64).sum() <= current[2].astype(np.float64).sum() * (1 + 1e-6)
+
+
+@pytest.mark.parametrize("capped", [False, True])
+def test_a_capped_share_gives_no_pixel_more_than_the_firefly_keeps(capped: bool) -> None:
+    """One glossy firefly 400 times its surroundings over a flat surface: uncapped, its
+    excess is shared equally over its 3x3 (energy kept); capped, every receiver gains
+    exactly the firefly's bound (the excess is larger than 9 times it) and the rest is
+    dropped."""
+    height, width = 9, 11
+    current = np.full((1, 3, height, width), 0.5, F32)
+    current[0, :, 4, 5] = 200.0
+    moments = np.empty((1, 2, height, width), F32)
+    moments[:, 0] = 0.5
+    moments[:, 1] = 0.25 * 1.01
+    depth = np.full((height, width), 2.0, F32)
+    radiance_mode = np.zeros((1, height, width), dtype=bool)
+    got = current.copy()
+    counts = spread_fireflies(got, [np.full((3, height, width), 0.5, F32)], (False,),
+                              moments, mode_mask(radiance_mode), depth, (GLOSSY_RADIUS,), 10.0,
+                              REC709, np.empty(depth.shape, F32), capped=(capped,))
+    want, found = ref.spread_fireflies(current, radiance_mode, moments, depth, [True], 10.0,
+                                       radius=1, cap=capped)
+    _close(got, want, 2e-6, "firefly spreading, capped" if capped else "firefly spreading")
+    assert counts == found == [1]
+    bound = 4.0 * 0.5  # 4x the second-brightest neighbour (above m1 + 10 sigma = 1.0)
+    gain = (want[0] - current[0])[0]
+    outside = np.ones((height, width), dtype=bool)
+    outside[3:6, 4:7] = False
+    assert np.all(gain[outside] == 0.0)
+    if capped:
+        others = ~outside
+        others[4, 5] = False
+        np.testing.assert_allclose(gain[others], bound, rtol=1e-9)
+        np.testing.assert_allclose(want[0, 0, 4, 5], 2 * bound, rtol=1e-9)
+    else:
+        np.testing.assert_allclose(want.sum(), current.astype(np.float64).sum(), rtol=1e-9)
+        np.testing.assert_allclose(gain[3:6, 4:7][0, 0], (200.0 - bound) / 9, rtol=1e-9)
 
 
 def test_firefly_spreading_keeps_to_its_colour_under_the_g_buffer_albedo() -> None:

@@ -25,11 +25,14 @@ signal demodulated by the G-buffer albedo also ``|a(q) - a(p)| <= ALBEDO_TOLERAN
 signal's demodulated light over the image is unchanged; only where it sits moves by a few
 pixels, which the converged image also spreads it over.
 
-A glossy signal's firefly is shared over its 3x3 alone (``GLOSSY_RADIUS``, when asked): there
-a lone bright sample is most often a rare hit of a small highlight or of its glow (a light
-seen in a polished or refracting surface, which one sample in a few dozen finds), whose
-converged image is a few pixels wide; the 9x9 would smear it into a square, and left alone
-its energy is dropped by the glossy history clamp, whose 3x3 rarely holds another hit.
+A glossy signal's firefly is shared over its 3x3 alone (``GLOSSY_RADIUS``, when asked), and
+no receiver gains more than the firefly keeps, ``L(p)`` in luminance (the rest of the excess
+is dropped): there a lone bright sample is most often a rare hit of a small highlight or of
+its glow (a light seen in a polished or refracting surface, which one sample in a few dozen
+finds), whose converged image is a few pixels wide; the 9x9 would smear it into a square,
+and left alone its energy is dropped by the glossy history clamp, whose 3x3 rarely holds
+another hit. The cap keeps a genuine firefly (a rare path whose light belongs far wider) or
+a thin object's highlight from becoming a bright 3x3 block.
 """
 
 from __future__ import annotations
@@ -148,9 +151,10 @@ def _share(
     keep: np.ndarray,
     flagged: np.ndarray,
     radius: np.int64,
+    capped: bool,
 ) -> int:
     """One signal: bound every firefly, then share each one's excess over its
-    ``(2 radius + 1)^2`` window.
+    ``(2 radius + 1)^2`` window (``capped``: at most the firefly's bound to each receiver).
     Serial, in row order (fireflies are rare), so the sums are the same on every run; every
     excess is taken before any is shared, so the result does not depend on that order."""
     height, width = depth.shape
@@ -160,6 +164,8 @@ def _share(
     ys = np.empty(total, dtype=np.int64)
     xs = np.empty(total, dtype=np.int64)
     excess = np.empty((total, 3), dtype=F32)
+    kept_luminance = np.empty(total, dtype=F32)
+    wr, wg, wb = luminance_weights
     i = 0
     for y in range(height):
         if flagged[y] == 0:
@@ -173,8 +179,9 @@ def _share(
                     kept = value * keep[y, x]
                     excess[i, c] = value - kept
                     illumination[c, y, x] = kept
+                kept_luminance[i] = (wr * illumination[0, y, x] + wg * illumination[1, y, x]
+                                     + wb * illumination[2, y, x])
                 i += 1
-    wr, wg, wb = luminance_weights
     for i in range(total):
         y, x = ys[i], xs[i]
         z = depth[y, x]
@@ -188,6 +195,11 @@ def _share(
                 if _receives(depth[yy, xx], z, mode[yy, xx], bit, aq, a, albedo_tolerance):
                     receivers += 1
         share = _ONE / F32(receivers)  # p itself always receives
+        if capped:  # each receiver gains at most the firefly's own bound
+            lost = wr * excess[i, 0] + wg * excess[i, 1] + wb * excess[i, 2]
+            most = max(kept_luminance[i], _ZERO) * F32(receivers)
+            if lost > most:
+                share *= most / lost
         for yy in range(y0, y1):
             for xx in range(x0, x1):
                 aq = wr * albedo[0, yy, xx] + wg * albedo[1, yy, xx] + wb * albedo[2, yy, xx]
@@ -208,6 +220,7 @@ def spread_fireflies(
     k: float,
     luminance_weights: tuple[np.float32, np.float32, np.float32],
     keep: np.ndarray,
+    capped: tuple[bool, ...] = (),
 ) -> list[int]:
     """In place on the current samples ``illumination`` (S, 3, H, W): per signal ``s`` with
     ``radii[s] > 0``, bound each firefly to ``L(p)`` and share its excess over the
@@ -215,8 +228,9 @@ def spread_fireflies(
     (S, 2, H, W) are the reprojected history's, ``albedo`` the signals' demodulation
     colours (3, H, W) each and ``guide`` whether each is the G-buffer albedo
     (``Signal.guide_albedo``), ``mode`` the (H, W) uint16 modes (bit ``s`` set: radiance).
-    ``keep`` is an (H, W) float32 scratch plane. Returns the number of fireflies per
-    signal."""
+    ``keep`` is an (H, W) float32 scratch plane. A signal with ``capped[s]`` gives each
+    receiver at most the firefly's bound ``L(p)`` (luminance) and drops the rest. Returns
+    the number of fireflies per signal."""
     height = depth.shape[0]
     flagged = np.zeros(height, dtype=np.int64)
     counts = []
@@ -229,5 +243,6 @@ def spread_fireflies(
                 luminance_weights, keep, flagged)
         tolerance = ALBEDO_TOLERANCE if guide[s] else ANY_COLOUR
         counts.append(int(_share(illumination[s], albedo[s], tolerance, luminance_weights,
-                                 mode, depth, bit, keep, flagged, np.int64(radius))))
+                                 mode, depth, bit, keep, flagged, np.int64(radius),
+                                 bool(capped) and capped[s])))
     return counts

@@ -160,8 +160,7 @@ class SVGFParams:
     # Variance estimation (paper section 4.2).
     variance_history_threshold: int = _p(
         4, "Below this history length the variance is estimated spatially (7x7 bilateral).",
-        group="variance", valid=Range(0),
-    )
+        group="variance", valid=Range(0))
     spatial_variance_radius: int = _p(3, "Radius of the spatial variance estimate (3 = 7x7).",
                                       group="variance", valid=Range(0))
     spatial_variance_sigma_luminance: float = _p(
@@ -251,7 +250,8 @@ class SVGFParams:
         group="glossy")
     glossy_spread_fireflies: bool = _p(
         False, "With spread_fireflies, also spread a glossy signal's fireflies, over their 3x3"
-        " (rare hits of a highlight or its glow, kept where they are).", group="glossy")
+        " and at most their bound to each pixel (rare hits of a highlight or its glow).",
+        group="glossy")
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
         5,

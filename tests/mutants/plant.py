@@ -405,6 +405,14 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "fireflies-glossy-uncapped", "filters",
+        "a glossy firefly's share is not capped at its bound (a hit becomes a bright block)",
+        "svgf_cli/filters/fireflies.py",
+        (("        if capped:  # each receiver gains at most the firefly's own bound",
+          "        if False:  # each receiver gains at most the firefly's own bound"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "fireflies-glossy-left-alone", "filters",
         "glossy_spread_fireflies is ignored: a glossy signal's fireflies are never spread",
         "svgf_cli/filters/stages/spread_fireflies.py",

@@ -10,7 +10,8 @@ from svgf_cli.filters.params import SVGFParams
 class SpreadFireflies(StageBase):
     """The current samples that are fireflies against the history anti-lag left, bounded
     and their excess shared over their surface (``filters.fireflies``): in the 9x9, a
-    glossy signal's in its 3x3 (``glossy_spread_fireflies``; else left alone). Not on a
+    glossy signal's in its 3x3, at most the firefly's bound to each pixel
+    (``glossy_spread_fireflies``; else left alone). Not on a
     frame without history: a single frame cannot tell a small highlight in a combined
     colour from a firefly. Counted per signal."""
 
@@ -34,7 +35,7 @@ class SpreadFireflies(StageBase):
             temporal.mode, temporal.depth,
             tuple(glossy_radius if g else RADIUS for g in glossy),
             ctx.params.spread_fireflies, temporal.luminance_weights,
-            ctx.work["despike_luminance"])
+            ctx.work["despike_luminance"], capped=tuple(glossy))
         ctx.counts.update({f"fireflies_spread.{name}": count
                            for name, count in zip(temporal.names, spread, strict=True)})
         return True
