@@ -586,9 +586,10 @@ def spread_fireflies(current: np.ndarray, radiance_mode: np.ndarray, moments: np
 def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.ndarray,
                   current: np.ndarray, depth: np.ndarray, k: float,
                   weights: tuple[float, float, float],
-                  radius: int | list[int] = 1) -> tuple[np.ndarray, np.ndarray]:
+                  radius: int | list = 1) -> tuple[np.ndarray, np.ndarray]:
     """Clamp each history channel to the current 3x3 (the ``(2 radius + 1)^2`` window, one
-    radius per signal or one for all; in-image surface pixels, centre included)
+    radius per signal or one for all, a signal's radius an int or an (H, W) array of them:
+    one per pixel; in-image surface pixels, centre included)
     ``mean +- k sigma``; where anything changed, scale the moments with the
     history luminance ``l -> l'``: ``m1 l'/l``, ``min(m2 (l'/l)^2, 1e36)`` (``l'``,
     ``l'^2`` where ``l <= 0`` or ``l' > 1e6 l``). A signal's pixels without history (its
@@ -608,7 +609,7 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
             for s in range(num_signals):
                 if h[s, y, x] <= 0.0:
                     continue
-                r = radii[s]
+                r = radii[s] if isinstance(radii[s], int) else int(radii[s][y, x])
                 window = [(yy, xx) for yy in range(max(y - r, 0), min(y + r + 1, height))
                           for xx in range(max(x - r, 0), min(x + r + 1, width))
                           if z[yy, xx] > 0.0]
@@ -627,6 +628,21 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
                 else:  # from black, or raised more than a millionfold
                     mom[s, :, y, x] = after, after * after
     return hist, mom
+
+
+def heavy_tailed(moments: np.ndarray, length: np.ndarray, depth: np.ndarray,
+                 mesh_id: np.ndarray, rough_ids: set[int], threshold: float,
+                 min_history: float = 4.0) -> np.ndarray:
+    """(H, W) bool: surface pixels with at least ``min_history`` frames of history whose
+    luminance moments (2, H, W) have ``(m2 - m1^2) / m1^2 > threshold`` (``m1 > 0``), not
+    on an object in ``rough_ids``."""
+    m1 = np.asarray(moments[0], dtype=F64)
+    m2 = np.asarray(moments[1], dtype=F64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = np.where(m1 > 0.0, (m2 - m1 * m1) / (m1 * m1), 0.0)
+    rough = np.isin(mesh_id, sorted(rough_ids))
+    return (np.asarray(depth) > 0) & (np.asarray(length) >= min_history) & (m1 > 0.0) \
+        & (relative > threshold) & ~rough
 
 
 # --------------------------------------------------------------------------- 2 reprojection

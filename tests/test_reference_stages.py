@@ -25,7 +25,7 @@ import reference_svgf as ref
 from moving_scene import ACESCG_LUMINANCE, plant_extremes, scene_frame
 
 from svgf_cli.filters import values
-from svgf_cli.filters.clamp import BAND_ROWS, firefly_clamp, history_clamp
+from svgf_cli.filters.clamp import BAND_ROWS, firefly_clamp, heavy_tailed, history_clamp
 from svgf_cli.filters.denoiser import MAX_REFLECTANCE, RELATIVE_ALBEDO_FLOOR
 from svgf_cli.filters.despike import despike, despike_lone
 from svgf_cli.filters.edges import normal_squarings
@@ -644,6 +644,65 @@ def test_history_clamp_matches_reference() -> None:
         untouched = (length[s] <= 0) | (depth <= 0)
         assert untouched.any() and np.all(want[s][:, untouched] == history[s][:, untouched])
     assert np.any((length[0] <= 0) & (length[1] > 0) & np.any(want[1] != history[1], axis=0))
+
+
+def test_heavy_tailed_pixels_match_reference() -> None:
+    """``heavy_tailed`` against the float64 reference: relative variance above the
+    threshold, history long enough, a surface, and not on a rough object; the count
+    returned is the plane's."""
+    rng = np.random.default_rng(11)
+    height, width = 23, 31
+    m1 = rng.uniform(0.0, 2.0, (height, width)).astype(F32)
+    m1[rng.random((height, width)) < 0.1] = 0.0  # black histories are never heavy-tailed
+    relative = rng.choice([0.0, 0.5, 1.5, 2.5, 9.0], size=(height, width))
+    moments = np.stack([m1, m1 * m1 * (1.0 + relative)]).astype(F32)
+    length = rng.choice([0.0, 1.0, 3.0, 4.0, 12.0], size=(height, width)).astype(F32)
+    depth = np.where(rng.random((height, width)) < 0.1, 0.0, 1.0).astype(F32)
+    mesh = rng.integers(3, 9, size=(height, width)).astype(np.int32)
+    table = np.zeros(6, np.uint8)
+    table[[1, 4]] = 1  # objects 4 and 7 are rough
+    got = np.empty((height, width), dtype=np.bool_)
+    count = heavy_tailed(moments, length, depth, mesh, 3, table, F32(2.0), got)
+    want = ref.heavy_tailed(moments, length, depth, mesh, {4, 7}, 2.0)
+    assert np.array_equal(got, want) and count == int(want.sum()) > 20
+    assert not np.any(got & np.isin(mesh, [4, 7]))
+    assert np.any(ref.heavy_tailed(moments, length, depth, mesh, set(), 2.0) & (mesh == 4))
+    # No rough table (ids outside it, or none found): every object counts.
+    count = heavy_tailed(moments, length, depth, mesh, 0, np.zeros(0, np.uint8), F32(2.0), got)
+    assert np.array_equal(got, ref.heavy_tailed(moments, length, depth, mesh, set(), 2.0))
+
+
+def test_history_clamp_heavy_tailed_pixels_take_the_wide_window() -> None:
+    """A 3x3 signal's pixels in ``wide_where`` are clamped over the wider window, as if the
+    3x3 pass had not touched them; every other pixel of it and the other signal get what a
+    call without ``wide_where`` gives (float64 reference with a radius per pixel)."""
+    current, depth = _spiky_illumination(2, height=BAND_ROWS + 9, width=14)
+    rng = np.random.default_rng(7)
+    history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
+    length = rng.choice([0.0, 1.0, 4.0], size=(2, *depth.shape)).astype(F32)
+    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
+    lum = np.einsum("c,scyx->syx", np.array(weights, dtype=np.float64), history)
+    moments = np.stack([lum, lum * lum * 1.5], axis=1).astype(F32)
+    wide = rng.random(depth.shape) < 0.3
+    got, got_moments = history.copy(), moments.copy()
+    history_clamp(got, got_moments, length, current, depth, F32(1.0), weights, [1, 1],
+                  [None, wide], 3)
+    want, want_moments = ref.history_clamp(history, moments, length, current, depth, 1.0,
+                                           weights, [1, np.where(wide, 3, 1)])
+    _close(got, want, 2e-5, "history clamp, wide where heavy-tailed")
+    _close(got_moments, want_moments, 5e-5, "history clamp moments, wide where heavy-tailed")
+    plain, plain_moments = history.copy(), moments.copy()
+    history_clamp(plain, plain_moments, length, current, depth, F32(1.0), weights, [1, 1])
+    assert np.array_equal(got[0], plain[0]) and np.array_equal(got[1][:, ~wide],
+                                                                plain[1][:, ~wide])
+    assert np.array_equal(got_moments[1][:, ~wide], plain_moments[1][:, ~wide])
+    assert np.sum(np.any(got[1] != plain[1], axis=0) & wide) > 20  # the window counts
+    # A radius of 1 (small images) or no plane: the call without it, bit for bit.
+    for args in (([None, wide], 1), ([None, None], 3)):
+        same, same_moments = history.copy(), moments.copy()
+        history_clamp(same, same_moments, length, current, depth, F32(1.0), weights, [1, 1],
+                      *args)
+        assert np.array_equal(same, plain) and np.array_equal(same_moments, plain_moments)
 
 
 @pytest.mark.parametrize("radii", [[2, 2], [1, 3], [3, 1]])

@@ -6,7 +6,9 @@
 * :func:`history_clamp` (against ghosting): the reprojected history colour is clamped per
   channel to the current frame's 3x3 (or wider: ``radius``) mean +- ``k`` sigma, so stale
   history that no longer matches the neighbourhood (moving shadows, lights switching) is
-  pulled back; its luminance moments are scaled with it.
+  pulled back; its luminance moments are scaled with it. A glossy signal's pixels whose
+  history is heavy-tailed (:func:`heavy_tailed`) can take a wider window than the rest of
+  the signal (``wide_where``).
 
 Neighbour statistics use only in-image, non-background pixels.
 """
@@ -28,6 +30,10 @@ _ONE = F32(1.0)
 # largest second moment it leaves (finite whatever spread a firefly left in the history).
 MAX_RAISE = F32(1e6)
 MAX_SECOND_MOMENT = F32(1e36)
+# From this many frames of history on, a pixel's luminance moments are taken as a sample of
+# its light's tail (:func:`heavy_tailed`).
+HEAVY_TAIL_MIN_HISTORY = F32(4.0)
+_NO_MASK = np.zeros((1, 1), dtype=np.bool_)
 
 
 @njit(
@@ -125,6 +131,8 @@ def history_clamp(
     k: float | Sequence[float],
     luminance_weights: tuple[np.float32, np.float32, np.float32],
     radius: int | Sequence[int] = 1,
+    wide_where: Sequence[np.ndarray | None] | None = None,
+    wide_radius: int = 1,
 ) -> None:
     """In place: clamp each history channel to the current 3x3 mean +- k*sigma (the
     ``(2 radius + 1)^2`` window's: one radius for all signals or one per signal), and let the
@@ -142,7 +150,9 @@ def history_clamp(
 
     ``k`` is one for all signals or one per signal; a signal with ``k <= 0`` is not clamped.
     The 3x3 signals in one parallel pass (the background count is shared); each wider one in
-    a pass of its own (:func:`_clamp_wide_rows`).
+    a pass of its own (:func:`_clamp_wide_rows`). ``wide_where``: per signal None or an
+    (H, W) bool plane where that 3x3 signal takes the ``(2 wide_radius + 1)^2`` window
+    instead (its history there clamped as if the 3x3 pass had not run).
     """
     num_signals = history.shape[0]
     ks = np.ascontiguousarray(np.broadcast_to(np.asarray(k, dtype=F32), (num_signals,)))
@@ -152,12 +162,22 @@ def history_clamp(
     wide = [s for s in range(num_signals) if radii[s] > 1 and ks[s] > 0]
     narrow = ks.copy()
     narrow[wide] = _ZERO  # clamped by _clamp_wide_rows below
+    # The 3x3 signals' pixels that take the wider window: kept as they are through the 3x3
+    # pass, put back, then clamped over the wider window alone.
+    held = [(s, mask, history[s][:, mask], history_moments[s][:, mask])
+            for s, mask in enumerate(wide_where or ())
+            if mask is not None and wide_radius > 1 and narrow[s] > _ZERO and mask.any()]
     if narrow.max() > _ZERO:  # a signal left for the 3x3 pass (none when all are wider)
         _history_clamp_rows(history, history_moments, history_length, current, depth, narrow,
                             luminance_weights)
     for s in wide:  # a wider window: one signal at a time, in bands of rows
         _clamp_wide_rows(history[s], history_moments[s], history_length[s], current[s], depth,
-                         ks[s], int(radii[s]), luminance_weights)
+                         ks[s], int(radii[s]), luminance_weights, _NO_MASK, False)
+    for s, mask, kept, kept_moments in held:
+        history[s][:, mask] = kept
+        history_moments[s][:, mask] = kept_moments
+        _clamp_wide_rows(history[s], history_moments[s], history_length[s], current[s], depth,
+                         ks[s], int(wide_radius), luminance_weights, mask, True)
 
 
 @njit(
@@ -229,6 +249,37 @@ def _history_clamp_rows(
                     _follow_luminance(m1, m2, x, before[x], wr * hr[x] + wg * hg[x] + wb * hb[x])
 
 
+@njit(parallel=True, fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def heavy_tailed(moments: np.ndarray, length: np.ndarray, depth: np.ndarray,
+                 mesh_id: np.ndarray, rough_low: int, rough_table: np.ndarray,
+                 threshold: np.float32, out: np.ndarray) -> int:
+    """``out`` (H, W) bool: the surface pixels with at least :data:`HEAVY_TAIL_MIN_HISTORY`
+    frames of history whose luminance moments ``m1, m2`` (2, H, W) have a relative variance
+    ``(m2 - m1^2) / m1^2`` above ``threshold`` (``m1 > 0``), except on the objects marked in
+    ``rough_table`` (uint8, object ``mesh_id - rough_low``). Returns how many.
+
+    A light made of rare bright samples (a small light's reflection, a refraction, a
+    caustic) has a large relative variance; exponential noise has 1."""
+    height, width = depth.shape
+    entries = rough_table.size
+    counts = np.zeros(height, dtype=np.int64)
+    for y in prange(height):
+        m1, m2, h, z = moments[0, y], moments[1, y], length[y], depth[y]
+        ids, row = mesh_id[y], out[y]
+        for x in range(width):
+            mean = m1[x]
+            heavy = (z[x] > _ZERO and h[x] >= HEAVY_TAIL_MIN_HISTORY and mean > _ZERO
+                     and m2[x] - mean * mean > threshold * (mean * mean))
+            if heavy:
+                k = np.int64(ids[x]) - rough_low
+                if k >= 0 and k < entries and rough_table[k] > 0:
+                    heavy = False
+            row[x] = heavy
+            counts[y] += 1 if heavy else 0
+    return int(counts.sum())
+
+
 # Rows per band of the wider windows' kernel: fixed, so that the sums (and so the outputs)
 # do not depend on the number of threads.
 BAND_ROWS = 32
@@ -238,11 +289,13 @@ BAND_ROWS = 32
       error_model="numpy")
 def _clamp_wide_rows(history: np.ndarray, moments: np.ndarray, length: np.ndarray,
                      current: np.ndarray, depth: np.ndarray, k: np.float32, radius: int,
-                     luminance_weights: tuple[np.float32, np.float32, np.float32]) -> None:
+                     luminance_weights: tuple[np.float32, np.float32, np.float32],
+                     only: np.ndarray, masked: bool) -> None:
     """One signal's history (3, H, W) clamped per channel to the mean +- ``k`` sigma of the
     current values (3, H, W) over the surface pixels of the (2 radius + 1)^2 window, its
     moments (2, H, W) following (:func:`_follow_luminance`); where it has a history and a
-    surface. In bands of :data:`BAND_ROWS` rows, one job each: the window's column sums
+    surface (and, when ``masked``, where ``only`` (H, W) bool is set). In bands of
+    :data:`BAND_ROWS` rows, one job each: the window's column sums
     (float64: count, values, squares) slide down the band, a row entering and one leaving,
     and each row's window sums run along it."""
     height, width = depth.shape
@@ -265,7 +318,7 @@ def _clamp_wide_rows(history: np.ndarray, moments: np.ndarray, length: np.ndarra
             hr, hg, hb = history[0, y], history[1, y], history[2, y]
             m1, m2 = moments[0, y], moments[1, y]
             for x in range(width):
-                if z[x] <= _ZERO or h[x] <= _ZERO:
+                if z[x] <= _ZERO or h[x] <= _ZERO or (masked and not only[y, x]):
                     continue
                 share = 1.0 / max(window[0, x], 1.0)
                 before = wr * hr[x] + wg * hg[x] + wb * hb[x]

@@ -138,6 +138,8 @@ class FrameContext:
     # Per glossy signal's index, the objects whose reflections are sharp
     # (filters.reflected_albedo.SharpObjects; stages.reflected_albedo); absent: none.
     sharp_objects: dict[int, Any] = field(default_factory=dict)
+    # ... and those whose reflections are rough (the same type); absent: none found.
+    rough_objects: dict[int, Any] = field(default_factory=dict)
     # The pixels given a medium's G-buffer (filters.stages.fill_medium); None: none.
     medium_pixels: np.ndarray | None = None
     # The index of the medium's signal in ``frame.signals`` (fill_medium); None: none.

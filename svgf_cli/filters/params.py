@@ -117,9 +117,7 @@ class SVGFParams:
         " + depth_slack * z).", group="temporal", valid=Range(0))
     depth_slack: float = _p(
         0.002, "Depth-relative slack of the reprojection depth test (scale-free stand-in for"
-        " Falcor's absolute 0.01).",
-        group="temporal", valid=Range(0),
-    )
+        " Falcor's absolute 0.01).", group="temporal", valid=Range(0))
     normal_tolerance: float = _p(
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient"
         " + 0.01).", group="temporal", valid=Range(0))
@@ -228,13 +226,10 @@ class SVGFParams:
         0.0, "sigma_l of glossy signals: reflections carry detail the spatial filter must keep"
         " (0 = the same as sigma_luminance).", group="glossy", valid=Range(0))
     mixed_sigma_luminance: float = _p(
-        0.0,
-        "sigma_l of signals holding direct and indirect light together (a combined colour, one"
-        " lobe's whole light): their variance is the indirect light's, which would blur the"
-        " direct light's detail (0 = the same as sigma_luminance; glossy signals keep"
-        " glossy_sigma_luminance).",
-        group="glossy", valid=Range(0),
-    )
+        0.0, "sigma_l of signals holding direct and indirect light together (a combined colour,"
+        " one lobe's whole light): their variance is the indirect light's (0 = the same as"
+        " sigma_luminance; glossy signals keep glossy_sigma_luminance).",
+        group="glossy", valid=Range(0))
     glossy_emitter_radiance: bool = _p(
         False,
         "Filter a glossy signal as radiance where the G-buffer albedo is no reflectance"
@@ -252,6 +247,10 @@ class SVGFParams:
         False, "With spread_fireflies, also spread a glossy signal's fireflies, over their 3x3"
         " and at most their bound to each pixel (rare hits of a highlight or its glow).",
         group="glossy")
+    glossy_heavy_tail: float = _p(
+        0.0, "A glossy pixel whose history's luminance moments have a relative variance above"
+        " this (light from rare bright samples) takes the history clamp's wider window unless"
+        " its object's reflections are rough (0 = off).", group="glossy", valid=Range(0))
     # A-trous wavelet filter (paper section 4.3).
     atrous_iterations: int = _p(
         5,
@@ -468,6 +467,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("glossy_spread_fireflies", True, "a glossy signal's lone bright sample is a"
                   " rare hit of a highlight or its glow, which the glossy history clamp would"
                   f" drop: {_ALG}#glossy-fireflies"),
+        Departure("glossy_heavy_tail", 2.0, "a heavy-tailed reflection's or refraction's rare"
+                  " bright samples are seldom in this frame's 3x3, so that bound pulls its"
+                  f" history dark: {_ALG}#heavy-tailed-glossy-light"),
         Departure("guide_albedo_floor", 0.1, "glossy light over a dark diffuse base is not"
                   " amplified by dividing by the G-buffer albedo: "
                   f"{_ALG}#1-signals-and-demodulation"),

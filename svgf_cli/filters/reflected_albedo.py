@@ -31,7 +31,9 @@ apart per object from the albedo itself:
 
 The objects found sharp (weight above 0) are handed on (:class:`SharpObjects`): on them a
 reflected light's pair of pixels is a piece of a light's image, elsewhere a rough
-reflection's scattered hits (``modulate.emitter_colour``).
+reflection's scattered hits (``modulate.emitter_colour``). The objects found rough (mean
+agreement below ``ROUGH_AGREEMENT``) are handed on too: their heavy-tailed glossy light
+keeps the history clamp's 3x3 (``filters.clamp.heavy_tailed``).
 """
 
 from __future__ import annotations
@@ -64,6 +66,12 @@ AGREE = 1.25
 # 640x360, 0.865 at 1920x1080; demodulating the glass cost 0.014 JOD at 640x360, so the ramp
 # starts at its agreement there (the mirror ball at 128x72 falls below it).
 RAMP = (0.84, 0.92)
+# An object whose candidates' mean agreement is below this (over at least
+# ROUGH_MIN_CANDIDATES of them) has rough reflections: the rough gold bust of the Cycles
+# renders 0.50-0.73 at every size, the glass 0.81-0.865, the mirror ball 0.82-0.955
+# (above). Its glossy history keeps the 3x3 clamp (filters.clamp.heavy_tailed).
+ROUGH_AGREEMENT = 0.75
+ROUGH_MIN_CANDIDATES = 50
 
 
 @dataclass(frozen=True)
@@ -291,38 +299,54 @@ def reflected_colour(gloss_colour: np.ndarray, floored: np.ndarray, weights: np.
     return np.ascontiguousarray(out, dtype=F32)
 
 
+Found = tuple[np.ndarray, int, SharpObjects]
+
+
 def reflected_albedo(gloss_colour: np.ndarray, albedo: np.ndarray,
                      diffuse_colours: Sequence[np.ndarray], depth: np.ndarray,
-                     mesh_id: np.ndarray) -> tuple[np.ndarray, int, SharpObjects] | None:
+                     mesh_id: np.ndarray) -> Found | None:
     """A glossy signal's demodulation colour with sharp reflections demodulated by the
     albedo they reflect (module docstring), how many pixels changed and the objects whose
     weight is above 0; None where no pixel is a candidate or no object's weight is above
-    0. Without a candidate it costs two passes over the frame; the agreement is computed on
-    the candidates alone and no frame-sized plane is made but the result."""
+    0 (:func:`reflect` with the rough objects too)."""
+    return reflect(gloss_colour, albedo, diffuse_colours, depth, mesh_id)[0]
+
+
+def reflect(gloss_colour: np.ndarray, albedo: np.ndarray,
+            diffuse_colours: Sequence[np.ndarray], depth: np.ndarray, mesh_id: np.ndarray
+            ) -> tuple[Found | None, SharpObjects | None]:
+    """:func:`reflected_albedo`'s result and the objects whose reflections are rough (mean
+    agreement below ``ROUGH_AGREEMENT`` over at least ``ROUGH_MIN_CANDIDATES`` candidates;
+    None without candidates or with ids as hashes). Without a candidate it costs two
+    passes over the frame; the agreement is computed on the candidates alone and no
+    frame-sized plane is made but the result."""
     candidates = reflected_candidates(gloss_colour, albedo, diffuse_colours, depth)
     low_id, high_id = _id_range(candidates, mesh_id)
     if high_id < low_id:
-        return None
+        return None, None
     if high_id - low_id >= _DENSE_IDS:  # ids as hashes (the rare case): sort them
         weights = object_weights(albedo_agreement(gloss_colour, albedo, candidates),
                                  candidates, mesh_id)
         rows, columns = np.nonzero(weights)
         if not rows.size:
-            return None
+            return None, None
         out = np.array(gloss_colour, dtype=F32, copy=True)
         gloss = gloss_colour[:, rows, columns]
         out[:, rows, columns] = reflected_colour(
             gloss, floored_albedo(gloss, albedo[:, rows, columns]), weights[rows, columns])
-        return out, int(rows.size), _sharp_table(np.unique(mesh_id[rows, columns]))
+        return (out, int(rows.size), _sharp_table(np.unique(mesh_id[rows, columns]))), None
     sums = np.zeros(high_id - low_id + 1, dtype=np.float64)
     counts = np.zeros(high_id - low_id + 1, dtype=np.int64)
     _agreement_sums(gloss_colour, albedo, candidates, mesh_id, np.int64(low_id), sums, counts)
-    per_object = _ramp(sums / np.maximum(counts, 1))
+    means = sums / np.maximum(counts, 1)
+    rough = (means < ROUGH_AGREEMENT) & (counts >= ROUGH_MIN_CANDIDATES)
+    rough_objects = SharpObjects(low_id, rough.astype(np.uint8))
+    per_object = _ramp(means)
     if not (per_object > 0).any():
-        return None
+        return None, rough_objects
     out = np.empty_like(gloss_colour, dtype=F32)
     changed = np.zeros(depth.shape[0], dtype=np.int64)
     _reflected_rows(gloss_colour, albedo, candidates, mesh_id, np.int64(low_id), per_object,
                     out, changed)
     sharp = SharpObjects(low_id, (per_object > 0).astype(np.uint8))
-    return out, int(changed.sum()), sharp
+    return (out, int(changed.sum()), sharp), rough_objects

@@ -421,6 +421,22 @@ MUTANTS: tuple[Mutant, ...] = (
         FILTER_TESTS,
     ),
     Mutant(
+        "glossy-heavy-tail-ignored", "filters",
+        "glossy_heavy_tail is ignored: a heavy-tailed glossy history keeps the 3x3 clamp",
+        "svgf_cli/filters/stages/history_clamp.py",
+        (("    if threshold <= 0.0 or radius <= 1 or not any(glossy) or temporal is None:",
+          "    if True:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
+        "glossy-heavy-tail-rough-too", "filters",
+        "rough objects' heavy-tailed glossy histories take the wide clamp window too",
+        "svgf_cli/filters/clamp.py",
+        (("                if k >= 0 and k < entries and rough_table[k] > 0:",
+          "                if k >= 0 and k < entries and rough_table[k] > 1:"),),
+        FILTER_TESTS,
+    ),
+    Mutant(
         "fireflies-cross-depth-edges", "filters",
         "a firefly's excess is shared with pixels of another surface",
         "svgf_cli/filters/fireflies.py",

@@ -6,7 +6,7 @@ import dataclasses
 
 from svgf_cli.filters.context import FrameContext, StageBase
 from svgf_cli.filters.params import SVGFParams
-from svgf_cli.filters.reflected_albedo import reflected_albedo
+from svgf_cli.filters.reflected_albedo import reflect
 
 
 class ReflectedAlbedo(StageBase):
@@ -15,11 +15,12 @@ class ReflectedAlbedo(StageBase):
     the two by how sharp (``filters.reflected_albedo``); demodulation and remodulation both
     read the new colour. New arrays (the caller's planes are never modified);
     ``counts["reflected_albedo.<signal>"]`` gets the pixels changed, ``ctx.sharp_objects``
-    the objects found sharp per signal (for ``reflected_lights``, after it)."""
+    the objects found sharp per signal (for ``reflected_lights``, after it) and
+    ``ctx.rough_objects`` those found rough (for ``history_clamp``)."""
 
     name = "reflected_albedo"
     reads = ("frame.signals", "frame.albedo", "frame.mesh_id", "depth")
-    writes = ("frame.signals", "sharp_objects")
+    writes = ("frame.signals", "sharp_objects", "rough_objects")
     clock = "demodulate"
 
     def enabled(self, params: SVGFParams) -> bool:
@@ -34,8 +35,10 @@ class ReflectedAlbedo(StageBase):
         signals = list(frame.signals)
         for index in glossy:
             signal = signals[index]
-            found = reflected_albedo(signal.albedo, frame.albedo, diffuse, ctx.depth,
-                                     frame.mesh_id)
+            found, rough = reflect(signal.albedo, frame.albedo, diffuse, ctx.depth,
+                                   frame.mesh_id)
+            if rough is not None:
+                ctx.rough_objects[index] = rough
             if found is not None:
                 signals[index] = dataclasses.replace(signal, albedo=found[0])
                 ctx.counts[f"reflected_albedo.{signal.name}"] = found[1]
