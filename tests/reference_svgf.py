@@ -632,7 +632,7 @@ def history_clamp(history: np.ndarray, moments: np.ndarray, history_length: np.n
 
 def heavy_tailed(moments: np.ndarray, length: np.ndarray, depth: np.ndarray,
                  mesh_id: np.ndarray, rough_ids: set[int], threshold: float,
-                 min_history: float = 4.0) -> np.ndarray:
+                 min_history: float = 1.0) -> np.ndarray:
     """(H, W) bool: surface pixels with at least ``min_history`` frames of history whose
     luminance moments (2, H, W) have ``(m2 - m1^2) / m1^2 > threshold`` (``m1 > 0``), not
     on an object in ``rough_ids``."""

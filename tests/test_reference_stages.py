@@ -656,7 +656,7 @@ def test_heavy_tailed_pixels_match_reference() -> None:
     m1[rng.random((height, width)) < 0.1] = 0.0  # black histories are never heavy-tailed
     relative = rng.choice([0.0, 0.5, 1.5, 2.5, 9.0], size=(height, width))
     moments = np.stack([m1, m1 * m1 * (1.0 + relative)]).astype(F32)
-    length = rng.choice([0.0, 1.0, 3.0, 4.0, 12.0], size=(height, width)).astype(F32)
+    length = rng.choice([0.0, 0.5, 1.0, 3.0, 12.0], size=(height, width)).astype(F32)
     depth = np.where(rng.random((height, width)) < 0.1, 0.0, 1.0).astype(F32)
     mesh = rng.integers(3, 9, size=(height, width)).astype(np.int32)
     table = np.zeros(6, np.uint8)

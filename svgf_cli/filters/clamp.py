@@ -31,8 +31,9 @@ _ONE = F32(1.0)
 MAX_RAISE = F32(1e6)
 MAX_SECOND_MOMENT = F32(1e36)
 # From this many frames of history on, a pixel's luminance moments are taken as a sample of
-# its light's tail (:func:`heavy_tailed`).
-HEAVY_TAIL_MIN_HISTORY = F32(4.0)
+# its light's tail (:func:`heavy_tailed`): one frame before this one already shows it
+# (docs/algorithm.md#heavy-tailed-glossy-light: 1 measured better than 2, 3 and 4).
+HEAVY_TAIL_MIN_HISTORY = F32(1.0)
 _NO_MASK = np.zeros((1, 1), dtype=np.bool_)
 
 
