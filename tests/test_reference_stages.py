@@ -646,6 +646,22 @@ def test_history_clamp_matches_reference() -> None:
     assert np.any((length[0] <= 0) & (length[1] > 0) & np.any(want[1] != history[1], axis=0))
 
 
+CLAMP_WEIGHTS = (F32(0.2126), F32(0.7152), F32(0.0722))
+
+
+def _clamp_case(height: int, width: int, seed: int) -> tuple:
+    """Two signals' spiky current values and depth, a history 0.2-3x them, history lengths
+    0, 1 or 4 and moments from the history's luminance (relative spread 0.5); and the
+    generator, for more."""
+    current, depth = _spiky_illumination(2, height=height, width=width)
+    rng = np.random.default_rng(seed)
+    history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
+    length = rng.choice([0.0, 1.0, 4.0], size=(2, *depth.shape)).astype(F32)
+    lum = np.einsum("c,scyx->syx", np.array(CLAMP_WEIGHTS, dtype=np.float64), history)
+    moments = np.stack([lum, lum * lum * 1.5], axis=1).astype(F32)
+    return current, depth, history, length, moments, rng
+
+
 def test_heavy_tailed_pixels_match_reference() -> None:
     """``heavy_tailed`` against the float64 reference: relative variance above the
     threshold, history long enough, a surface, and not on a rough object; the count
@@ -676,13 +692,8 @@ def test_history_clamp_heavy_tailed_pixels_take_the_wide_window() -> None:
     """A 3x3 signal's pixels in ``wide_where`` are clamped over the wider window, as if the
     3x3 pass had not touched them; every other pixel of it and the other signal get what a
     call without ``wide_where`` gives (float64 reference with a radius per pixel)."""
-    current, depth = _spiky_illumination(2, height=BAND_ROWS + 9, width=14)
-    rng = np.random.default_rng(7)
-    history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
-    length = rng.choice([0.0, 1.0, 4.0], size=(2, *depth.shape)).astype(F32)
-    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
-    lum = np.einsum("c,scyx->syx", np.array(weights, dtype=np.float64), history)
-    moments = np.stack([lum, lum * lum * 1.5], axis=1).astype(F32)
+    current, depth, history, length, moments, rng = _clamp_case(BAND_ROWS + 9, 14, seed=7)
+    weights = CLAMP_WEIGHTS
     wide = rng.random(depth.shape) < 0.3
     got, got_moments = history.copy(), moments.copy()
     history_clamp(got, got_moments, length, current, depth, F32(1.0), weights, [1, 1],
@@ -710,14 +721,9 @@ def test_history_clamp_wider_windows_match_reference(radii: list[int]) -> None:
     """A wider window per signal (``radius``), each against the float64 reference, over
     more rows than a band of the wider windows' kernel (``clamp.BAND_ROWS``); the 3x3
     signal of a mixed call gets exactly what a 3x3 call alone gives it."""
-    current, depth = _spiky_illumination(2, height=2 * BAND_ROWS + 7, width=12)
+    current, depth, history, length, moments, _ = _clamp_case(2 * BAND_ROWS + 7, 12, seed=5)
     depth[BAND_ROWS - 1:BAND_ROWS + 2, 3:6] = 0.0  # background across a band's edge
-    rng = np.random.default_rng(5)
-    history = (current * rng.uniform(0.2, 3.0, current.shape)).astype(F32)
-    length = rng.choice([0.0, 1.0, 4.0], size=(2, *depth.shape)).astype(F32)
-    weights = (F32(0.2126), F32(0.7152), F32(0.0722))
-    lum = np.einsum("c,scyx->syx", np.array(weights, dtype=np.float64), history)
-    moments = np.stack([lum, lum * lum * 1.5], axis=1).astype(F32)
+    weights = CLAMP_WEIGHTS
     got, got_moments = history.copy(), moments.copy()
     history_clamp(got, got_moments, length, current, depth, F32(1.0), weights, radii)
     want, want_moments = ref.history_clamp(history, moments, length, current, depth, 1.0,

@@ -76,14 +76,14 @@ ROUGH_MIN_CANDIDATES = 50
 
 @dataclass(frozen=True)
 class SharpObjects:
-    """The objects whose reflections are sharp, by id: ``table[id - low_id] > 0`` (uint8;
-    ids outside the table are not)."""
+    """A set of objects by id, ``table[id - low_id] > 0`` (uint8; ids outside the table are
+    not in it): those whose reflections are sharp, or (:func:`reflect`) rough."""
 
     low_id: int
     table: np.ndarray
 
     def holds(self, ids: np.ndarray) -> np.ndarray:
-        """Bool per id (any shape): whether that object is sharp."""
+        """Bool per id (any shape): whether that object is in the set."""
         k = np.asarray(ids, dtype=np.int64) - self.low_id
         inside = (k >= 0) & (k < self.table.size)
         return inside & (self.table[np.where(inside, k, 0)] > 0) if self.table.size else inside

@@ -424,7 +424,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "glossy-heavy-tail-ignored", "filters",
         "glossy_heavy_tail is ignored: a heavy-tailed glossy history keeps the 3x3 clamp",
         "svgf_cli/filters/stages/history_clamp.py",
-        (("    if threshold <= 0.0 or radius <= 1 or not any(glossy) or temporal is None:",
+        (("    if threshold <= 0.0 or radius <= 1 or not own_k or not any(glossy) or temporal"
+          " is None:",
           "    if True:"),),
         FILTER_TESTS,
     ),

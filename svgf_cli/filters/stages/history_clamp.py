@@ -29,13 +29,16 @@ def clamp_radii(params: SVGFParams, glossy: tuple[bool, ...], height: int, width
 
 def heavy_tail_masks(ctx: FrameContext, glossy: tuple[bool, ...], radius: int
                      ) -> list[np.ndarray | None] | None:
-    """Per signal, None or (glossy signals, with ``glossy_heavy_tail`` on and a window wider
-    than the 3x3 at this image size) where its history is heavy-tailed and its object not
+    """Per signal, None or (glossy signals clamped over the 3x3 by their own k, with
+    ``glossy_heavy_tail`` on and a window wider than the 3x3 at this image size) where its
+    history is heavy-tailed and its object not
     rough (``filters.clamp.heavy_tailed``; ``ctx.rough_objects``): there the glossy history
     takes the wider window. Counted as ``counts["heavy_tail.<signal>"]``."""
     threshold = ctx.params.glossy_heavy_tail
     temporal = ctx.temporal
-    if threshold <= 0.0 or radius <= 1 or not any(glossy) or temporal is None:
+    # Without their own k, glossy signals take the wider window everywhere (clamp_radii).
+    own_k = ctx.params.glossy_history_clamp > 0.0
+    if threshold <= 0.0 or radius <= 1 or not own_k or not any(glossy) or temporal is None:
         return None
     masks: list[np.ndarray | None] = []
     for index, is_glossy in enumerate(glossy):
