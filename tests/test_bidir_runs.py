@@ -294,8 +294,10 @@ def test_svgf_plan_sees_bidirectional_among_the_denoise_arguments(
     code, stdout, _ = run_cli([*plan, "--set", "warm_start=0"], capsys)
     assert [c["read"] for c in json.loads(stdout)] == [[1, 4], [3, 8], [7, 10]]
     # The default preset's warm start: each chunk's first output has 2 frames of warm-up,
-    # fewer than 4, so each chunk looks ahead 8 frames from its start.
+    # fewer than 8, so each chunk looks ahead 16 frames from its start (to the last frame).
     code, stdout, _ = run_cli(plan, capsys)
+    assert [c["read"] for c in json.loads(stdout)] == [[1, 12], [3, 12], [7, 12]]
+    code, stdout, _ = run_cli([*plan, "--warm-start", "4"], capsys)
     assert [c["read"] for c in json.loads(stdout)] == [[1, 8], [3, 10], [7, 12]]
     assert exit_code(plan[:7] + ["--last-frame", "9", "--", "i.####.exr", "-o", "o"]) == 2
 

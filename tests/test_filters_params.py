@@ -91,7 +91,7 @@ PINNED: dict[str, dict[str, object]] = {
         "history_clamp_radius": -1, "despike": 2.0,
         "pixel_filter": -1.0, "edge_filter": -1.0, "taa": False,
         "taa_jittered": True, "taa_alpha": 0.65, "still_emission_mean": True,
-        "warm_start": 4,
+        "warm_start": 8,
         "medium_fill_radius": 4,
         "medium_coverage_radius": -1,
         "samples_per_pixel": -1,

@@ -169,7 +169,7 @@ def test_svgf_plan_reads_the_look_ahead_of_the_preset_or_the_option(
                           "--", "in.####.exr", "-o", "o.####.exr", *denoise_args]) == 0
         return [c["read"] for c in json.loads(capsys.readouterr().out)]
 
-    assert reads()[0] == [1, 8]  # the default preset's 4: frames 1-4 look ahead to 8
+    assert reads()[0] == [1, 16]  # the default preset's 8: frames 1-8 look ahead to 16
     assert reads("--preset", "paper")[0] == [1, 5]
     assert reads("--preset=paper", "--warm-start", "6")[0] == [1, 12]
     assert reads("--set", "warm_start=0")[0] == [1, 5]

@@ -136,7 +136,7 @@ class SVGFParams:
     )
     warm_start: int = _p(
         0, "The first N output frames of a cold start (a shot's first frames) from a"
-        " bidirectional run over its first 2N frames, not noisy (default preset: 4; 0: off;"
+        " bidirectional run over its first 2N frames, not noisy (default preset: 8; 0: off;"
         " later frames unchanged; docs/stability.md#warm-start).",
         group="temporal", valid=Range(0, 16),
     )
@@ -484,7 +484,7 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
                   "#sharper-history-resampling-catmull-rom"),
         Departure("moving_feedback_share", 0.0, "where pixels move the feedback blur compounds"
                   f" with the resampling: {_ALG}#feedback-where-pixels-move"),
-        Departure("warm_start", 4, "a causal run starts every shot with 1, 2, 3 frames of"
+        Departure("warm_start", 8, "a causal run starts every shot with 1, 2, 3 frames of"
                   " history, the largest part of its loss in video quality: docs/stability.md"
                   "#warm-start"),
         Departure("medium_fill_radius", 4, "a renderer's G-buffer holds no surface where"

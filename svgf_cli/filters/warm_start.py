@@ -27,10 +27,10 @@ from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.two_pass import denoise_bidirectional
 from svgf_cli.frame import DenoisedFrame, Frame
 
-# Measured best on the bundled sequences (docs/stability.md#cold-start-variants): the first
-# 4 output frames from a bidirectional run over the first 8.
-WARM_FRAMES = 4
-LOOKAHEAD_FRAMES = 8
+# As the `default` preset's warm_start (docs/stability.md#warm-start): the first 8 output
+# frames from a bidirectional run over the first 16.
+WARM_FRAMES = 8
+LOOKAHEAD_FRAMES = 16
 
 
 def lookahead_params(params: SVGFParams) -> SVGFParams:
