@@ -23,14 +23,14 @@ from collections.abc import Iterable, Iterator
 from itertools import islice
 
 from svgf_cli.filters.denoiser import Denoiser
-from svgf_cli.filters.params import SVGFParams
+from svgf_cli.filters.params import PRESETS, SVGFParams
 from svgf_cli.filters.two_pass import denoise_bidirectional
 from svgf_cli.frame import DenoisedFrame, Frame
 
-# As the `default` preset's warm_start (docs/stability.md#warm-start): the first 8 output
-# frames from a bidirectional run over the first 16.
-WARM_FRAMES = 8
-LOOKAHEAD_FRAMES = 16
+# The `default` preset's (docs/stability.md#warm-start): its first warm_start output frames
+# from a bidirectional run over twice as many.
+WARM_FRAMES = PRESETS["default"].warm_start
+LOOKAHEAD_FRAMES = 2 * WARM_FRAMES
 
 
 def lookahead_params(params: SVGFParams) -> SVGFParams:
