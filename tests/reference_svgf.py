@@ -71,7 +71,7 @@ from svgf_cli.filters.bidirectional import (
     STATIC_FILTERED_SHARE,
     STATIC_MOTION,
 )
-from svgf_cli.filters.params import SVGFParams, antilag_radius_for
+from svgf_cli.filters.params import SVGFParams, antilag_radius_for, luminance_stop_scale_for
 from svgf_cli.frame import Frame, Signal
 
 F64 = np.float64
@@ -965,9 +965,32 @@ def atrous_steps(iterations: int) -> list[int]:
     return [2**i for i in range(iterations)]
 
 
+def _gaussian_3x3(values: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Per signal of (S, H, W) ``values``: the 3x3 Gaussian (1/4 centre, 1/8 edge, 1/16
+    corner) over the taps where the (S, H, W) ``usable(q, p)`` holds, renormalised; a pixel
+    with no such tap keeps its own value. ``usable`` is a function of two index tuples
+    (source = the taps q, target = the pixels p) returning booleans."""
+    num_signals, height, width = values.shape
+    total = np.zeros_like(values)
+    weight = np.zeros_like(values)
+    for oy in (-1, 0, 1):
+        for ox in (-1, 0, 1):
+            # q = p + (ox, oy) where that is inside the image
+            target = (slice(None), slice(max(0, -oy), height - max(0, oy)),
+                      slice(max(0, -ox), width - max(0, ox)))
+            source = (slice(None), slice(max(0, oy), height + min(0, oy)),
+                      slice(max(0, ox), width + min(0, ox)))
+            g = G3[ox + 1] * G3[oy + 1] * usable(source, target)
+            weight[target] += g
+            total[target] += g * values[source]
+    return np.where(weight > 0.0, total / np.where(weight > 0.0, weight, 1.0), values)
+
+
 def luminance_stop_guides(illumination: np.ndarray, variance: np.ndarray,
                           depth: np.ndarray, sigma_luminance: float | Sequence[float],
-                          weights: Sequence[float] = REC709) -> tuple[np.ndarray, np.ndarray]:
+                          weights: Sequence[float] = REC709,
+                          blur_modes: np.ndarray | None = None,
+                          ) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel and signal: ``l(p) = max(0, luminance)`` (the frame's weights) and
     ``1 / max(sigma_l sqrt(g3x3(Var(p)) + (1e-5 l(p))^2), 1e-20)``; ``sigma_l`` is one
     number or one per signal (glossy signals have their own).
@@ -975,30 +998,39 @@ def luminance_stop_guides(illumination: np.ndarray, variance: np.ndarray,
     ``g3x3`` is the 3x3 Gaussian (1/4 centre, 1/8 edge, 1/16 corner) renormalised over the
     in-image surface pixels; a pixel with none of those keeps its own variance. The floor on
     the deviation is relative to ``l``, so scaling the input scales the output.
+    ``blur_modes`` (the (S, H, W) radiance-mode booleans) given: ``l`` is ``g3x3(l)`` over
+    the in-image surface pixels of the pixel's own mode (``luminance_guide_blur``).
     """
     c = np.asarray(illumination, dtype=F64)
     v = np.asarray(variance, dtype=F64)
-    surface = np.asarray(depth) > 0.0
-    height, width = surface.shape
-    total = np.zeros_like(v)
-    weight = np.zeros((height, width))
-    for oy in (-1, 0, 1):
-        for ox in (-1, 0, 1):
-            # q = p + (ox, oy) where that is inside the image and a surface pixel
-            target = (slice(max(0, -oy), height - max(0, oy)),
-                      slice(max(0, -ox), width - max(0, ox)))
-            source = (slice(max(0, oy), height + min(0, oy)),
-                      slice(max(0, ox), width + min(0, ox)))
-            g = G3[ox + 1] * G3[oy + 1] * surface[source]
-            weight[target] += g
-            total[(slice(None), *target)] += g * v[(slice(None), *source)]
-    filtered = np.where(weight > 0.0, total / np.where(weight > 0.0, weight, 1.0), v)
+    surface = np.broadcast_to(np.asarray(depth) > 0.0, v.shape)
+    filtered = _gaussian_3x3(v, lambda source, target: surface[source])
     lum = np.maximum(luminance(c, weights), 0.0)
+    if blur_modes is not None:
+        modes = np.asarray(blur_modes, dtype=bool)
+        lum = _gaussian_3x3(lum, lambda source, target: surface[source]
+                            & (modes[source] == modes[target]))
     deviation = np.sqrt(np.maximum(filtered, 0.0) + (RELATIVE_DEVIATION_FLOOR * lum) ** 2)
     sigma = np.asarray(sigma_luminance, dtype=F64)
     if sigma.ndim == 1:
         sigma = sigma[:, None, None]
     return lum, 1.0 / np.maximum(sigma * deviation, MIN_SCALE)
+
+
+def atrous_sigmas(p: SVGFParams, clean: CleanFrame, geom: Geometry) -> list[float]:
+    """Each signal's sigma_l: glossy signals' own, then those mixing direct and indirect
+    light, else ``sigma_luminance``; times ``luminance_stop_scale`` (auto: by image size)."""
+    scale = luminance_stop_scale_for(p, *geom.depth.shape)
+    return [scale * ((p.glossy_sigma_luminance or p.sigma_luminance) if glossy
+                     else (p.mixed_sigma_luminance or p.sigma_luminance) if mixed
+                     else p.sigma_luminance)
+            for glossy, mixed in zip(clean.glossy, clean.mixed, strict=True)]
+
+
+def guide_blur_modes(p: SVGFParams, radiance_mode: np.ndarray) -> np.ndarray | None:
+    """The radiance modes the luminance guide is blurred within (``luminance_guide_blur``),
+    or None: the guide is each pixel's own luminance."""
+    return radiance_mode if p.luminance_guide_blur else None
 
 
 def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
@@ -1747,12 +1779,9 @@ class ReferenceDenoiser:
         colour_history = unfiltered = colour
         for iteration, step in enumerate(atrous_steps(iterations)):
             # Glossy signals stop at their own sigma_l; then those mixing direct and indirect.
-            sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
-                      else (p.mixed_sigma_luminance or p.sigma_luminance) if mixed
-                      else p.sigma_luminance
-                      for glossy, mixed in zip(clean.glossy, clean.mixed, strict=True)]
-            guides = luminance_stop_guides(colour, variance, geom.depth, sigmas,
-                                           clean.weights)
+            guides = luminance_stop_guides(colour, variance, geom.depth,
+                                           atrous_sigmas(p, clean, geom), clean.weights,
+                                           guide_blur_modes(p, radiance_mode))
             colour, variance = atrous_iteration(colour, variance, guides[0], radiance_mode,
                                                 guides[1], geom.depth, geom.ddx, geom.ddy,
                                                 geom.unit_normal, step, p.sigma_depth,
@@ -1988,9 +2017,9 @@ class _Capturing(ReferenceDenoiser):
                                                  geom, p)
         if iteration_count(p.atrous_iterations, *geom.depth.shape) < 1:
             return unfiltered
-        sigmas = [(p.glossy_sigma_luminance or p.sigma_luminance) if glossy
-                  else p.sigma_luminance for glossy in clean.glossy]
-        guides = luminance_stop_guides(unfiltered, variance, geom.depth, sigmas, clean.weights)
+        guides = luminance_stop_guides(unfiltered, variance, geom.depth,
+                                       atrous_sigmas(p, clean, geom), clean.weights,
+                                       guide_blur_modes(p, radiance_mode))
         filtered, _ = atrous_iteration(unfiltered, variance, guides[0], radiance_mode,
                                        guides[1], geom.depth, geom.ddx, geom.ddy,
                                        geom.unit_normal, 1, p.sigma_depth, p.sigma_normal)

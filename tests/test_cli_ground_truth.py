@@ -143,12 +143,13 @@ def test_static_scene_converges_to_the_noise_free_image(
     assert abs(accumulated_bias) < 0.02 * float(truth[:, surface].mean())
 
     # SVGF: the a-trous removes most of what is left (the illumination is constant, so
-    # nothing stops it; measured 0.020x the accumulation's MSE, 0.0027x the input's). Its
-    # luminance edge-stopping biases the heavy-tailed noise dark (measured -1.3 %).
+    # nothing stops it; measured 0.022x the accumulation's MSE, 0.0028x the input's: the
+    # stops are half as wide below 120 rows since 2026-12-07, 0.013x at the old width). Its
+    # luminance edge-stopping biases the heavy-tailed noise dark (measured -1.4 %).
     _denoise(folder, tmp_path / "svgf", capsys, "--warm-start", "0")
     image, svgf_mse, svgf_bias = error(tmp_path / "svgf")
-    assert svgf_mse < 0.02 * expected_mse
-    assert svgf_mse < 0.003 * input_mse
+    assert svgf_mse < 0.03 * expected_mse
+    assert svgf_mse < 0.004 * input_mse
     assert abs(svgf_bias) < 0.025 * float(truth[:, surface].mean())
     # Background: the input radiance, untouched; emission: noise-free, kept to the noise.
     np.testing.assert_array_equal(image[:, :SKY_ROWS], truth[:, :SKY_ROWS])

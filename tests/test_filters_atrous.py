@@ -154,6 +154,79 @@ def test_luminance_stop_guides_match_the_renormalised_gaussian(
         assert np.all(np.abs(want_luminance[flat] - 1.0) > 0.01)
 
 
+@pytest.mark.parametrize(("num_signals", "width", "first"), [
+    (1, 23, 0), (2, 11, 0), (3, 9, 0), (2, 5, 1), (1, 2, 0), (1, 1, 0), (3, 3, 0),
+])
+def test_blurred_luminance_guides_match_the_reference(num_signals: int, width: int,
+                                                      first: int) -> None:
+    """``luminance_guide_blur``: the guide is the 3x3 Gaussian of the luminance over the
+    in-image surface pixels of the pixel's own mode; the inverse scale is unchanged but for
+    its floor, which follows the guide."""
+    height = 12
+    scene = _scene(num_signals + first, height, max(width, 3), seed=width + first)
+    scene = {k: np.ascontiguousarray(v[..., :width]) for k, v in scene.items()}
+    signals = slice(first, first + num_signals)
+    illumination = np.ascontiguousarray(scene["illumination"][signals])
+    variance = np.ascontiguousarray(scene["variance"][signals])
+    sigmas = (4.0, 1.0, 2.5)[:num_signals]
+    luminance = np.empty((num_signals, height, width), dtype=F32)
+    inverse_scale = np.empty_like(luminance)
+    luminance_stop_guides(illumination, variance, scene["mode"], first, scene["depth"],
+                          sigmas, REC709, luminance, inverse_scale, blur=True)
+    radiance_mode = _radiance_mode(scene["mode"], num_signals, first)
+    want_luminance, want_inverse_scale = ref.luminance_stop_guides(
+        illumination, variance, scene["depth"], sigmas, ref.REC709, blur_modes=radiance_mode)
+    assert np.all((luminance < 0) == radiance_mode)
+    np.testing.assert_allclose(np.abs(luminance), want_luminance, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(inverse_scale, want_inverse_scale, rtol=1e-5)
+    if width < 5:
+        return
+    # The blur happened, and it kept to the pixel's mode: blurring across modes, or not at
+    # all, gives other guides.
+    plain, _ = ref.luminance_stop_guides(illumination, variance, scene["depth"], sigmas)
+    across, _ = ref.luminance_stop_guides(illumination, variance, scene["depth"], sigmas,
+                                          ref.REC709, blur_modes=np.zeros_like(radiance_mode))
+    assert np.max(np.abs(np.abs(luminance) - plain)) > 0.1
+    assert np.max(np.abs(np.abs(luminance) - across)) > 0.05
+
+
+def test_the_blurred_guide_keeps_the_mean_of_one_sample_noise() -> None:
+    """One-sample light is skewed (a few bright samples among dark ones): weighed by their
+    own luminance the bright samples count less and the a-trous output is darker than its
+    input; compared through 3x3 means it keeps far more of the mean. Five iterations of a
+    flat, lit plane at the stops' default sigma_l."""
+    rng = np.random.default_rng(7)
+    height, width = 64, 96
+    # Light of mean 1: 0.25 on 80 % of the samples, 4 on the rest.
+    bright = rng.uniform(size=(1, 1, height, width)) < 0.2
+    illumination = np.broadcast_to(np.where(bright, 4.0, 0.25), (1, 3, height, width))
+    illumination = np.ascontiguousarray(illumination, dtype=F32)
+    depth = np.full((height, width), 5.0, dtype=F32)
+    zero = np.zeros_like(depth)
+    normal = np.zeros((3, height, width), dtype=F32)
+    normal[2] = -1.0
+    mode = np.zeros((height, width), dtype=np.uint16)
+
+    def mean_after_atrous(blur: bool) -> float:
+        colour = illumination
+        variance = np.full((1, height, width), np.var(illumination[0, 0]), dtype=F32)
+        for iteration in range(5):
+            guide = np.empty((1, height, width), dtype=F32)
+            inverse_scale = np.empty_like(guide)
+            luminance_stop_guides(colour, variance, mode, 0, depth, 2.0, REC709, guide,
+                                  inverse_scale, blur=blur)
+            out_c = np.empty_like(colour)
+            out_v = np.empty_like(variance)
+            atrous_iteration(colour, variance, guide, inverse_scale, depth, zero, zero, normal,
+                             1 << iteration, 1.0, 128.0, True, out_c, out_v)
+            colour, variance = out_c, out_v
+        return float(colour[0, 1, 8:-8, 8:-8].mean() / illumination[0, 1, 8:-8, 8:-8].mean())
+
+    sharp, blurred = mean_after_atrous(False), mean_after_atrous(True)
+    assert sharp < 0.9  # measured 0.78
+    assert abs(1.0 - blurred) < 0.5 * (1.0 - sharp)  # measured 0.97
+
+
 @pytest.mark.parametrize(("step", "width"), [(1, 20), (2, 9)])
 def test_three_signals_in_one_pass_equal_a_pair_and_a_single(step: int, width: int) -> None:
     """The triple loop shares only the geometric weights: each signal's result is the one

@@ -600,8 +600,8 @@ def test_despike_bounds_a_firefly_filtered_alone_as_radiance() -> None:
 def test_luminance_stop_scale_multiplies_every_stop_and_auto_follows_the_image() -> None:
     """``luminance_stop_scale`` is a factor on the a-trous sigma_l of every signal: 2 with
     sigma_luminance 2 filters exactly as 1 with 4, glossy and mixed stops included (a direct
-    signal, a mixed one), and looser than 1 with 2. Auto is 1 below 120 rows, so a small
-    image filters as the explicit 1 (the bundled 128x72 fixtures are unchanged)."""
+    signal, a mixed one), and looser than 1 with 2. Auto is 0.5 below 120 rows, so a small
+    image filters as the explicit 0.5."""
     frames = static_sequence(3, 24, 16, noise=0.3, split=True)
     base = resolve_params("default")
     assert base.luminance_stop_scale == AUTO_STOP_SCALE
@@ -609,12 +609,13 @@ def test_luminance_stop_scale_multiplies_every_stop_and_auto_follows_the_image()
         frames, scaled=base.replace(luminance_stop_scale=2.0),
         wider=base.replace(luminance_stop_scale=1.0, sigma_luminance=4.0,
                            mixed_sigma_luminance=3.0, glossy_sigma_luminance=2.0),
-        one=base.replace(luminance_stop_scale=1.0), auto=base)
+        one=base.replace(luminance_stop_scale=1.0),
+        half=base.replace(luminance_stop_scale=0.5), auto=base)
     np.testing.assert_array_equal(out["scaled"], out["wider"])
-    np.testing.assert_array_equal(out["auto"], out["one"])
+    np.testing.assert_array_equal(out["auto"], out["half"])
     assert all(np.any(a != b) for a, b in zip(out["scaled"], out["one"], strict=True))
     assert [luminance_stop_scale_for(base, rows, 2 * rows) for rows in
-            (72, 119, 120, 319, 320, 639, 640, 1080)] == [1, 1, 1.5, 1.5, 1.75, 1.75, 3, 3]
+            (72, 119, 120, 319, 320, 639, 640, 1080)] == [0.5, 0.5, 1.5, 1.5, 1.75, 1.75, 3, 3]
     assert luminance_stop_scale_for(base, 1080, 720) == 3  # the shorter side
     assert luminance_stop_scale_for(base.replace(luminance_stop_scale=0.5), 1080, 1920) == 0.5
     assert luminance_stop_scale_for(resolve_params("paper"), 1080, 1920) == 1.0

@@ -343,9 +343,10 @@ def fog_patch_frame(rng: np.random.Generator, size: int = 48) -> Frame:
 def test_the_medium_coverage_keeps_a_small_fogs_light_in_it(seed: int) -> None:
     """A fog patch over a wall that has no edge where the fog ends: filtered as radiance,
     its few bright samples among zeros lose to the zeros and its light spreads onto the
-    wall, so the fog comes out dark (measured 0.82-0.85 of its expectation after 8
-    frames) and the wall around it too (0.91-0.93 of the far wall); demodulated by its
-    coverage 0.88-0.90, and the wall beside it within 0.03 of the far wall (0 to 0.025)."""
+    wall, so the fog comes out dark (measured 0.84-0.89 of its expectation after 8
+    frames; 0.80-0.84 before the a-trous stops compared blurred luminance) and the wall
+    around it too (up to 0.035 below the far wall); demodulated by its coverage 0.90-0.91,
+    and the wall beside it within 0.025 of the far wall (-0.022 to +0.008)."""
     fog_light, wall_light = 0.4 + 0.4 * 0.5 * 0.5, 0.5
     near = np.zeros((48, 48), bool)
     near[12:36, 12:36] = True
@@ -369,9 +370,10 @@ def test_the_medium_coverage_keeps_a_small_fogs_light_in_it(seed: int) -> None:
                           float(out[:, near].mean()) / wall_light,
                           float(out[:, far].mean()) / wall_light)
     (fog_off, near_off, far_off), (fog_on, near_on, far_on) = shares[0], shares[1]
-    assert fog_on > 0.87 and fog_on > fog_off + 0.02
+    assert fog_on > 0.88 and fog_on > fog_off + 0.005
     assert far_on == pytest.approx(far_off, abs=0.002)  # the far wall: as it was
-    assert abs(near_on - far_on) < 0.03 and abs(near_on - far_on) < abs(near_off - far_off)
+    assert abs(near_on - far_on) < 0.025
+    assert abs(near_on - far_on) < abs(near_off - far_off) + 0.005
 
 
 def test_the_coverage_radius_grows_with_the_image() -> None:

@@ -81,6 +81,7 @@ def luminance_stop_guides(
     luminance_weights: tuple[np.float32, np.float32, np.float32],
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
+    blur: bool = False,
 ) -> None:
     """Per pixel and signal: the guide luminance and the inverse scale of eq. 5.
 
@@ -94,6 +95,10 @@ def luminance_stop_guides(
     Gaussian is renormalised over in-image surface pixels (background variance is
     meaningless); a pixel without any such neighbour keeps its own variance.
     ``S`` is 1 to 3 signals; ``sigma_luminance`` is one sigma_l for all or one per signal.
+    ``blur``: the guide is ``g3x3(l)`` instead, the same Gaussian renormalised over the
+    in-image surface pixels of the pixel's own mode (a pixel with none keeps ``l``). A
+    one-sample ``l`` in the stop weighs each tap by its own noise: bright samples count
+    less than dark ones, and the filter darkens (``luminance_guide_blur``).
     Outputs must not overlap the inputs (checked).
     """
     num_signals = illumination.shape[0]
@@ -107,7 +112,7 @@ def luminance_stop_guides(
     )
     _guide_rows(illumination, variance, mode, np.int64(first_signal), depth, sigmas,
                 float32_weights(luminance_weights), out_luminance, out_inverse_scale,
-                np.int64(get_num_threads()))
+                bool(blur), np.int64(get_num_threads()))
 
 
 @njit(parallel=True, **_JIT)
@@ -121,40 +126,100 @@ def _guide_rows(
     luminance_weights: tuple[np.float32, np.float32, np.float32],
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
+    blur: bool,
     threads: int,
 ) -> None:
     """All rows of :func:`luminance_stop_guides` in parallel."""
-    height = depth.shape[0]
+    height, width = depth.shape
     for i in prange(balanced_row_count(height, threads)):
         y = balanced_row(i, height, threads)
         if y >= height:
             continue
         # Surface weight, then the weighted variance sums of the signals.
-        sums = np.empty((4, depth.shape[1]), dtype=np.float32)
-        _guide_row(y, sums, illumination, variance, mode, first_signal, depth, sigma_luminance,
-                   luminance_weights, out_luminance, out_inverse_scale)
+        sums = np.empty((4, width), dtype=np.float32)
+        # Each signal's guide luminance on row y (blurred or not).
+        guide = np.empty((illumination.shape[0], width), dtype=np.float32)
+        _luminance_row(y, sums, illumination, mode, first_signal, depth, luminance_weights,
+                       blur, guide)
+        _guide_row(y, sums, variance, mode, first_signal, depth, sigma_luminance, guide,
+                   out_luminance, out_inverse_scale)
+
+
+@noalias_njit(**_JIT)
+def _luminance_row(
+    y: int,
+    sums: np.ndarray,
+    illumination: np.ndarray,
+    mode: np.ndarray,
+    first_signal: int,
+    depth: np.ndarray,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    blur: bool,
+    guide: np.ndarray,
+) -> None:
+    """Row ``y`` of each signal's ``max(0, l)``, or with ``blur`` its 3x3 Gaussian over the
+    in-image surface pixels of the centre's mode (``sums[0:3]`` as scratch)."""
+    height, width = depth.shape
+    uy = U(y)
+    for s in range(illumination.shape[0]):
+        for i in range(width):
+            x = U(i)
+            guide[s, i] = max(luminance(illumination[s, 0, uy, x], illumination[s, 1, uy, x],
+                                        illumination[s, 2, uy, x], luminance_weights), _ZERO)
+        if not blur:
+            continue
+        bit = first_signal + s
+        for i in range(width):
+            sums[0, i] = _ZERO
+            sums[1, i] = _ZERO
+        for dy in range(-1, 2):
+            yy = y + dy
+            if yy < 0 or yy >= height:
+                continue
+            uq = U(yy)
+            # Row yy's luminance, 0 off the surface (sums[2]), once for its three taps.
+            for i in range(width):
+                q = U(i)
+                lum = max(luminance(illumination[s, 0, uq, q], illumination[s, 1, uq, q],
+                                    illumination[s, 2, uq, q], luminance_weights), _ZERO)
+                sums[2, i] = lum if depth[uq, q] > _ZERO else _ZERO
+            for dx in range(-1, 2):
+                k = _G1[dx + 1] * _G1[dy + 1]
+                # The taps inside the image: x + dx in [0, width).
+                start = max(0, -dx)
+                stop = min(width, width - dx)
+                for i in range(max(0, stop - start)):
+                    x = U(start + i)
+                    q = U(start + i + dx)
+                    same = ((mode[uq, q] ^ mode[uy, x]) >> bit) & 1 == 0
+                    w = k if depth[uq, q] > _ZERO and same else _ZERO
+                    sums[0, x] += w
+                    sums[1, x] = fma(w, sums[2, q], sums[1, x])
+        for i in range(width):
+            if sums[0, i] > _ZERO:
+                guide[s, i] = sums[1, i] / sums[0, i]
 
 
 @noalias_njit(**_JIT)
 def _guide_row(
     y: int,
     sums: np.ndarray,
-    illumination: np.ndarray,
     variance: np.ndarray,
     mode: np.ndarray,
     first_signal: int,
     depth: np.ndarray,
     sigma_luminance: np.ndarray,
-    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    guide: np.ndarray,
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
 ) -> None:
-    """Row ``y``: the three taps of each 3x3 kernel row in one loop (as in the a-trous).
+    """Row ``y``: the three taps of each 3x3 kernel row in one loop (as in the a-trous),
+    with the row's ``guide`` luminance per signal.
 
     One or two signals fill ``sums[1]`` and ``sums[2]`` (a single signal twice), a third
     also ``sums[3]``.
     """
-    num_signals = illumination.shape[0]
+    num_signals = variance.shape[0]
     second = min(num_signals, 2) - 1
     three = num_signals == 3
     height, width = depth.shape
@@ -203,8 +268,7 @@ def _guide_row(
         sigma = sigma_luminance[s]
         for i in range(width):
             x = U(i)
-            lum = max(luminance(illumination[s, 0, uy, x], illumination[s, 1, uy, x],
-                                illumination[s, 2, uy, x], luminance_weights), _ZERO)
+            lum = guide[s, x]
             radiance_mode = (mode[uy, x] >> (first_signal + s)) & 1 != 0
             out_luminance[s, uy, x] = -(lum + _MODE_OFFSET) if radiance_mode else lum
             weight = sums[0, x]

@@ -103,6 +103,7 @@ def atrous_step(ctx: FrameContext, filtered: np.ndarray, filtered_variance: np.n
         luminance_stop_guides(
             filtered[group], filtered_variance[group], mode, group.start, depth,
             sigmas[group], ctx.weights, guide_luminance[group], guide_inverse_scale[group],
+            p.luminance_guide_blur,
         )
         atrous_iteration(
             filtered[group], filtered_variance[group], guide_luminance[group],
