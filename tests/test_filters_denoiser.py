@@ -615,7 +615,7 @@ def test_luminance_stop_scale_multiplies_every_stop_and_auto_follows_the_image()
     np.testing.assert_array_equal(out["auto"], out["half"])
     assert all(np.any(a != b) for a, b in zip(out["scaled"], out["one"], strict=True))
     assert [luminance_stop_scale_for(base, rows, 2 * rows) for rows in
-            (72, 119, 120, 319, 320, 639, 640, 1080)] == [0.5, 0.5, 1.5, 1.5, 1.75, 1.75, 3, 3]
+            (72, 119, 120, 319, 320, 639, 640, 1080)] == [0.5, 0.5, 1, 1, 1.75, 1.75, 3, 3]
     assert luminance_stop_scale_for(base, 1080, 720) == 3  # the shorter side
     assert luminance_stop_scale_for(base.replace(luminance_stop_scale=0.5), 1080, 1920) == 0.5
     assert luminance_stop_scale_for(resolve_params("paper"), 1080, 1920) == 1.0

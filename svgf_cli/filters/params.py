@@ -275,7 +275,7 @@ class SVGFParams:
                             group="atrous", valid=Range(0, low_open=True))
     luminance_stop_scale: float = _p(
         1.0, "Factor on every a-trous sigma_l (sigma_luminance, mixed_ and glossy_); auto (-1 in"
-        " svgf/params) = from the image's shorter side: 0.5 below 120 pixels, 1.5 below 320, 1.75"
+        " svgf/params) = from the image's shorter side: 0.5 below 120 pixels, 1 below 320, 1.75"
         " below 640, else 3.", group="atrous", valid=Range(0, low_open=True, auto=AUTO_STOP_SCALE))
     luminance_guide_blur: bool = _p(False, "The a-trous luminance stops compare 3x3 Gaussian"
         " means of luminance (as the variance's), not each pixel's own one-sample value, whose"
@@ -582,21 +582,21 @@ def history_clamp_radius_for(params: SVGFParams, height: int, width: int) -> int
 
 
 # The shorter image side from which each looser luminance stop is used.
-_STOP_SIDES = ((640, 3.0), (320, 1.75), (120, 1.5), (0, 0.5))
+_STOP_SIDES = ((640, 3.0), (320, 1.75), (120, 1.0), (0, 0.5))
 
 
 def luminance_stop_scale_for(params: SVGFParams, height: int, width: int) -> float:
     """The factor on the a-trous luminance stops for an image of ``height`` x ``width``: an
     explicit one is kept; ``AUTO_STOP_SCALE`` loosens the stops as the image grows (0.5 below
-    120 rows, 1.5 below 320, 1.75 below 640, 3 from 640). The stop keeps apart neighbours
+    120 rows, 1 below 320, 1.75 below 640, 3 from 640). The stop keeps apart neighbours
     whose luminance differs by more than sigma_l standard deviations of the noise: the noise
     per pixel does not change with the resolution, while a smooth gradient's difference
     between neighbours shrinks as the scene covers more pixels, and each further iteration
     (the count grows with the image too) stops at the compounded product of its weights.
     Measured (docs/algorithm.md#the-luminance-stop-grows-with-the-image): 72 rows best at
     1, 144 and 216 rows at 1.5, 360 rows at 1.75-2, 720 rows at 3-4; with the blurred guide
-    (``luminance_guide_blur``, docs/algorithm.md#the-luminance-stops-guide) 72 rows at 0.5
-    and 360 rows still at 1.75."""
+    (``luminance_guide_blur``, docs/algorithm.md#the-luminance-stops-guide) 72 rows at 0.5,
+    216 rows at 1 and 360 rows still at 1.75."""
     return _by_image_side(params.luminance_stop_scale, AUTO_STOP_SCALE, _STOP_SIDES,
                           height, width)
 
