@@ -965,11 +965,13 @@ def atrous_steps(iterations: int) -> list[int]:
     return [2**i for i in range(iterations)]
 
 
-def _gaussian_3x3(values: np.ndarray, usable: np.ndarray) -> np.ndarray:
+def _gaussian_3x3(values: np.ndarray,
+                  usable: Callable[[tuple[slice, ...], tuple[slice, ...]], np.ndarray]
+                  ) -> np.ndarray:
     """Per signal of (S, H, W) ``values``: the 3x3 Gaussian (1/4 centre, 1/8 edge, 1/16
-    corner) over the taps where the (S, H, W) ``usable(q, p)`` holds, renormalised; a pixel
-    with no such tap keeps its own value. ``usable`` is a function of two index tuples
-    (source = the taps q, target = the pixels p) returning booleans."""
+    corner) over the taps where ``usable(source, target)`` holds (booleans for the taps q
+    at ``source`` of the pixels p at ``target``), renormalised; a pixel with no such tap
+    keeps its own value."""
     num_signals, height, width = values.shape
     total = np.zeros_like(values)
     weight = np.zeros_like(values)
@@ -1778,7 +1780,6 @@ class ReferenceDenoiser:
         feedback = min(p.feedback_iteration, iterations - 1)
         colour_history = unfiltered = colour
         for iteration, step in enumerate(atrous_steps(iterations)):
-            # Glossy signals stop at their own sigma_l; then those mixing direct and indirect.
             guides = luminance_stop_guides(colour, variance, geom.depth,
                                            atrous_sigmas(p, clean, geom), clean.weights,
                                            guide_blur_modes(p, radiance_mode))

@@ -162,10 +162,7 @@ def _luminance_row(
     height, width = depth.shape
     uy = U(y)
     for s in range(illumination.shape[0]):
-        for i in range(width):
-            x = U(i)
-            guide[s, i] = max(luminance(illumination[s, 0, uy, x], illumination[s, 1, uy, x],
-                                        illumination[s, 2, uy, x], luminance_weights), _ZERO)
+        _row_luminance(illumination[s], uy, luminance_weights, guide[s])
         if not blur:
             continue
         bit = first_signal + s
@@ -177,12 +174,11 @@ def _luminance_row(
             if yy < 0 or yy >= height:
                 continue
             uq = U(yy)
-            # Row yy's luminance, 0 off the surface (sums[2]), once for its three taps.
-            for i in range(width):
-                q = U(i)
-                lum = max(luminance(illumination[s, 0, uq, q], illumination[s, 1, uq, q],
-                                    illumination[s, 2, uq, q], luminance_weights), _ZERO)
-                sums[2, i] = lum if depth[uq, q] > _ZERO else _ZERO
+            # Row yy's luminance, once for its three taps (row y's is the guide's own).
+            row = guide[s]
+            if dy != 0:
+                row = sums[2]
+                _row_luminance(illumination[s], uq, luminance_weights, row)
             for dx in range(-1, 2):
                 k = _G1[dx + 1] * _G1[dy + 1]
                 # The taps inside the image: x + dx in [0, width).
@@ -194,10 +190,24 @@ def _luminance_row(
                     same = ((mode[uq, q] ^ mode[uy, x]) >> bit) & 1 == 0
                     w = k if depth[uq, q] > _ZERO and same else _ZERO
                     sums[0, x] += w
-                    sums[1, x] = fma(w, sums[2, q], sums[1, x])
+                    sums[1, x] = fma(w, row[q], sums[1, x])
         for i in range(width):
             if sums[0, i] > _ZERO:
                 guide[s, i] = sums[1, i] / sums[0, i]
+
+
+@noalias_njit(**_JIT)
+def _row_luminance(
+    illumination: np.ndarray,
+    y: np.uint64,
+    luminance_weights: tuple[np.float32, np.float32, np.float32],
+    out: np.ndarray,
+) -> None:
+    """``out[x] = max(0, l)`` of row ``y`` of one signal's (3, H, W) ``illumination``."""
+    for i in range(out.shape[0]):
+        x = U(i)
+        out[x] = max(luminance(illumination[0, y, x], illumination[1, y, x],
+                               illumination[2, y, x], luminance_weights), _ZERO)
 
 
 @noalias_njit(**_JIT)
