@@ -90,6 +90,9 @@ MAX_REFLECTANCE = 1.05  # a demodulation colour brighter than this is not a refl
 # A reflected light's pixel has this many lit neighbours or more (the rule off sharp
 # mirrors: the reference has no reflected albedo, and its scenes no sharp mirror).
 MIN_LIT_NEIGHBOURS = 2
+# ... and is farther than 2 pixels (a square) from the centre of a 5x5 window of which 13
+# or more pixels are lit: a light's large image stays demodulated.
+LARGE_IMAGE_WINDOW, LARGE_IMAGE_COUNT, LARGE_IMAGE_REACH = 5, 13, 2
 RELATIVE_ALBEDO_FLOOR = 0.02  # per-channel floor relative to the brightest channel
 NO_HISTORY_MOTION = 1e15  # what non-finite motion becomes: a position far outside the image
 
@@ -359,10 +362,31 @@ def effective_albedo(albedo: np.ndarray, black: float,
     return ~demodulated[..., 0, :, :], divisor
 
 
+def large_image_pixels(lit: np.ndarray) -> np.ndarray:
+    """(H, W) bool: within ``LARGE_IMAGE_REACH`` (a square) of a pixel whose
+    ``LARGE_IMAGE_WINDOW`` square window, clipped by the image, holds ``LARGE_IMAGE_COUNT``
+    or more ``lit`` pixels (``modulate.unmark_large_images``), pixel by pixel."""
+    height, width = lit.shape
+    r, reach = LARGE_IMAGE_WINDOW // 2, LARGE_IMAGE_REACH
+    centre = np.zeros((height, width), dtype=bool)
+    for y in range(height):
+        for x in range(width):
+            window = lit[max(y - r, 0):y + r + 1, max(x - r, 0):x + r + 1]
+            centre[y, x] = int(window.sum()) >= LARGE_IMAGE_COUNT
+    near = np.zeros((height, width), dtype=bool)
+    for y in range(height):
+        for x in range(width):
+            near[y, x] = centre[max(y - reach, 0):y + reach + 1,
+                                max(x - reach, 0):x + reach + 1].any()
+    return near
+
+
 def reflected_lights(guide: np.ndarray) -> np.ndarray:
     """(H, W) bool: the (cleaned) G-buffer albedo is above ``MAX_REFLECTANCE`` at the pixel
-    and at ``MIN_LIT_NEIGHBOURS`` or more of its 8 neighbours (``modulate.emitter_colour``)."""
-    lit = np.pad(guide.max(axis=0) > MAX_REFLECTANCE, 1)
+    and at ``MIN_LIT_NEIGHBOURS`` or more of its 8 neighbours, none of them near a light's
+    large image (``modulate.emitter_colour``, ``modulate.unmark_large_images``)."""
+    above = guide.max(axis=0) > MAX_REFLECTANCE
+    lit = np.pad(above & ~large_image_pixels(above), 1)
     height, width = guide.shape[1:]
     neighbours = np.zeros((height, width), dtype=np.int64)
     for dy in (-1, 0, 1):

@@ -7,9 +7,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import reference_svgf as ref
 
 from svgf_cli.filters.denoiser import Denoiser
-from svgf_cli.filters.modulate import emitter_colour, reflected_lights
+from svgf_cli.filters.modulate import emitter_colour, reflected_lights, unmark_large_images
 from svgf_cli.filters.params import PRESETS
 from svgf_cli.frame import Frame, Signal
 
@@ -251,6 +252,64 @@ def test_reflected_light_stays_sharp():
     assert _highlight_peak(marked=True)[0] > 0.75 * 180.0  # the default as it is
     off = params.replace(glossy_emitter_radiance=False)
     assert _highlight_peak(marked=True, params=off) == (blurred_peak, blurred_ring)
+
+
+def test_large_reflected_images_are_unmarked_as_the_reference():
+    """A light's large image (13 or more of a 5x5 window lit) and the pixels within 2 of
+    such a window's centre are not lit; small images and scattered hits are, as before."""
+    rng = np.random.default_rng(11)
+    height, width = 30, 41
+    above = np.zeros((height, width), bool)
+    yy, xx = np.mgrid[:height, :width]
+    disc = np.hypot(yy - 12, xx - 14) <= 6
+    above |= disc & (rng.uniform(size=(height, width)) < 0.85)  # a large, dense image
+    above[20:23, 30:33] = True  # a small light's 3x3 image
+    above[0:4, 36:41] = rng.uniform(size=(4, 5)) < 0.8  # a large one clipped by the corner
+    above |= rng.uniform(size=(height, width)) < 0.05  # scattered hits
+    lit = np.pad(above, 1).astype(np.uint8)
+    scratch = np.full((2, height, width), 9, np.uint8)
+    unmark_large_images(lit, scratch[0], scratch[1])
+    near = ref.large_image_pixels(above)
+    np.testing.assert_array_equal(lit, np.pad(above & ~near, 1))
+    assert not lit[1:-1, 1:-1][disc].any()
+    assert lit[21:24, 31:34].all()  # the small image stays marked
+    assert (above & near & ~disc).sum() > 0 and (above & ~near).sum() > 40
+
+
+def _large_highlight_frame(t: int, marked: bool) -> Frame:
+    """:func:`_highlight_frame` with a light's large image instead (a rough reflection of
+    an area light): every sample within 3.5 pixels of its centre sees it, then fewer, none
+    beyond 5 (hits at 400, truth 400 times the hit rate)."""
+    frame = _highlight_frame(t, marked=False)
+    rng = np.random.default_rng(200 + t)
+    yy, xx = np.mgrid[:HEIGHT, :WIDTH]
+    r = np.hypot(yy - 11, xx - 19)
+    hit = rng.uniform(size=r.shape) < np.clip((5.0 - r) / 1.5, 0.0, 1.0)
+    glossy = frame.signals[1]
+    radiance = np.where(hit, F32(400.0) * glossy.albedo, glossy.radiance).astype(F32)
+    guide = frame.albedo.copy()
+    if marked:
+        guide[:, hit] = 40.0
+    return dataclasses.replace(
+        frame, signals=[frame.signals[0], dataclasses.replace(glossy, radiance=radiance)],
+        albedo=guide)
+
+
+def test_a_large_reflected_light_is_filtered_demodulated():
+    """Radiance mode keeps a small image of a light from being averaged into the dark
+    surface around it (above); a large image is filtered demodulated, with the surface,
+    so its soft rim is not cut along the random hits: none of it is marked and the output
+    is the unmarked frame's, bit for bit."""
+    def run(marked: bool, params=PRESETS["default"]):
+        denoiser = Denoiser(params, debug_layers=True)
+        for t in range(4):
+            out = denoiser.process(_large_highlight_frame(t, marked))
+        return out
+    marked = run(marked=True)
+    assert marked.counts["reflected_light.glossy"] == 0
+    off = run(marked=True, params=PRESETS["default"].replace(glossy_emitter_radiance=False))
+    np.testing.assert_array_equal(marked.layers["glossy.G"], off.layers["glossy.G"])
+    np.testing.assert_array_equal(marked.color, off.color)
 
 
 def test_reflected_lights_are_counted_not_warned_about():

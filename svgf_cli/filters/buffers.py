@@ -80,6 +80,7 @@ ROLES: dict[str, tuple[Shape, type]] = {
     "taa": (lambda s, h, w: (3, h, w), F32),
     "despike_luminance": (lambda s, h, w: (h, w), F32),
     "reflected_lights": (lambda s, h, w: (h + 2, w + 2), np.uint8),
+    "reflected_lights_scratch": (lambda s, h, w: (2, h, w), np.uint8),
     "antilag_scratch": (lambda s, h, w: scratch_shape(s, h, w), F32),
     "antilag_lambda": (lambda s, h, w: (s, *cell_shape(h, w)), F32),
 }

@@ -283,6 +283,62 @@ def reflected_lights(guide: np.ndarray, max_reflectance: np.float32, out_lit: np
     return bool(out_lit.any())
 
 
+# A reflected light's image is large where more than half of a 5x5 window saw it
+# (``LARGE_IMAGE_COUNT`` of 25); no pixel within ``LARGE_IMAGE_REACH`` of such a window's
+# centre counts as lit. Radiance mode keeps a light's small image (a few pixels) from being
+# averaged into the dark surface around it; a large image's inside is uniformly bright and
+# the a-trous' luminance stop keeps it demodulated, while the mode's boundary would follow
+# the random hits along its soft rim (a rough reflection at 640x360: a jagged highlight).
+LARGE_IMAGE_RADIUS = 2
+LARGE_IMAGE_COUNT = 13
+LARGE_IMAGE_REACH = 2
+
+
+@njit(parallel=True, **_JIT)
+def unmark_large_images(lit: np.ndarray, counts: np.ndarray, near: np.ndarray) -> None:
+    """In place on ``lit`` ((H + 2, W + 2) uint8 from :func:`reflected_lights`): 0 on every
+    pixel within ``LARGE_IMAGE_REACH`` (a square) of a pixel whose (2 LARGE_IMAGE_RADIUS +
+    1)^2 window, clipped by the image, holds ``LARGE_IMAGE_COUNT`` or more lit pixels.
+    ``counts`` and ``near`` are (H, W) uint8 scratch planes (separable sums and maxima)."""
+    height, width = counts.shape
+    r, reach = LARGE_IMAGE_RADIUS, LARGE_IMAGE_REACH
+    for y in prange(height):  # lit pixels of each row's window span
+        _window_row(lit[y + 1, 1:width + 1], r, False, counts[y])
+    for y in prange(height):  # ... summed down the window's rows: a large image's centre
+        out = near[y]
+        out[:] = 0
+        for yy in range(max(y - r, 0), min(y + r + 1, height)):
+            row = counts[yy]
+            for x in range(width):
+                out[x] += row[x]
+        for x in range(width):
+            out[x] = np.uint8(1) if out[x] >= LARGE_IMAGE_COUNT else np.uint8(0)
+    for y in prange(height):  # the centres spread along the row ...
+        _window_row(near[y], reach, True, counts[y])
+    for y in prange(height):  # ... and down the rows: those pixels are not lit
+        out = lit[y + 1, 1:width + 1]
+        for yy in range(max(y - reach, 0), min(y + reach + 1, height)):
+            row = counts[yy]
+            for x in range(width):  # both planes hold 0 or 1: a branch-free 'and not'
+                out[x] &= row[x] ^ np.uint8(1)
+
+
+@njit(**_JIT)
+def _window_row(row: np.ndarray, radius: int, spread: bool, out: np.ndarray) -> None:
+    """``out[x]`` = the sum (or, with ``spread``, the or) of ``row[x - radius .. x +
+    radius]`` clipped by the row, uint8."""
+    width = row.shape[0]
+    out[:] = 0
+    for d in range(-radius, radius + 1):  # one shifted row at a time: vectorizes
+        lo, hi = max(0, -d), min(width, width - d)
+        if spread:
+            for x in range(lo, hi):
+                out[x] |= row[x + d]
+        else:
+            for x in range(lo, hi):
+                out[x] += row[x + d]
+
+
 # A reflected light is marked where at least this many of the pixel's 8 neighbours also
 # saw it: on an object whose reflections are sharp (``filters.reflected_albedo``) one, as
 # a small light's image may be a pair of pixels; elsewhere two, as a rough metal's samples

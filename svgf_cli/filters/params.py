@@ -230,9 +230,9 @@ class SVGFParams:
         False,
         "Filter a glossy signal as radiance where the G-buffer albedo is no reflectance"
         " (brightest channel above 1.05: Cycles' Denoising Albedo holds the light's emission"
-        " where a specular path reached a light) at the pixel and at two neighbours (one on"
-        " a sharp mirror): a reflected light is filtered with the pixels that also see it,"
-        " not blurred into the surface around it.",
+        " where a specular path reached a light) at the pixel and two neighbours (one on a"
+        " sharp mirror), off a light's large image: a small reflected light is filtered with"
+        " the pixels that also see it, not blurred into the surface around it.",
         group="glossy",
     )
     reflected_albedo: bool = _p(

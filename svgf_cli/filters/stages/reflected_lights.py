@@ -19,14 +19,15 @@ class MarkReflectedLights(StageBase):
     """Each glossy signal's demodulation colour replaced by the G-buffer albedo where that
     is no reflectance (``modulate.emitter_colour``): a specular path reached a light there,
     and the signal is filtered as radiance. A lit pixel needs fewer lit neighbours on the
-    objects the reflected albedo found sharp (``ctx.sharp_objects``). Written into workspace
+    objects the reflected albedo found sharp (``ctx.sharp_objects``), and none within two
+    pixels of a light's large image (``modulate.unmark_large_images``). Written into workspace
     planes (the caller's planes are never modified); demodulation and remodulation both read
     the replaced colour, so the modes agree. ``ctx.marked`` gets the pixels marked per
     glossy signal."""
 
     name = "reflected_lights"
     reads = ("frame.albedo", "frame.mesh_id", "depth", "sharp_objects")
-    writes = ("reflected_lights", "emitter_colour.<i>")
+    writes = ("reflected_lights", "reflected_lights_scratch", "emitter_colour.<i>")
     clock = "demodulate"
 
     def enabled(self, params: SVGFParams) -> bool:
@@ -40,6 +41,8 @@ class MarkReflectedLights(StageBase):
         lit = work["reflected_lights"]
         if not modulate.reflected_lights(frame.albedo, F32(MAX_REFLECTANCE), lit):
             return  # the albedo AOV is a reflectance everywhere: nothing to mark
+        scratch = work["reflected_lights_scratch"]
+        modulate.unmark_large_images(lit, scratch[0], scratch[1])
         rows = np.zeros(frame.height, dtype=np.int64)
         signals = []
         for index, signal in enumerate(frame.signals):
