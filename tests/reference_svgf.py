@@ -1059,18 +1059,27 @@ def guide_blur_modes(p: SVGFParams, radiance_mode: np.ndarray) -> np.ndarray | N
     return radiance_mode if p.luminance_guide_blur else None
 
 
+def symmetric_stops(p: SVGFParams, clean: CleanFrame) -> list[bool]:
+    """Per signal: whether its luminance stop is symmetric (``mixed_symmetric_stop``: the
+    signals mixing direct and indirect light, not glossy)."""
+    return [p.mixed_symmetric_stop and mixed and not glossy
+            for glossy, mixed in zip(clean.glossy, clean.mixed, strict=True)]
+
+
 def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
                      guide_luminance: np.ndarray, radiance_mode: np.ndarray,
                      guide_inverse_scale: np.ndarray, depth: np.ndarray, ddx: np.ndarray,
                      ddy: np.ndarray, normal: np.ndarray, step: int, sigma_depth: float,
-                     sigma_normal: float) -> tuple[np.ndarray, np.ndarray]:
+                     sigma_normal: float, symmetric: Sequence[bool] | None = None,
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Paper eqs. 1-5 for every pixel and signal, one tap offset at a time.
 
     Over the in-image taps ``q = p + step (i - 2, j - 2)`` of the 5x5 B3 kernel:
     ``w = h(q) w_z w_n w_l`` with ``w_z = exp(-depth exponent)`` (eq. 3, see
     :func:`depth_exponent`), ``w_n`` (eq. 4) and
-    ``w_l = exp(-|l(p) - l(q)| * guide_inverse_scale(p))`` (eq. 5), and ``w = 0`` where the
-    signal's mode at ``q`` differs from ``p``'s; the centre has weight ``h``.
+    ``w_l = exp(-|l(p) - l(q)| * guide_inverse_scale(p))`` (eq. 5; for a ``symmetric``
+    signal ``* sqrt(guide_inverse_scale(p) guide_inverse_scale(q))``), and ``w = 0`` where
+    the signal's mode at ``q`` differs from ``p``'s; the centre has weight ``h``.
     ``c' = sum(w c) / sum(w)`` (eq. 1), ``Var' = sum(w^2 Var) / (sum w)^2`` (eq. 2).
     Background centres (zero normal) receive weight only from themselves.
     (Vectorised over pixels, taps in an outer loop: the per-pixel form of the same sums
@@ -1085,6 +1094,9 @@ def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
     n = np.asarray(normal, dtype=F64)
     height, width = z.shape
     py, px = np.mgrid[0:height, 0:width]
+    both = np.zeros((len(v_in), 1, 1), dtype=bool)
+    if symmetric is not None:
+        both[:, 0, 0] = np.asarray(symmetric, dtype=bool)
     sum_w = np.zeros_like(v_in)
     sum_c = np.zeros_like(c_in)
     sum_w2v = np.zeros_like(v_in)
@@ -1105,7 +1117,8 @@ def atrous_iteration(illumination: np.ndarray, variance: np.ndarray,
                 w_z = np.abs(z_p - z[qy, qx]) / (
                     sigma_depth * np.abs(gx * ox + gy * oy) + DEPTH_EPSILON * z_p
                 )
-                w_l = np.abs(lum - lum[:, qy, qx]) * inv
+                w_l = np.abs(lum - lum[:, qy, qx]) * np.where(
+                    both, np.sqrt(inv * inv[:, qy, qx]), inv)
                 same_mode = mode == mode[:, qy, qx]
                 w = np.where(facing & same_mode, h * w_n * np.exp(-(w_z + w_l)), 0.0)
             sum_w += w
@@ -1810,7 +1823,7 @@ class ReferenceDenoiser:
             colour, variance = atrous_iteration(colour, variance, guides[0], radiance_mode,
                                                 guides[1], geom.depth, geom.ddx, geom.ddy,
                                                 geom.unit_normal, step, p.sigma_depth,
-                                                p.sigma_normal)
+                                                p.sigma_normal, symmetric_stops(p, clean))
             if iteration == feedback:
                 colour_history = colour
         if feedback >= 0 and p.moving_feedback_share < 1.0:
@@ -2047,7 +2060,8 @@ class _Capturing(ReferenceDenoiser):
                                        guide_blur_modes(p, radiance_mode))
         filtered, _ = atrous_iteration(unfiltered, variance, guides[0], radiance_mode,
                                        guides[1], geom.depth, geom.ddx, geom.ddy,
-                                       geom.unit_normal, 1, p.sigma_depth, p.sigma_normal)
+                                       geom.unit_normal, 1, p.sigma_depth, p.sigma_normal,
+                                       symmetric_stops(p, clean))
         motion = np.asarray(clean.motion, dtype=F64)
         still = (np.abs(motion[0]) < STATIC_MOTION) & (np.abs(motion[1]) < STATIC_MOTION)
         share = np.where(still, STATIC_FILTERED_SHARE, 0.0)

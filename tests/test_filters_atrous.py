@@ -227,6 +227,90 @@ def test_the_blurred_guide_keeps_the_mean_of_one_sample_noise() -> None:
     assert abs(1.0 - blurred) < 0.5 * (1.0 - sharp)  # measured 0.97
 
 
+@pytest.mark.parametrize(("step", "width", "symmetric"), [
+    (1, 23, (True, False)), (2, 17, (False, True)), (4, 21, (True,)), (1, 22, (True, False, True)),
+    (2, 15, (True, True, True)),
+])
+def test_symmetric_stops_match_the_equations(step: int, width: int,
+                                             symmetric: tuple[bool, ...]) -> None:
+    """A symmetric signal's plane holds -sqrt(inverse scale), and its taps are stopped at the
+    product of both pixels' roots (``ref.atrous_iteration`` with ``symmetric``); the other
+    signals of the group are filtered as without it, bit for bit."""
+    num_signals, height = len(symmetric), 14
+    scene = _scene(num_signals, height, width, seed=3 * step + width)
+    # Deviations that differ from pixel to pixel by up to 30x: the two stops differ.
+    scene["variance"] *= np.random.default_rng(width).uniform(0.03, 30.0, scene["variance"].shape
+                                                             ).astype(F32)
+    guides = {}
+    for flags in (symmetric, (False,) * num_signals):
+        luminance = np.empty((num_signals, height, width), dtype=F32)
+        inverse_scale = np.empty_like(luminance)
+        luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                              scene["depth"], F32(4.0), REC709, luminance, inverse_scale,
+                              symmetric=flags)
+        out_c = np.full_like(scene["illumination"], np.nan)
+        out_v = np.full_like(scene["variance"], np.nan)
+        atrous_iteration(scene["illumination"], scene["variance"], luminance, inverse_scale,
+                         scene["depth"], scene["ddx"], scene["ddy"], scene["normal"], step,
+                         1.0, 128.0, True, out_c, out_v)
+        guides[flags] = (luminance, inverse_scale, out_c, out_v)
+    luminance, roots, out_c, out_v = guides[symmetric]
+    plain = guides[(False,) * num_signals]
+    np.testing.assert_array_equal(luminance, plain[0])
+    for s, flag in enumerate(symmetric):
+        if flag:
+            assert np.all(roots[s] < 0)
+            np.testing.assert_allclose(roots[s] * roots[s], plain[1][s], rtol=1e-6)
+            assert np.max(np.abs(out_c[s] - plain[2][s])) > 0.01  # the stop changed
+        else:
+            np.testing.assert_array_equal(roots[s], plain[1][s])
+            np.testing.assert_array_equal(out_c[s], plain[2][s])
+            np.testing.assert_array_equal(out_v[s], plain[3][s])
+    want_c, want_v = ref.atrous_iteration(
+        scene["illumination"], scene["variance"], np.abs(luminance), luminance < 0, plain[1],
+        scene["depth"], scene["ddx"], scene["ddy"], scene["normal"], step, 1.0, 128.0,
+        symmetric)
+    np.testing.assert_allclose(out_c, want_c, rtol=2e-4, atol=1e-6)
+    np.testing.assert_allclose(out_v, want_v, rtol=4e-4, atol=1e-7)
+
+
+def test_the_symmetric_stop_keeps_the_mean_of_one_sample_noise() -> None:
+    """Skewed one-sample light whose variance estimate follows each sample (a bright sample's
+    own moments make its deviation large, a dim one's small, as a short history's do): with
+    the centre's deviation alone a bright pixel's stop takes in its dim neighbours while
+    theirs shut it out, and its light is lost; the symmetric stop weighs each pair alike.
+    Five iterations of a flat plane, the guide blurred as in ``default``."""
+    rng = np.random.default_rng(9)
+    height, width = 64, 96
+    bright = rng.uniform(size=(1, 1, height, width)) < 0.2
+    illumination = np.ascontiguousarray(
+        np.broadcast_to(np.where(bright, 4.0, 0.25), (1, 3, height, width)), dtype=F32)
+    depth = np.full((height, width), 5.0, dtype=F32)
+    zero = np.zeros_like(depth)
+    normal = np.zeros((3, height, width), dtype=F32)
+    normal[2] = -1.0
+    mode = np.zeros((height, width), dtype=np.uint16)
+
+    def mean_after_atrous(symmetric: bool) -> float:
+        colour = illumination
+        variance = np.ascontiguousarray(0.5 * illumination[:, 1] ** 2, dtype=F32)
+        for iteration in range(5):
+            guide = np.empty((1, height, width), dtype=F32)
+            inverse_scale = np.empty_like(guide)
+            luminance_stop_guides(colour, variance, mode, 0, depth, 1.5, REC709, guide,
+                                  inverse_scale, blur=True, symmetric=symmetric)
+            out_c = np.empty_like(colour)
+            out_v = np.empty_like(variance)
+            atrous_iteration(colour, variance, guide, inverse_scale, depth, zero, zero, normal,
+                             1 << iteration, 1.0, 128.0, True, out_c, out_v)
+            colour, variance = out_c, out_v
+        return float(colour[0, 1, 8:-8, 8:-8].mean() / illumination[0, 1, 8:-8, 8:-8].mean())
+
+    own, symmetric = mean_after_atrous(False), mean_after_atrous(True)
+    assert own < 0.95  # measured 0.83
+    assert abs(1.0 - symmetric) < 0.5 * (1.0 - own)  # measured 0.98
+
+
 @pytest.mark.parametrize(("step", "width"), [(1, 20), (2, 9)])
 def test_three_signals_in_one_pass_equal_a_pair_and_a_single(step: int, width: int) -> None:
     """The triple loop shares only the geometric weights: each signal's result is the one

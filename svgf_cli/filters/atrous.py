@@ -9,6 +9,10 @@ kernel ``h = (1/16, 1/4, 3/8, 1/4, 1/16)`` dilated by ``s``, each tap weighted b
 * ``w_l = exp(-|l(p) - l(q)| / (sigma_l sqrt(g3x3(Var(l(p))) + (eps l(p))^2)))``  (eq. 5)
 * ``w = 0`` between pixels of different demodulation modes (``filters.modulate``)
 
+A symmetric signal (``mixed_symmetric_stop``) divides eq. 5's luminance difference by the
+geometric mean of the two pixels' deviations instead of the centre's alone, so ``w_l(p, q)
+= w_l(q, p)``.
+
 ``c' = sum(h w c) / sum(h w)`` (eq. 1) and the variance is carried with squared weights,
 ``Var' = sum(h^2 w^2 Var) / (sum h w)^2`` (eq. 2). ``g3x3`` is the 3x3 Gaussian (1/4 centre,
 1/8 edge, 1/16 corner), renormalised over in-image surface pixels; it only drives w_l. The
@@ -82,6 +86,7 @@ def luminance_stop_guides(
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
     blur: bool = False,
+    symmetric: bool | Sequence[bool] = False,
 ) -> None:
     """Per pixel and signal: the guide luminance and the inverse scale of eq. 5.
 
@@ -99,6 +104,10 @@ def luminance_stop_guides(
     in-image surface pixels of the pixel's own mode (a pixel with none keeps ``l``). A
     one-sample ``l`` in the stop weighs each tap by its own noise: bright samples count
     less than dark ones, and the filter darkens (``luminance_guide_blur``).
+    ``symmetric`` (one for all or one per signal): such a signal's plane holds
+    ``-sqrt(inverse scale)``, and the a-trous stops a tap at the product of the two
+    pixels' roots, the inverse of the geometric mean of their deviations
+    (``mixed_symmetric_stop``; a positive value is the centre's own, eq. 5 as published).
     Outputs must not overlap the inputs (checked).
     """
     num_signals = illumination.shape[0]
@@ -110,9 +119,11 @@ def luminance_stop_guides(
         {"out_luminance": out_luminance, "out_inverse_scale": out_inverse_scale},
         {"illumination": illumination, "variance": variance, "mode": mode, "depth": depth},
     )
+    roots = np.ascontiguousarray(np.broadcast_to(np.asarray(symmetric, dtype=np.bool_),
+                                                 (num_signals,)))
     _guide_rows(illumination, variance, mode, np.int64(first_signal), depth, sigmas,
                 float32_weights(luminance_weights), out_luminance, out_inverse_scale,
-                bool(blur), np.int64(get_num_threads()))
+                bool(blur), roots, np.int64(get_num_threads()))
 
 
 @njit(parallel=True, **_JIT)
@@ -127,6 +138,7 @@ def _guide_rows(
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
     blur: bool,
+    symmetric: np.ndarray,
     threads: int,
 ) -> None:
     """All rows of :func:`luminance_stop_guides` in parallel."""
@@ -142,7 +154,7 @@ def _guide_rows(
         _luminance_row(y, sums, illumination, mode, first_signal, depth, luminance_weights,
                        blur, guide)
         _guide_row(y, sums, variance, mode, first_signal, depth, sigma_luminance, guide,
-                   out_luminance, out_inverse_scale)
+                   symmetric, out_luminance, out_inverse_scale)
 
 
 @noalias_njit(**_JIT)
@@ -220,11 +232,13 @@ def _guide_row(
     depth: np.ndarray,
     sigma_luminance: np.ndarray,
     guide: np.ndarray,
+    symmetric: np.ndarray,
     out_luminance: np.ndarray,
     out_inverse_scale: np.ndarray,
 ) -> None:
     """Row ``y``: the three taps of each 3x3 kernel row in one loop (as in the a-trous),
-    with the row's ``guide`` luminance per signal.
+    with the row's ``guide`` luminance per signal (a ``symmetric`` signal's inverse scale
+    written as its negated square root).
 
     One or two signals fill ``sums[1]`` and ``sums[2]`` (a single signal twice), a third
     also ``sums[3]``.
@@ -287,6 +301,10 @@ def _guide_row(
             floor = RELATIVE_DEVIATION_FLOOR * lum
             scale = sigma * np.sqrt(max(filtered, _ZERO) + floor * floor)
             out_inverse_scale[s, uy, x] = _ONE / max(scale, _MIN_SCALE)
+        if symmetric[s]:
+            row = out_inverse_scale[s, uy]
+            for i in range(width):
+                row[i] = -np.sqrt(row[i])
 
 
 def zero_signals(illumination: np.ndarray, variance: np.ndarray) -> np.ndarray:
@@ -674,15 +692,20 @@ def _segment(
             sums[0, 0, a], sums[0, 1, a], sums[0, 2, a], sums[0, 3, a], sums[0, 4, a],
             sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a],
         )
-        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                   depth, normal, uq,
                    U(x + o0), h0, f0, sigma_depth, normal_log_scale, second)
-        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                   depth, normal, uq,
                    U(x + o1), h1, f1, sigma_depth, normal_log_scale, second)
-        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                   depth, normal, uq,
                    U(x + o2), h2, _ZERO, sigma_depth, normal_log_scale, second)
-        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                   depth, normal, uq,
                    U(x + o3), h3, f3, sigma_depth, normal_log_scale, second)
-        acc = _tap(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                   depth, normal, uq,
                    U(x + o4), h4, f4, sigma_depth, normal_log_scale, second)
         sums[0, 0, a], sums[0, 1, a], sums[0, 2, a], sums[0, 3, a], sums[0, 4, a] = acc[:5]
         sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a] = acc[5:]
@@ -695,6 +718,7 @@ def _tap(
     illumination: np.ndarray,
     variance: np.ndarray,
     guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
     depth: np.ndarray,
     normal: np.ndarray,
     uq: np.uint64,
@@ -722,6 +746,12 @@ def _tap(
     weight = kernel if cosine > _ZERO else _ZERO
     guide0 = guide_luminance[0, uq, qx]
     guide1 = guide_luminance[second, uq, qx]
+    # A symmetric signal's (negative) roots: the product of the two pixels'. Loaded for
+    # every signal: a load under the condition would keep the loop from vectorizing.
+    root0 = guide_inverse_scale[0, uq, qx]
+    root1 = guide_inverse_scale[second, uq, qx]
+    inv0 = inv0 if inv0 > _ZERO else inv0 * root0
+    inv1 = inv1 if inv1 > _ZERO else inv1 * root1
     w0 = weight * fast_exp(shared - abs(lum0 - guide0) * inv0)
     w1 = weight * fast_exp(shared - abs(lum1 - guide1) * inv1)
     # The guide's sign is the demodulation mode: modes never exchange weight.
@@ -788,15 +818,20 @@ def _segment3(
             sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a],
             sums[2, 0, a], sums[2, 1, a], sums[2, 2, a], sums[2, 3, a], sums[2, 4, a],
         )
-        acc = _tap3(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap3(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                    depth, normal, uq,
                     U(x + o0), h0, f0, sigma_depth, normal_log_scale)
-        acc = _tap3(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap3(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                    depth, normal, uq,
                     U(x + o1), h1, f1, sigma_depth, normal_log_scale)
-        acc = _tap3(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap3(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                    depth, normal, uq,
                     U(x + o2), h2, _ZERO, sigma_depth, normal_log_scale)
-        acc = _tap3(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap3(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                    depth, normal, uq,
                     U(x + o3), h3, f3, sigma_depth, normal_log_scale)
-        acc = _tap3(acc, centre, illumination, variance, guide_luminance, depth, normal, uq,
+        acc = _tap3(acc, centre, illumination, variance, guide_luminance, guide_inverse_scale,
+                    depth, normal, uq,
                     U(x + o4), h4, f4, sigma_depth, normal_log_scale)
         sums[0, 0, a], sums[0, 1, a], sums[0, 2, a], sums[0, 3, a], sums[0, 4, a] = acc[:5]
         sums[1, 0, a], sums[1, 1, a], sums[1, 2, a], sums[1, 3, a], sums[1, 4, a] = acc[5:10]
@@ -810,6 +845,7 @@ def _tap3(
     illumination: np.ndarray,
     variance: np.ndarray,
     guide_luminance: np.ndarray,
+    guide_inverse_scale: np.ndarray,
     depth: np.ndarray,
     normal: np.ndarray,
     uq: np.uint64,
@@ -830,6 +866,12 @@ def _tap3(
     guide0 = guide_luminance[0, uq, qx]
     guide1 = guide_luminance[1, uq, qx]
     guide2 = guide_luminance[2, uq, qx]
+    root0 = guide_inverse_scale[0, uq, qx]
+    root1 = guide_inverse_scale[1, uq, qx]
+    root2 = guide_inverse_scale[2, uq, qx]
+    inv0 = inv0 if inv0 > _ZERO else inv0 * root0
+    inv1 = inv1 if inv1 > _ZERO else inv1 * root1
+    inv2 = inv2 if inv2 > _ZERO else inv2 * root2
     w0 = weight * fast_exp(shared - abs(lum0 - guide0) * inv0)
     w1 = weight * fast_exp(shared - abs(lum1 - guide1) * inv1)
     w2 = weight * fast_exp(shared - abs(lum2 - guide2) * inv2)

@@ -278,8 +278,10 @@ class SVGFParams:
         " svgf/params) = from the image's shorter side: 0.5 below 120 pixels, 1 below 320, 1.75"
         " below 640, else 3.", group="atrous", valid=Range(0, low_open=True, auto=AUTO_STOP_SCALE))
     luminance_guide_blur: bool = _p(False, "The a-trous luminance stops compare 3x3 Gaussian"
-        " means of luminance (as the variance's), not each pixel's own one-sample value, whose"
-        " noise weighs the taps: the filter darkens.", group="atrous")
+        " means of luminance, not one-sample values whose noise weighs the taps.", group="atrous")
+    mixed_symmetric_stop: bool = _p(False, "The a-trous luminance stop of a mixed signal (a"
+        " combined colour) divides by the geometric mean of both pixels' deviations, not the"
+        " centre's alone: symmetric weights.", group="atrous")
     # Demodulation (paper section 4).
     albedo_epsilon: float = _p(
         1e-3,
@@ -443,6 +445,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("luminance_guide_blur", True, "a one-sample luminance in the stop gives a"
                   " bright sample less weight than a dark one: the filtered frame was 2-7 %"
                   f" darker than the truth: {_ALG}#the-luminance-stops-guide"),
+        Departure("mixed_symmetric_stop", True, "with the centre's deviation alone a bright"
+                  " sample's own stop is loose and its dim neighbours' tight: its light was"
+                  f" lost: {_ALG}#a-symmetric-stop-for-mixed-signals"),
         Departure("glossy_history_clamp", 1.0, "reflections move with what they show, so"
                   f" their reprojected history is unreliable: {_GLOSSY}"),
         Departure("sigma_luminance", 2.0, "with the unfiltered history and the warm start,"

@@ -97,13 +97,14 @@ def atrous_step(ctx: FrameContext, filtered: np.ndarray, filtered_variance: np.n
     guide_inverse_scale = ctx.plane("guide_inverse_scale")
     scale = luminance_stop_scale_for(p, ctx.frame.height, ctx.frame.width)
     sigmas = [scale * signal_sigma_luminance(p, signal) for signal in ctx.frame.signals]
+    symmetric = [symmetric_stop(p, signal) for signal in ctx.frame.signals]
     span = filtered_span(zero)
     for part_of_span in signal_groups(span.stop - span.start):
         group = slice(span.start + part_of_span.start, span.start + part_of_span.stop)
         luminance_stop_guides(
             filtered[group], filtered_variance[group], mode, group.start, depth,
             sigmas[group], ctx.weights, guide_luminance[group], guide_inverse_scale[group],
-            p.luminance_guide_blur,
+            p.luminance_guide_blur, symmetric[group],
         )
         atrous_iteration(
             filtered[group], filtered_variance[group], guide_luminance[group],
@@ -125,6 +126,12 @@ def signal_sigma_luminance(params: SVGFParams, signal: Signal) -> float:
     if signal.mixed:
         return params.mixed_sigma_luminance or params.sigma_luminance
     return params.sigma_luminance
+
+
+def symmetric_stop(params: SVGFParams, signal: Signal) -> bool:
+    """Whether ``signal``'s luminance stop is symmetric (``mixed_symmetric_stop``): mixed
+    signals' (direct and indirect light together, not glossy)."""
+    return params.mixed_symmetric_stop and signal.mixed and not signal.glossy
 
 
 def signal_groups(num_signals: int) -> list[slice]:
