@@ -190,39 +190,47 @@ def test_blurred_luminance_guides_match_the_reference(num_signals: int, width: i
     assert np.max(np.abs(np.abs(luminance) - across)) > 0.05
 
 
-def test_the_blurred_guide_keeps_the_mean_of_one_sample_noise() -> None:
-    """One-sample light is skewed (a few bright samples among dark ones): weighed by their
-    own luminance the bright samples count less and the a-trous output is darker than its
-    input; compared through 3x3 means it keeps far more of the mean. Five iterations of a
-    flat, lit plane at the stops' default sigma_l."""
-    rng = np.random.default_rng(7)
-    height, width = 64, 96
-    # Light of mean 1: 0.25 on 80 % of the samples, 4 on the rest.
-    bright = rng.uniform(size=(1, 1, height, width)) < 0.2
-    illumination = np.broadcast_to(np.where(bright, 4.0, 0.25), (1, 3, height, width))
-    illumination = np.ascontiguousarray(illumination, dtype=F32)
+def _skewed_plane(seed: int) -> np.ndarray:
+    """(1, 3, 64, 96) one-sample light of mean 1 on a flat plane: 0.25 on 80 % of the
+    samples, 4 on the rest."""
+    bright = np.random.default_rng(seed).uniform(size=(1, 1, 64, 96)) < 0.2
+    return np.ascontiguousarray(np.broadcast_to(np.where(bright, 4.0, 0.25), (1, 3, 64, 96)),
+                                dtype=F32)
+
+
+def _mean_after_five_iterations(illumination: np.ndarray, variance: np.ndarray,
+                                sigma: float, blur: bool, symmetric: bool = False) -> float:
+    """The a-trous output's mean over the inside of a flat, facing plane (:func:`_skewed_plane`)
+    after five iterations, as a share of the input's."""
+    height, width = illumination.shape[2:]
     depth = np.full((height, width), 5.0, dtype=F32)
     zero = np.zeros_like(depth)
     normal = np.zeros((3, height, width), dtype=F32)
     normal[2] = -1.0
     mode = np.zeros((height, width), dtype=np.uint16)
+    colour = illumination
+    for iteration in range(5):
+        guide = np.empty((1, height, width), dtype=F32)
+        inverse_scale = np.empty_like(guide)
+        luminance_stop_guides(colour, variance, mode, 0, depth, sigma, REC709, guide,
+                              inverse_scale, blur=blur, symmetric=symmetric)
+        out_c = np.empty_like(colour)
+        out_v = np.empty_like(variance)
+        atrous_iteration(colour, variance, guide, inverse_scale, depth, zero, zero, normal,
+                         1 << iteration, 1.0, 128.0, True, out_c, out_v)
+        colour, variance = out_c, out_v
+    return float(colour[0, 1, 8:-8, 8:-8].mean() / illumination[0, 1, 8:-8, 8:-8].mean())
 
-    def mean_after_atrous(blur: bool) -> float:
-        colour = illumination
-        variance = np.full((1, height, width), np.var(illumination[0, 0]), dtype=F32)
-        for iteration in range(5):
-            guide = np.empty((1, height, width), dtype=F32)
-            inverse_scale = np.empty_like(guide)
-            luminance_stop_guides(colour, variance, mode, 0, depth, 2.0, REC709, guide,
-                                  inverse_scale, blur=blur)
-            out_c = np.empty_like(colour)
-            out_v = np.empty_like(variance)
-            atrous_iteration(colour, variance, guide, inverse_scale, depth, zero, zero, normal,
-                             1 << iteration, 1.0, 128.0, True, out_c, out_v)
-            colour, variance = out_c, out_v
-        return float(colour[0, 1, 8:-8, 8:-8].mean() / illumination[0, 1, 8:-8, 8:-8].mean())
 
-    sharp, blurred = mean_after_atrous(False), mean_after_atrous(True)
+def test_the_blurred_guide_keeps_the_mean_of_one_sample_noise() -> None:
+    """One-sample light is skewed (a few bright samples among dark ones): weighed by their
+    own luminance the bright samples count less and the a-trous output is darker than its
+    input; compared through 3x3 means it keeps far more of the mean. Five iterations of a
+    flat, lit plane at the stops' default sigma_l."""
+    illumination = _skewed_plane(7)
+    variance = np.full((1, 64, 96), np.var(illumination[0, 0]), dtype=F32)
+    sharp = _mean_after_five_iterations(illumination, variance, 2.0, blur=False)
+    blurred = _mean_after_five_iterations(illumination, variance, 2.0, blur=True)
     assert sharp < 0.9  # measured 0.78
     assert abs(1.0 - blurred) < 0.5 * (1.0 - sharp)  # measured 0.97
 
@@ -280,33 +288,11 @@ def test_the_symmetric_stop_keeps_the_mean_of_one_sample_noise() -> None:
     the centre's deviation alone a bright pixel's stop takes in its dim neighbours while
     theirs shut it out, and its light is lost; the symmetric stop weighs each pair alike.
     Five iterations of a flat plane, the guide blurred as in ``default``."""
-    rng = np.random.default_rng(9)
-    height, width = 64, 96
-    bright = rng.uniform(size=(1, 1, height, width)) < 0.2
-    illumination = np.ascontiguousarray(
-        np.broadcast_to(np.where(bright, 4.0, 0.25), (1, 3, height, width)), dtype=F32)
-    depth = np.full((height, width), 5.0, dtype=F32)
-    zero = np.zeros_like(depth)
-    normal = np.zeros((3, height, width), dtype=F32)
-    normal[2] = -1.0
-    mode = np.zeros((height, width), dtype=np.uint16)
-
-    def mean_after_atrous(symmetric: bool) -> float:
-        colour = illumination
-        variance = np.ascontiguousarray(0.5 * illumination[:, 1] ** 2, dtype=F32)
-        for iteration in range(5):
-            guide = np.empty((1, height, width), dtype=F32)
-            inverse_scale = np.empty_like(guide)
-            luminance_stop_guides(colour, variance, mode, 0, depth, 1.5, REC709, guide,
-                                  inverse_scale, blur=True, symmetric=symmetric)
-            out_c = np.empty_like(colour)
-            out_v = np.empty_like(variance)
-            atrous_iteration(colour, variance, guide, inverse_scale, depth, zero, zero, normal,
-                             1 << iteration, 1.0, 128.0, True, out_c, out_v)
-            colour, variance = out_c, out_v
-        return float(colour[0, 1, 8:-8, 8:-8].mean() / illumination[0, 1, 8:-8, 8:-8].mean())
-
-    own, symmetric = mean_after_atrous(False), mean_after_atrous(True)
+    illumination = _skewed_plane(9)
+    variance = np.ascontiguousarray(0.5 * illumination[:, 1] ** 2, dtype=F32)
+    own = _mean_after_five_iterations(illumination, variance, 1.5, blur=True)
+    symmetric = _mean_after_five_iterations(illumination, variance, 1.5, blur=True,
+                                            symmetric=True)
     assert own < 0.95  # measured 0.83
     assert abs(1.0 - symmetric) < 0.5 * (1.0 - own)  # measured 0.98
 
