@@ -492,14 +492,31 @@ def test_box_filter_is_bit_identical_to_its_running_sums(radius: int,
                           box_running_sums(planes, radius).view(np.uint32))
 
 
-@pytest.mark.parametrize(("radius", "shape"), [(3, (7, 150)), (1, (20, 64)), (4, (3, 2))])
+def tent_running_sums(planes: np.ndarray, radius: int) -> np.ndarray:
+    """The tent mean of filters.shares.covered_average: box_running_sums of its own
+    float32 result (each box rounded once, as the kernel rounds it)."""
+    return box_running_sums(box_running_sums(planes, radius), radius)
+
+
+def clipped_box_float64(planes: np.ndarray, radius: int) -> np.ndarray:
+    """The clipped box mean by its definition, in float64: each window's own mean."""
+    _, height, width = planes.shape
+    out = np.empty(planes.shape)
+    for y, x in np.ndindex(height, width):
+        window = planes[:, max(y - radius, 0):y + radius + 1, max(x - radius, 0):x + radius + 1]
+        out[:, y, x] = window.reshape(planes.shape[0], -1).mean(axis=1)
+    return out
+
+
+@pytest.mark.parametrize(("radius", "shape"), [(2, (7, 150)), (1, (20, 64)), (4, (3, 2)),
+                                               (2, (40, 33))])
 def test_covered_average_is_the_numpy_steps_bit_for_bit(radius: int,
                                                          shape: tuple[int, int]) -> None:
-    """filters.shares.covered_average in one pass, then the colour (compose_passes): the box
-    mean of the stored light times the colour's surface (float64 running sums, once
-    rounded), over the surface's own box mean where that is above 0, times the colour;
-    each step rounded to float32 as the numpy expression rounds it. Windows with no
-    coloured pixel keep their 0."""
+    """filters.shares.covered_average, then the colour (compose_passes): the tent mean (two
+    box means, each float64 running sums rounded once to float32, the second in place) of
+    the stored light times the colour's surface, over the surface's own tent mean where that
+    is above 0, times the colour; each step rounded to float32 as the numpy expression
+    rounds it. Windows with no coloured pixel keep their 0."""
     from svgf_cli.filters.shares import covered_average
 
     rng = np.random.default_rng(radius)
@@ -509,51 +526,84 @@ def test_covered_average_is_the_numpy_steps_bit_for_bit(radius: int,
         np.float32)
     colour[:, :, : shape[1] // 3] = 0.0  # a band wider than the window: coverage 0 there
     surface = (colour > 0).any(axis=0).astype(np.float32)
-    coverage = box_running_sums(surface[None], radius)[0]
-    want = box_running_sums(stored * surface, radius)
+    coverage = tent_running_sums(surface[None], radius)[0]
+    want = tent_running_sums(stored * surface, radius)
     np.divide(want, coverage, out=want, where=coverage > 0)
     want *= colour
     got = np.empty_like(stored)
     covered_average(stored, surface, coverage, radius, got)
+    assert not got[:, :, : shape[1] // 3 - 2 * radius].any()  # beyond the tent's reach
     got *= colour
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
-    assert not got[:, :, : shape[1] // 3 - radius].any()
 
 
 def test_covered_average_and_spread_match_float64_references() -> None:
-    """filters.shares.covered_average is the covered box mean (bit for bit: the same
-    float64 sums, once rounded, over the coverage); covered_spread is the standard
-    error of that average: the spread of the covered values about it over the square root
-    of their count (float64 reference, float32 tolerance)."""
+    """filters.shares.covered_average is the covered tent mean T(stored x surface) /
+    T(surface), T the clipped box mean twice (float64 reference by each window's own mean,
+    float32 tolerance); covered_spread is the standard error of that average: the covered
+    values' spread about it over the square root of the samples they are worth."""
+    from svgf_cli.filters.composable import SHARE_TENT_SAMPLES
     from svgf_cli.filters.shares import covered_average, covered_spread
 
     rng = np.random.default_rng(11)
-    shape, radius = (13, 40), 3
+    shape, radius = (13, 40), 2
     stored = (rng.random((3, *shape)) * 4.0).astype(np.float32)
     colour = np.where(rng.random((3, *shape)) < 0.5, 0.0, rng.random((3, *shape))).astype(
         np.float32)
     colour[:, :, :12] = 0.0
     surface = (colour > 0).any(axis=0).astype(np.float32)
-    coverage = box_running_sums(surface[None], radius)[0]
+    coverage = tent_running_sums(surface[None], radius)[0]
     average = np.empty_like(stored)
     covered_average(stored, surface, coverage, radius, average)
-    want_average = box_running_sums(stored * surface, radius)
-    np.divide(want_average, coverage, out=want_average, where=coverage > 0)
-    assert np.array_equal(average.view(np.uint32), want_average.view(np.uint32))
     spread = np.empty_like(stored)
-    covered_spread(stored, surface, coverage, average, radius, 2.0, spread)
-    pad = np.pad(stored.astype(np.float64), ((0, 0), (radius, radius), (radius, radius)))
-    mask = np.pad(surface.astype(np.float64), radius)
-    want = np.zeros(stored.shape)
-    for c, y, x in np.ndindex(*stored.shape):
-        values = pad[c, y:y + 2 * radius + 1, x:x + 2 * radius + 1]
-        kept = values[mask[y:y + 2 * radius + 1, x:x + 2 * radius + 1] > 0]
-        if kept.size:
-            mean = kept.mean()
-            count = max(coverage[y, x] * (2 * radius + 1) ** 2, 1.0)
-            want[c, y, x] = 2.0 * np.sqrt(max((kept ** 2).mean() - mean ** 2, 0.0) / count)
-    np.testing.assert_allclose(spread, want, rtol=2e-3, atol=1e-5)
-    assert not spread[:, :, : 12 - radius].any()  # no coloured pixel in reach: 0
+    covered_spread(stored, surface, coverage, average, radius, 2.0, SHARE_TENT_SAMPLES, spread)
+
+    def tent(planes: np.ndarray) -> np.ndarray:
+        return clipped_box_float64(clipped_box_float64(planes.astype(np.float64), radius),
+                                   radius)
+
+    cover = tent(surface[None])[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = np.where(cover > 0, tent(stored * surface) / cover, 0.0)
+        second = np.where(cover > 0, tent(stored.astype(np.float64) ** 2 * surface) / cover, 0.0)
+    want = 2.0 * np.sqrt(np.maximum(second - mean ** 2, 0.0)
+                         / np.maximum(cover * SHARE_TENT_SAMPLES, 1.0))
+    np.testing.assert_allclose(average, mean, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(spread, want, rtol=2e-3, atol=1e-4)
+    assert not spread[:, :, : 12 - 2 * radius].any()  # no coloured pixel in reach: 0
+
+
+def test_the_share_tent_weighs_nearer_pixels_more() -> None:
+    """Away from the borders the shares' tent mean is the (4 r + 1)^2 window weighted by
+    t(dy) t(dx), t(d) = 2 r + 1 - |d|: a lone bright sample on a covered surface leaves a
+    peak falling off to its window's edge (a 7x7 box left a flat square: cycles/dof's
+    GlossInd came out in blocks), and SHARE_TENT_SAMPLES is 1 / sum w^2 of those weights."""
+    from svgf_cli.filters.composable import (
+        SHARE_TENT_RADIUS,
+        SHARE_TENT_SAMPLES,
+        tent_filter,
+    )
+    from svgf_cli.filters.shares import covered_average
+
+    r = SHARE_TENT_RADIUS
+    size = 8 * r + 3
+    stored = np.zeros((3, size, size), np.float32)
+    centre = size // 2
+    stored[:, centre, centre] = [8.0, 4.0, 1.0]
+    surface = np.ones((size, size), np.float32)
+    coverage = tent_filter(surface[None])[0]
+    got = np.empty_like(stored)
+    covered_average(stored, surface, coverage, r, got)
+    t = (2 * r + 1 - np.abs(np.arange(-2 * r, 2 * r + 1))).astype(np.float64)
+    weights = np.outer(t, t) / t.sum() ** 2
+    want = np.zeros((size, size))
+    want[centre - 2 * r:centre + 2 * r + 1, centre - 2 * r:centre + 2 * r + 1] = weights
+    for c, value in enumerate((8.0, 4.0, 1.0)):
+        np.testing.assert_allclose(got[c], value * want, rtol=1e-5, atol=1e-7)
+    row = got[0, centre, centre:centre + 2 * r + 2]
+    assert np.all(np.diff(row) < 0) and row[-1] == 0.0  # falling to the window's edge
+    assert row[0] > 1.5 * row[r] and row[2 * r] < 0.25 * row[0]  # a peak, not a plateau
+    assert pytest.approx(1.0 / (weights ** 2).sum(), rel=1e-12) == SHARE_TENT_SAMPLES
 
 
 def test_blend_previous_matches_a_float64_reference() -> None:

@@ -15,7 +15,7 @@ applies one set of weights to every AOV):
 * **light passes**: each pass belongs to the filtered signal built from it (Cycles' ``DiffDir``
   to ``diffuse_direct``...); a signal holding several passes (``specular``: glossy and
   transmission, direct and indirect) is split by the passes' stored light averaged over the
-  7x7 pixels that have its colour pass, times the pixel's own colour pass; the passes are
+  pixels that have its colour pass (a 9x9 tent), times the pixel's own colour pass; the passes are
   then scaled together so that they add up to ``C - emission`` (the pixel filter and despike
   stages act on the colour after the signals are summed), and a pass stored divided by its
   colour is divided back. Where that colour is 0, next to a pixel where it is not, such a
@@ -61,11 +61,22 @@ from svgf_cli.filters.shares import (
 from svgf_cli.frame import DenoisedFrame, Frame, LightLayer, LightLayers, Signal
 
 F32 = np.float32
-# Box radius of the shares splitting one filtered signal among its passes, and of the
-# fallback shares (pixels): 7x7. Measured on testdata/cycles/production (bench/
-# light_layers.py): radius 2 leaves GlossInd's temporal error above the input's (0.063 against
-# 0.057), radius 4 GlossDir's relMSE at 0.30x the input's; radius 3: 0.28x and 0.0565.
+# Box radius of the fallback shares (pixels): 7x7. Measured on testdata/cycles/production
+# (bench/light_layers.py), when it also averaged the passes splitting a signal: radius 2 left
+# GlossInd's temporal error above the input's (0.063 against 0.057), radius 4 GlossDir's
+# relMSE at 0.30x the input's; radius 3: 0.28x and 0.0565.
 SHARE_RADIUS = 3
+# The passes splitting one filtered signal are averaged over a tent, two box means of this
+# radius (a 9x9 window, weights (5 - |dy|) (5 - |dx|)): a 7x7 box left a lone bright sample's
+# share as a flat square (cycles/dof's GlossInd: blocks). Tent radius 2 against that box,
+# relMSE / temporal error (bench/light_layers.py): dof GlossInd 0.168 -> 0.156 / 0.068 ->
+# 0.062, GlossDir 0.361 -> 0.349; production GlossDir 0.204 -> 0.192, GlossInd temporal
+# 0.045 -> 0.040; radius 3 (13x13) blurred GlossDir (dof 0.440, production 0.208).
+SHARE_TENT_RADIUS = 2
+# How many samples the tent's weights are worth (1 / sum of the squared weights): 54.
+_TENT = 2 * SHARE_TENT_RADIUS + 1 - np.abs(np.arange(-2 * SHARE_TENT_RADIUS,
+                                                     2 * SHARE_TENT_RADIUS + 1))
+SHARE_TENT_SAMPLES = float(_TENT.sum() ** 4 / (_TENT ** 2).sum() ** 2)
 # A share's denominator at or below this (absolute, per channel) is "no light": fallback.
 SHARE_FLOOR = 1e-8
 # How far a pass's averaged stored light from last frame may lie from this frame's: this
@@ -81,6 +92,12 @@ def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS,
     (``filters.shares.box_mean``), into ``out`` when given (float32, C-contiguous)."""
     out = np.empty(planes.shape, dtype=F32) if out is None else out
     box_mean(np.ascontiguousarray(planes, dtype=F32), int(radius), out)
+    return out
+
+def tent_filter(planes: np.ndarray, radius: int = SHARE_TENT_RADIUS) -> np.ndarray:
+    """The (C, H, W) planes' :func:`box_filter` of ``radius`` twice: their tent mean."""
+    out = box_filter(planes, radius)
+    box_mean(out, int(radius), out)
     return out
 
 
@@ -231,7 +248,7 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
                 smooth[...] = 0.0
                 continue
             if layer.colour is None:
-                box_filter(layer.stored, out=smooth)
+                smooth[...] = tent_filter(layer.stored)
                 continue
             # The stored light's mean over the window's pixels that have its colour (a pass
             # divided by its colour is 0 off it: a plain mean dims it along the colour's
@@ -240,10 +257,10 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
                 covered[id(layer.colour)] = _coverage(layer.colour)
             surface, coverage = covered[id(layer.colour)]
             stored = np.ascontiguousarray(layer.stored, dtype=F32)
-            covered_average(stored, surface, coverage, SHARE_RADIUS, smooth)
+            covered_average(stored, surface, coverage, SHARE_TENT_RADIUS, smooth)
             if blend is not None and spread is not None:
-                covered_spread(stored, surface, coverage, smooth, SHARE_RADIUS,
-                               SHARE_HISTORY_REACH, spread)
+                covered_spread(stored, surface, coverage, smooth, SHARE_TENT_RADIUS,
+                               SHARE_HISTORY_REACH, SHARE_TENT_SAMPLES, spread)
                 blend(index, smooth, spread)
             smooth *= layer.colour
         # Passes listed side by side (a signal's always are): split straight into theirs.
@@ -267,9 +284,9 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
 
 def _coverage(colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where a colour pass (3, H, W) is not 0 in some channel, (H, W) float32 1/0, and that
-    mask's mean over the share window, (H, W)."""
+    mask's tent mean (the passes' share window), (H, W)."""
     surface = _surface(colour).astype(F32)
-    return surface, box_filter(surface[None])[0]
+    return surface, tent_filter(surface[None])[0]
 
 
 def _surface(colour: np.ndarray) -> np.ndarray:

@@ -1,9 +1,9 @@
 """The light passes' shares of a signal, accumulated over time (``filters.composable``).
 
 A signal that holds several light passes (Cycles' ``specular``: glossy and transmission,
-direct and indirect) is split among them by each pass's stored light averaged over the 7x7
-pixels that have its colour. One frame's 1-spp passes make that average noisy and make it
-flicker from frame to frame, so each pass's average is blended with last frame's at the
+direct and indirect) is split among them by each pass's stored light averaged over the
+pixels that have its colour (a 9x9 tent). One frame's 1-spp passes make that average noisy
+and make it flicker from frame to frame, so each pass's average is blended with last frame's at the
 pixel the motion vectors point to, as the colour's history is (``filters.shares.
 blend_previous``): the blend factor is the colour filter's for that signal and pixel,
 ``max(alpha, 1 / h)``, so where its history was rejected or cut short by anti-lag (a light

@@ -1,5 +1,6 @@
-"""Kernels of the composable light layers (``filters.composable``): a clipped box mean and
-the split of a total by per-pixel shares. Float64 references: ``tests/test_light_layers.py``.
+"""Kernels of the composable light layers (``filters.composable``): a clipped box mean, the
+tent mean of a pass over its colour's pixels, and the split of a total by per-pixel shares.
+Float64 references: ``tests/test_light_layers.py``.
 """
 
 from __future__ import annotations
@@ -19,46 +20,63 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
     borders (each window divided by the pixels it covers), summed in float64: running sums
     along each row, then down each column, each in the same order. One job per channel
     keeps only the 2 radius + 2 row sums the column sums still need (a ring of rows): a
-    frame-sized float64 temporary made this memory-bound."""
+    frame-sized float64 temporary made this memory-bound. ``out`` may be ``planes``."""
     for c in prange(planes.shape[0]):
-        _box_channel(planes[c], planes[c], False, False, planes[c], radius, out[c])
+        _box_channel(planes[c], planes[c], False, False, radius, out[c])
 
 
 @njit(**_JIT)
 def covered_average(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
                     radius: int, out: np.ndarray) -> None:
-    """``out`` = :func:`box_mean` of ``stored x surface`` (3, H, W) x (H, W) 1/0, divided
-    by ``coverage`` (the surface's own box mean, (H, W)) where that is above 0: a pass
-    stored divided by its colour, averaged over the window's pixels that have that colour.
-    Each step rounds to float32 as the numpy expression of the same steps does."""
+    """``out`` = the tent mean ``T`` (:func:`box_mean` of ``radius`` twice: weights
+    ``t(dy) t(dx)``, ``t(d) = 2 radius + 1 - |d|``) of ``stored x surface`` (3, H, W) x
+    (H, W) 1/0, divided by ``coverage`` (the surface's own tent mean, (H, W)) where that is
+    above 0: ``T(stored surface) / T(surface)``, a pass stored divided by its colour averaged
+    over the window's pixels that have that colour, nearer pixels weighing more (a lone
+    bright sample leaves a peak, not a flat square). Each box rounds to float32."""
     for c in prange(stored.shape[0]):
-        _box_channel(stored[c], surface, True, False, coverage, radius, out[c])
+        _tent_channel(stored[c], surface, False, coverage, radius, out[c])
 
 
 @njit(**_JIT)
 def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
-                   average: np.ndarray, radius: int, reach: float, out: np.ndarray) -> None:
+                   average: np.ndarray, radius: int, reach: float, samples: float,
+                   out: np.ndarray) -> None:
     """``out`` = ``reach`` standard errors of :func:`covered_average` ``average``: the
-    values' spread about it, ``sqrt(max(mean(stored^2) - average^2, 0))`` over the same
-    pixels, over the square root of how many they were (``coverage`` x the window's area,
-    at least 1)."""
-    area = (2 * radius + 1) ** 2
+    values' spread about it, ``sqrt(max(T(stored^2 surface) / T(surface) - average^2, 0))``,
+    over the square root of how many samples the weights are worth (``coverage`` x
+    ``samples``, the tent's ``1 / sum w^2``, at least 1)."""
     for c in prange(stored.shape[0]):
-        _box_channel(stored[c], surface, True, True, coverage, radius, out[c])
+        _tent_channel(stored[c], surface, True, coverage, radius, out[c])
         for y in range(stored.shape[1]):
             row, mean, share = out[c, y], average[c, y], coverage[y]
             for x in range(row.shape[0]):
-                count = max(share[x] * area, 1.0)
+                count = max(share[x] * samples, 1.0)
                 row[x] = reach * np.sqrt(max(row[x] - mean[x] * mean[x], 0.0) / count)
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
       error_model="numpy")
+def _tent_channel(plane: np.ndarray, surface: np.ndarray, squared: bool, coverage: np.ndarray,
+                  radius: int, out: np.ndarray) -> None:
+    """One channel (H, W) of :func:`covered_average` (``squared``: of the squares): the box
+    mean of ``plane x surface``, the box mean of that in place, over ``coverage``."""
+    _box_channel(plane, surface, True, squared, radius, out)
+    _box_channel(out, out, False, False, radius, out)  # each row is summed before it is written
+    for y in range(out.shape[0]):
+        row, share = out[y], coverage[y]
+        for x in range(row.shape[0]):
+            row[x] = row[x] / share[x] if share[x] > 0.0 else row[x]
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
 def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared: bool,
-                 coverage: np.ndarray, radius: int, out: np.ndarray) -> None:
-    """One channel (H, W) of :func:`box_mean` (``covered`` False: the other planes are not
-    read), or of the mean of ``plane`` (``squared``: of its squares) times ``surface`` over
-    ``coverage`` (:func:`covered_average`)."""
+                 radius: int, out: np.ndarray) -> None:
+    """One channel (H, W) of :func:`box_mean` (``covered`` False: ``surface`` is not
+    read), or of the box mean of ``plane`` (``squared``: of its squares) times ``surface``.
+    ``out`` may be ``plane``: row ``y`` is summed into the ring before ``out[y]`` is
+    written."""
     height, width = plane.shape
     ring = 2 * radius + 2  # rows y - radius - 1 .. y + radius
     rows = np.empty((ring, width), dtype=np.float64)
@@ -87,10 +105,6 @@ def _box_channel(plane: np.ndarray, surface: np.ndarray, covered: bool, squared:
         for x in range(width):
             cover = rows_covered * (min(x + radius + 1, width) - max(x - radius, 0))
             row[x] = columns[x] / cover
-        if covered:
-            share = coverage[y]
-            for x in range(width):
-                row[x] = row[x] / share[x] if share[x] > 0.0 else row[x]
 
 
 @njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
