@@ -197,6 +197,34 @@ def test_compose_passes_weighs_a_pass_by_its_mean_over_its_colours_pixels() -> N
     np.testing.assert_array_equal(parts[0][:, :, 7:], 0.0)
 
 
+def test_compose_passes_splits_colourless_passes_by_their_tent_means() -> None:
+    """Passes with no colour pass (Cycles' VolumeDir and VolumeInd) split their signal by
+    their radiance's tent mean (composable.tent_filter), pixel by pixel: a lone bright
+    VolumeInd sample takes a share that falls off with the tent's weights around it."""
+    from svgf_cli.filters.composable import SHARE_TENT_RADIUS, compose_passes, tent_filter
+    from svgf_cli.frame import LightLayer
+
+    h, w = 15, 17
+    direct = np.full((3, h, w), 0.5, np.float32)
+    indirect = np.zeros((3, h, w), np.float32)
+    indirect[:, 7, 8] = 20.0
+
+    def layer(name: str, light: np.ndarray) -> LightLayer:
+        return LightLayer((f"{name}.R", f"{name}.G", f"{name}.B"), light, light, None,
+                          "volume")
+
+    signal = np.ones((3, h, w), np.float32)
+    parts = compose_passes(signal, {"volume": signal},
+                           [layer("VolumeDir", direct), layer("VolumeInd", indirect)],
+                           emitters=True)
+    weights = np.stack([tent_filter(direct), tent_filter(indirect)]).astype(np.float64)
+    want = signal * weights / weights.sum(axis=0)
+    np.testing.assert_allclose(parts, want, rtol=1e-5, atol=1e-7)
+    share = parts[1, 0, 7]
+    assert share[8] > share[9] > share[10] > 0.0  # a peak, not a flat square
+    assert share[8 + 2 * SHARE_TENT_RADIUS + 1] == 0.0 and share[8 + 2 * SHARE_TENT_RADIUS] > 0
+
+
 def test_compose_passes_gives_a_pass_black_in_the_whole_frame_none() -> None:
     """Cycles writes TransDir or VolumeInd black on many shots: such a pass gets none of its
     signal (the others split it as without it, bit for bit), and a signal with one pass

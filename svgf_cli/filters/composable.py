@@ -94,9 +94,12 @@ def box_filter(planes: np.ndarray, radius: int = SHARE_RADIUS,
     box_mean(np.ascontiguousarray(planes, dtype=F32), int(radius), out)
     return out
 
-def tent_filter(planes: np.ndarray, radius: int = SHARE_TENT_RADIUS) -> np.ndarray:
-    """The (C, H, W) planes' :func:`box_filter` of ``radius`` twice: their tent mean."""
-    out = box_filter(planes, radius)
+
+def tent_filter(planes: np.ndarray, radius: int = SHARE_TENT_RADIUS,
+                out: np.ndarray | None = None) -> np.ndarray:
+    """The (C, H, W) planes' :func:`box_filter` of ``radius`` twice: their tent mean, into
+    ``out`` when given (float32, C-contiguous; the second box runs in place)."""
+    out = box_filter(planes, radius, out)
     box_mean(out, int(radius), out)
     return out
 
@@ -248,7 +251,7 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
                 smooth[...] = 0.0
                 continue
             if layer.colour is None:
-                smooth[...] = tent_filter(layer.stored)
+                tent_filter(layer.stored, out=smooth)
                 continue
             # The stored light's mean over the window's pixels that have its colour (a pass
             # divided by its colour is 0 off it: a plain mean dims it along the colour's
