@@ -53,6 +53,7 @@ from svgf_cli.filters.shares import (
     covered_spread,
     divide_where_coloured,
     fill_from_neighbours,
+    find_slivers,
     split_plain_rows,
     split_shares,
     subtract_product,
@@ -79,6 +80,13 @@ _TENT = 2 * SHARE_TENT_RADIUS + 1 - np.abs(np.arange(-2 * SHARE_TENT_RADIUS,
 SHARE_TENT_SAMPLES = float(_TENT.sum() ** 4 / (_TENT ** 2).sum() ** 2)
 # A share's denominator at or below this (absolute, per channel) is "no light": fallback.
 SHARE_FLOOR = 1e-8
+# A pixel whose colour pass comes from the noisy outlines' exchanges alone and is below this
+# share of the colour around it (5x5, its pixels with colour) is left without colour: a
+# pass there would be its light over a sliver of colour (cycles/smoke: a `DiffDir` pixel
+# 35 760 times the reference's; bench/light_layers.py: 0.1 and 0.25 both remove those,
+# 0.25 also takes dof's `DiffDir` 0.352x -> 0.318x its input's relMSE, `Env` +2 %; 0.5 and
+# 1 raise `DiffCol` and `Env` by 6-11 % and 35-115 %).
+SLIVER_FRACTION = 0.25
 # How far a pass's averaged stored light from last frame may lie from this frame's: this
 # many standard errors of this frame's average (filters.pass_shares; bench/light_layers.py
 # on cycles/production, smoke and dof: 0.5 leaves more flicker, 2 lets a reflection's old
@@ -417,7 +425,11 @@ def spilled_colours(colours: dict[tuple[str, str, str], np.ndarray],
     colour's edge (:func:`stored_values`), not past the mix's, which reaches surfaces with
     no such colour (a metal's interior)."""
     for colour in colours.values():
+        before = _surface(colour)
         spill.apply(colour, colour)
+        slivers = np.empty_like(before)
+        find_slivers(colour, before, SLIVER_FRACTION, SHARE_TENT_RADIUS, slivers)
+        colour[:, slivers] = 0.0
         cover = covers[id(colour)]
         cover.vacant = ~_surface(colour)
 
