@@ -7,7 +7,8 @@ With no ``--output`` it denoises ``DIR/in.####.exr`` (`svgf denoise --preset-aov
 default settings) into a temporary folder first. For each layer found in the reference
 (``Combined``, ``Combined_<group>``, Cycles' light passes) it prints relMSE (trimmed), FLIP
 and the temporal error (as `svgf evaluate` computes them, over every frame; the temporal
-error from the second frame on) of the input and of the output, and their ratio; then the
+error from the second frame on) of the input and of the output, and their ratio, and the
+worst pixel of each (its largest channel over the reference's, at least 0.05); then the
 additivity of every output frame (`svgf inspect --check`'s check). Exit 1 when a light layer
 misses the issue's target (relMSE <= 0.3x the input's, FLIP and temporal error below it).
 ``--min-coverage 0.01`` shows how much of a divided pass's relMSE is the reference's own
@@ -52,6 +53,14 @@ def layers_of(path: Path) -> dict[str, np.ndarray]:
 # Cycles' light passes stored divided by a colour pass (the reference's, for --min-coverage).
 COLOUR_OF = {f"{lobe}{part}": f"{lobe}Col" for lobe in ("Diff", "Gloss", "Trans")
              for part in ("Dir", "Ind")}
+
+
+def worst_pixel(frames: list[dict[str, np.ndarray]], refs: list[dict[str, np.ndarray]],
+                layer: str) -> float:
+    """The largest ratio of a pixel's largest channel to the reference's (at least 0.05)
+    over the frames: a hot pixel that relMSE's trimming leaves out."""
+    return max(float((x[layer].max(axis=0) / np.maximum(r[layer].max(axis=0), 0.05)).max())
+               for x, r in zip(frames, refs, strict=True))
 
 
 def scores(frames: list[dict[str, np.ndarray]], refs: list[dict[str, np.ndarray]],
@@ -100,7 +109,7 @@ def main(argv: list[str]) -> int:
     names = [n for n in refs[0] if n.startswith("Combined") or n in PASSES]
     missed = []
     print(f"{'layer':<16} {'relMSE in':>10} {'out':>9} {'ratio':>6} {'FLIP in':>8} {'out':>7} "
-          f"{'temporal in':>11} {'out':>8}")
+          f"{'temporal in':>11} {'out':>8} {'worst in':>9} {'out':>7}")
     for name in names:
         if not any(np.any(f[name]) for f in ins) and not any(np.any(f[name]) for f in outs):
             # Black in every input and output frame (TransDir: no direct light through the
@@ -110,7 +119,8 @@ def main(argv: list[str]) -> int:
         b = scores(outs, refs, name, args.min_coverage)
         ratio = b[0] / a[0] if a[0] else float("nan")
         print(f"{name:<16} {a[0]:>10.4f} {b[0]:>9.4f} {ratio:>6.3f} {a[1]:>8.4f} {b[1]:>7.4f} "
-              f"{a[2]:>11.4f} {b[2]:>8.4f}")
+              f"{a[2]:>11.4f} {b[2]:>8.4f} {worst_pixel(ins, refs, name):>9.1f} "
+              f"{worst_pixel(outs, refs, name):>7.1f}")
         light = name not in ("Combined", "Emit", "Env") and not name.endswith("Col")
         if light and not (ratio <= 0.3 and b[1] < a[1] and b[2] < a[2]):
             missed.append(name)

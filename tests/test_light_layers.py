@@ -390,7 +390,8 @@ def test_spilled_colours_mix_a_colour_written_anew_as_the_colour_is() -> None:
 def test_find_slivers_matches_a_float64_reference() -> None:
     """filters.shares.find_slivers, pixel by pixel: a pixel with no colour before, above 0
     now, whose largest channel is below the fraction of the largest channel of the mean
-    over the window's coloured pixels (clipped at the borders)."""
+    over the window's pixels coloured before and now (clipped at the borders), or that
+    has no such pixel in its window."""
     from svgf_cli.filters.shares import find_slivers
 
     rng = np.random.default_rng(12)
@@ -406,9 +407,12 @@ def test_find_slivers_matches_a_float64_reference() -> None:
         own = wide[:, y, x].max()
         if before[y, x] or own <= 0.0:
             continue
-        window = wide[:, max(y - radius, 0):y + radius + 1, max(x - radius, 0):x + radius + 1]
-        lit = window.reshape(3, -1)[:, window.reshape(3, -1).max(axis=0) > 0.0]
-        want[y, x] = own < fraction * lit.mean(axis=1).max()
+        rows = slice(max(y - radius, 0), y + radius + 1)
+        columns = slice(max(x - radius, 0), x + radius + 1)
+        window = wide[:, rows, columns].reshape(3, -1)
+        surfaces = (window.max(axis=0) > 0.0) & before[rows, columns].ravel()
+        want[y, x] = not surfaces.any() or own < fraction * window[:, surfaces].mean(
+            axis=1).max()
     np.testing.assert_array_equal(got, want)
     assert want.any() and (~want & ~before & (colour.max(axis=0) > 0)).any()
 

@@ -84,7 +84,7 @@ SHARE_FLOOR = 1e-8
 # share of the colour around it (5x5, its pixels with colour) is left without colour: a
 # pass there would be its light over a sliver of colour (cycles/smoke: a `DiffDir` pixel
 # 35 760 times the reference's; bench/light_layers.py: 0.1 and 0.25 both remove those,
-# 0.25 also takes dof's `DiffDir` 0.352x -> 0.318x its input's relMSE, `Env` +2 %; 0.5 and
+# 0.25 also takes dof's `DiffDir` 0.352x -> 0.314x its input's relMSE, `Env` +3 %; 0.5 and
 # 1 raise `DiffCol` and `Env` by 6-11 % and 35-115 %).
 SLIVER_FRACTION = 0.25
 # How far a pass's averaged stored light from last frame may lie from this frame's: this

@@ -339,9 +339,11 @@ def find_slivers(colour: np.ndarray, before: np.ndarray, fraction: float, radius
                  out: np.ndarray) -> None:
     """``out`` (H, W) bool: the pixels that had no colour ``before`` (H, W) bool and whose
     colour pass now (3, H, W) is above 0 but below ``fraction`` times the mean over the
-    (2 radius + 1)^2 window's pixels above 0, in its largest channel: ``max_c a_c(p) <
-    fraction x max_c mean_q a_c(q)``. Found first, cleared by the caller: in place, a row
-    would read neighbours another row had cleared."""
+    (2 radius + 1)^2 window's pixels that had colour before and still have, in its largest
+    channel: ``max_c a_c(p) < fraction x max_c mean_q a_c(q)`` (the surfaces around it,
+    not the other pixels the mix reached), or with no such pixel in the window. Found
+    first, cleared by the caller: in place, a row would read neighbours another row had
+    cleared."""
     _, height, width = colour.shape
     for y in prange(height):
         for x in range(width):
@@ -354,11 +356,14 @@ def find_slivers(colour: np.ndarray, before: np.ndarray, fraction: float, radius
             for yy in range(max(y - radius, 0), min(y + radius + 1, height)):
                 for xx in range(max(x - radius, 0), min(x + radius + 1, width)):
                     r, g, b = colour[0, yy, xx], colour[1, yy, xx], colour[2, yy, xx]
-                    if (r > 0.0) | (g > 0.0) | (b > 0.0):
+                    if before[yy, xx] & ((r > 0.0) | (g > 0.0) | (b > 0.0)):
                         sums[0] += r
                         sums[1] += g
                         sums[2] += b
                         count += 1
+            if count == 0:
+                out[y, x] = True
+                continue
             around = max(sums[0], sums[1], sums[2]) / count
             out[y, x] = own < fraction * around
 
