@@ -377,12 +377,14 @@ def test_the_medium_coverage_keeps_a_small_fogs_light_in_it(seed: int) -> None:
 
 
 def test_the_coverage_radius_grows_with_the_image() -> None:
-    """auto: one pixel per 360 of the shorter side, at least 1 (a 3x3 coverage mottles a
-    1080p fog; a 5x5 one is wider than a 128x72 fog's edge); an explicit radius is kept."""
+    """auto: 1 below 320 rows of the shorter side, else one pixel per 360, at least 2 (a
+    3x3 coverage mottles a 640x360 fog; a 5x5 one is wider than a 128x72 fog's edge and
+    lost video JOD at 384x216); an explicit radius is kept."""
     from svgf_cli.filters.params import medium_coverage_radius_for
 
     auto = PRESETS["default"]
     assert [medium_coverage_radius_for(auto, h, w) for h, w in
-            ((72, 128), (144, 256), (540, 960), (1080, 1920), (1920, 1080), (2160, 3840))
-            ] == [1, 1, 2, 3, 3, 6]
+            ((72, 128), (144, 256), (216, 384), (319, 640), (360, 640), (640, 360),
+             (540, 960), (1080, 1920), (1920, 1080), (2160, 3840))
+            ] == [1, 1, 1, 1, 2, 2, 2, 3, 3, 6]
     assert medium_coverage_radius_for(auto.replace(medium_coverage_radius=2), 72, 128) == 2
