@@ -532,6 +532,36 @@ def test_write_passes_mixes_a_glossy_colour_read_where_the_gbuffer_is_noise() ->
                                rtol=1e-4, atol=1e-6)
 
 
+def test_compose_passes_of_no_signal_weigh_by_the_colour_as_written() -> None:
+    """Passes of no filtered signal (``--signals combined``: each takes a share of the whole
+    light) weigh by their colour as written (after the noisy outlines' exchanges), which
+    they are divided by: a pixel that gave most of its DiffCol to the mix gets a share of
+    light to match, not a pass five times its neighbours'. Passes of a filtered signal
+    keep the colour as read."""
+    from svgf_cli.filters.composable import compose_passes
+    from svgf_cli.frame import LightLayer
+
+    h, w = 9, 9
+    read = np.full((3, h, w), 0.5, np.float32)
+    mixed = read.copy()
+    mixed[:, 4, 4] = 0.1  # this pixel's DiffCol went to its neighbours
+
+    def layer(name: str, signal: str) -> LightLayer:
+        stored = np.ones((3, h, w), np.float32)
+        return LightLayer((f"{name}.R", f"{name}.G", f"{name}.B"), stored * read, stored,
+                          read, signal, (f"{name}Col.R", f"{name}Col.G", f"{name}Col.B"))
+
+    light = np.ones((3, h, w), np.float32)
+    passes = [layer("DiffDir", "diffuse"), layer("GlossDir", "specular")]
+    parts = compose_passes(light, {}, passes, emitters=True, written=[mixed, read])
+    np.testing.assert_allclose(parts[0, :, 4, 4], 1.0 / 6.0, rtol=1e-5)
+    np.testing.assert_allclose(parts[0, :, 4, 4] / mixed[:, 4, 4], 1.0 / 0.6, rtol=1e-5)
+    np.testing.assert_allclose(parts[:, :, 0, 0], 0.5, rtol=1e-6)
+    owned = compose_passes(light, {"diffuse": light * 0.5, "specular": light * 0.5}, passes,
+                           emitters=True, written=[mixed, read])
+    np.testing.assert_allclose(owned[0, :, 4, 4], 0.5, rtol=1e-6)  # its own signal's
+
+
 def test_compose_passes_falls_back_on_the_passes_light_nearby() -> None:
     """Where no pass's weight has light (their colour as read is 0 at and around a pixel
     the signal lights, as where a colour came from the noisy outlines' mix), the signal is

@@ -225,7 +225,8 @@ Blend = Callable[[int, np.ndarray, np.ndarray], None]
 
 def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
                    passes: list[LightLayer], barred: dict[int, np.ndarray] | None = None,
-                   emitters: bool = False, blend: Blend | None = None) -> np.ndarray:
+                   emitters: bool = False, blend: Blend | None = None,
+                   written: list[np.ndarray | None] | None = None) -> np.ndarray:
     """The denoised light passes, (P, 3, H, W), in the colour's units (light x colour
     pass), adding up to ``light`` (the colour less the emission). ``barred`` maps a pass's
     index to the (H, W) pixels where it carries no light (its part there goes to the other
@@ -235,7 +236,9 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
     them. A pass black in the whole frame as read (Cycles' VolumeInd or TransDir, often)
     gets none: its weight is 0 and not box-filtered, and a signal with one pass lit is
     that pass's alone. ``blend(index, average)``: each pass's averaged stored light, before
-    it is multiplied by its colour, blended with its history (``filters.pass_shares``)."""
+    it is multiplied by its colour, blended with its history (``filters.pass_shares``).
+    ``written``: each pass's colour pass as written, by which a pass of no filtered signal
+    (``--signals combined``) is weighed instead of its colour as read."""
     estimates = np.empty((len(passes), *light.shape), dtype=F32)
     covered: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # by id of a colour pass
     members: dict[str, list[int]] = {}
@@ -273,7 +276,10 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
                 covered_spread(stored, surface, coverage, smooth, SHARE_TENT_RADIUS,
                                SHARE_HISTORY_REACH, SHARE_TENT_SAMPLES, spread)
                 blend(index, smooth, spread)
-            smooth *= layer.colour
+            # A pass of no filtered signal takes a share of the whole light, which took
+            # the noisy outlines' exchanges: its colour as written, as it is divided by.
+            colour = written[index] if not owner and written is not None else None
+            smooth *= layer.colour if colour is None else colour
         # Passes listed side by side (a signal's always are): split straight into theirs.
         side_by_side = indexes == list(range(indexes[0], indexes[-1] + 1))
         # Where no pass's weight has light (its colour as read is 0 around a sample whose
@@ -621,7 +627,7 @@ def write_passes(denoised: DenoisedFrame, emission: np.ndarray | None,
     # than negative light; the emission passes take the difference.
     light_only = np.maximum(residual, 0.0) if light.emission else residual
     parts = compose_passes(light_only, outputs, light.passes, barred, bool(light.emission),
-                           blend)
+                           blend, written)
     for layer, part, colour in zip(light.passes, parts, written, strict=True):
         stored = stored_values(layer, part, colour,
                                None if colour is None else covers[id(colour)])
