@@ -26,7 +26,8 @@ applies one set of weights to every AOV):
   noise (:func:`spilled_colours`), as the signals it divides do.
 
 Where the shares' denominator is (near) 0 while the colour is not, the input layers'
-box-filtered shares are used, and where those are 0 too, each layer's light over the frame
+averaged shares are used (box-filtered for the groups, over the tent for a signal's
+passes), and where those are 0 too, each layer's light over the frame
 (a layer black in the frame gets none); the light no light pass has goes to the emission
 passes.
 """
@@ -81,7 +82,7 @@ SHARE_TENT_SAMPLES = float(_TENT.sum() ** 4 / (_TENT ** 2).sum() ** 2)
 # A share's denominator at or below this (absolute, per channel) is "no light": fallback.
 SHARE_FLOOR = 1e-8
 # A pixel whose colour pass comes from the noisy outlines' exchanges alone and is below this
-# share of the colour around it (5x5, its pixels with colour) is left without colour: a
+# share of the colour around it (5x5, its pixels that had it before) is left without: a
 # pass there would be its light over a sliver of colour (cycles/smoke: a `DiffDir` pixel
 # 35 760 times the reference's; bench/light_layers.py: 0.1 and 0.25 both remove those,
 # 0.25 also takes dof's `DiffDir` 0.352x -> 0.314x its input's relMSE, `Env` +3 %; 0.5 and
@@ -232,8 +233,9 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
     index to the (H, W) pixels where it carries no light (its part there goes to the other
     passes, in proportion to theirs). Where no pass has light, filtered or read: none when
     the file has ``emitters`` (emission passes: they take that light), else by the passes'
-    light over the frame; a signal's light where none of its passes has any, likewise among
-    them. A pass black in the whole frame as read (Cycles' VolumeInd or TransDir, often)
+    light over the frame; a signal's light where none of its passes' weights has any, by
+    their light as read over the share tent, and where that is none too by their light over
+    the frame. A pass black in the whole frame as read (Cycles' VolumeInd or TransDir, often)
     gets none: its weight is 0 and not box-filtered, and a signal with one pass lit is
     that pass's alone. ``blend(index, average)``: each pass's averaged stored light, before
     it is multiplied by its colour, blended with its history (``filters.pass_shares``).
