@@ -433,12 +433,11 @@ def spilled_colours(colours: dict[tuple[str, str, str], np.ndarray],
     colour's edge (:func:`stored_values`), not past the mix's, which reaches surfaces with
     no such colour (a metal's interior)."""
     for colour in colours.values():
-        before = _surface(colour)
+        cover = covers[id(colour)]  # its surface: the colour before the exchanges
         spill.apply(colour, colour)
-        slivers = np.empty_like(before)
-        find_slivers(colour, before, SLIVER_FRACTION, SHARE_TENT_RADIUS, slivers)
+        slivers = np.empty_like(cover.surface)
+        find_slivers(colour, cover.surface, SLIVER_FRACTION, SHARE_TENT_RADIUS, slivers)
         colour[:, slivers] = 0.0
-        cover = covers[id(colour)]
         cover.vacant = ~_surface(colour)
 
 
