@@ -83,7 +83,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     folder = args.frames_dir or make(frames=args.frames, stand_in=args.stand_in)
     print(f"frames: {folder}/in.####.exr ({args.frames})", flush=True)
-    with tempfile.TemporaryDirectory(dir=REPO / "bench" / "out") as tmp:
+    scratch = REPO / "bench" / "out"  # not made by --frames-dir runs on a fresh clone
+    scratch.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=scratch) as tmp:
         svgf = run_cli(folder / "in.####.exr", Path(tmp), args.frames, "--preset-aovs",
                        args.aovs, *shlex.split(args.svgf_args))
         print(

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -152,6 +153,10 @@ class Frame:
     # Light passes and light groups to be written denoised (None: none; the Denoiser itself
     # ignores them, `filters.composable.LayeredDenoiser` composes them).
     light: LightLayers | None = None
+    # What makes ``light`` when the filter first needs it (None: ``light`` is all there is).
+    # `filters.composable.LayeredDenoiser` calls it once its colour filter has let go of its
+    # per-frame planes, so the layers' float32 planes are not held beside them.
+    light_loader: Callable[[], LightLayers | None] | None = None
     # The output colour, (3, H, W), decided by another pass (the look-ahead warm start of a
     # shot's first frames, ``run.warm_start``): the filter still runs on the frame to build
     # its history, and returns this colour (its light layers add up to it).

@@ -19,6 +19,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
+from svgf_cli.filters import composable
 from svgf_cli.filters.composable import LayeredDenoiser
 from svgf_cli.filters.params import resolve_params
 from svgf_cli.io import zipchunks
@@ -27,7 +28,7 @@ from svgf_cli.io.layers import build_mapping
 from svgf_cli.io.output import prepare_colour, write_output
 from svgf_cli.io.source import SourceFile
 from svgf_cli.progress import Progress
-from svgf_cli.run import causal
+from svgf_cli.run import light as run_light
 from svgf_cli.run import output as run_output
 from svgf_cli.run.chunk import run_sequence
 from svgf_cli.run.output import light_replaced
@@ -115,11 +116,13 @@ def test_pass_through_channels_reach_the_writer_as_read(
 def test_the_input_pixels_the_output_replaces_are_let_go_before_filtering(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """While a frame is filtered its file no longer holds the light passes, the emission
-    passes and the light groups (the filter has float32 copies; the output writes them
-    anew), and while it is written it holds none of the channels the output replaces;
-    every pass-through channel keeps its pixels throughout."""
+    """A frame reaches the filter with its light layers not yet read (a loader: the colour
+    filter runs without their float32 planes); once they are made its file no longer holds
+    the light passes, the emission passes and the light groups (the filter has float32
+    copies; the output writes them anew), and while it is written it holds none of the
+    channels the output replaces; every pass-through channel keeps its pixels throughout."""
     results: list[Any] = []
+    entering: list[tuple[set[str], bool]] = []  # (released, light not yet read)
     filtering: list[tuple[set[str], set[str]]] = []  # (released, light channels)
     writing: list[tuple[set[str], set[str], set[str]]] = []  # (released, replaced, held)
 
@@ -135,8 +138,17 @@ def test_the_input_pixels_the_output_replaces_are_let_go_before_filtering(
 
     def watched(self: LayeredDenoiser, frame: Any) -> Any:
         result = next(r for r in results if r.frame is frame)
-        filtering.append((released(result.source), set(light_replaced(frame.light))))
+        entering.append((released(result.source),
+                         frame.light is None and frame.light_loader is not None))
         return process(self, frame)
+
+    made = composable.frame_light
+
+    def read_light(frame: Any) -> Any:
+        light = made(frame)
+        result = next(r for r in results if r.frame is frame)
+        filtering.append((released(result.source), set(light_replaced(light))))
+        return light
 
     write = run_output.OutputFrame
 
@@ -147,14 +159,18 @@ def test_the_input_pixels_the_output_replaces_are_let_go_before_filtering(
         return write(source, part_index, channels, *args)
 
     monkeypatch.setattr(LayeredDenoiser, "process", watched)
+    monkeypatch.setattr(composable, "frame_light", read_light)
     monkeypatch.setattr(run_output, "OutputFrame", recorded)
     _run(tmp_path, range(1, 4), read)
-    assert len(filtering) == len(writing) == 3
+    assert len(entering) == len(filtering) == len(writing) == 3
+    colour = {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B"}
+    for gone, deferred in entering:
+        assert deferred
+        assert gone <= colour
     for gone, light in filtering:
         assert len(light) >= 30  # 8 passes, 2 emission passes, 3 groups: R, G, B each
         assert light <= gone
-        assert gone <= light | {"ViewLayer.Combined.R", "ViewLayer.Combined.G",
-                                "ViewLayer.Combined.B"}
+        assert gone <= light | colour
     for gone, replaced, held in writing:
         assert gone == replaced
         assert {"ViewLayer.Denoising Albedo.R", "ViewLayer.CryptoObject00.r",
@@ -165,7 +181,7 @@ def test_letting_go_of_replaced_pixels_changes_no_output_bit(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     _run(tmp_path / "lean", range(1, 5))
-    monkeypatch.setattr(causal, "release_light_inputs", lambda *args: 0)
+    monkeypatch.setattr(run_light, "release_light_inputs", lambda *args: 0)
     monkeypatch.setattr(run_output, "release_replaced", lambda *args: 0)
     _run(tmp_path / "held", range(1, 5))
     for frame in range(1, 5):

@@ -857,6 +857,27 @@ def test_pass_shares_steady_a_flickering_share_and_start_over() -> None:
     assert (mean == 7.0).all()
 
 
+def test_pass_shares_hold_one_frame_of_averages() -> None:
+    """Each pass's last-frame average is let go once blended (a pass is blended once a
+    frame): mid-frame the passes' averages are held once, last frame's or this frame's,
+    and the blend is what it was."""
+    from svgf_cli.filters.pass_shares import PassShares
+
+    shape = (3, 4, 5)
+    still, mesh, long, spread = _still_pixels(shape, 1e3)
+    shares = PassShares()
+    keys = [("a.R", "a.G", "a.B"), ("b.R", "b.G", "b.B")]
+    for key in keys:
+        shares.blend(key, np.full(shape, 1.0, np.float32), spread, still, mesh, long, 0.5)
+    shares.advance(mesh)
+    mean = np.full(shape, 3.0, np.float32)
+    shares.blend(keys[0], mean, spread, still, mesh, long, 0.5)
+    assert (mean == 2.0).all()  # 1 + 0.5 (3 - 1): last frame's average was read
+    assert keys[0] not in shares.previous and keys[1] in shares.previous
+    held = sum(a.nbytes for a in [*shares.previous.values(), *shares._current.values()])
+    assert held == 2 * np.zeros(shape, np.float32).nbytes
+
+
 def _still_pixels(shape: tuple[int, int, int], spread: float
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """No motion, one mesh, a long colour history, and ``spread`` everywhere."""
@@ -1145,6 +1166,38 @@ def test_layered_filter_holds_one_workspace_at_a_time_and_gives_the_same_bits() 
         assert got.light.keys() == want.light.keys() and len(got.light) > 20
         for name, plane in want.light.items():
             assert np.array_equal(got.light[name].view(np.uint32), plane.view(np.uint32)), name
+
+
+def test_layered_filter_reads_the_light_layers_after_the_colour_filter() -> None:
+    """A frame's light layers given as a loader are made once the colour's filter has let go
+    of its per-frame planes (so their float32 planes are never held beside them), once, and
+    every output layer is bit for bit what the layers attached before filtering give."""
+    from svgf_cli.filters.composable import LayeredDenoiser
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    eager, lazy = LayeredDenoiser(PRESETS["default"]), LayeredDenoiser(PRESETS["default"])
+    loads: list[bool] = []  # whether the colour's workspace was let go at each load
+    for frame in (1, 2, 3):
+        eager_result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+        eager_result.frame.light = read_light_layers(eager_result, "cycles")
+        want = eager.process(eager_result.frame)
+        result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+
+        def load(result=result):  # noqa: ANN001, ANN202
+            loads.append(lazy.colour.resident.work is None)
+            return read_light_layers(result, "cycles")
+
+        result.frame.light_loader = load
+        got = lazy.process(result.frame)
+        assert result.frame.light is not None and result.frame.light_loader is None
+        assert np.array_equal(got.color.view(np.uint32), want.color.view(np.uint32))
+        assert got.light.keys() == want.light.keys() and len(got.light) > 20
+        for name, plane in want.light.items():
+            assert np.array_equal(got.light[name].view(np.uint32), plane.view(np.uint32)), name
+    assert loads == [True, True, True]
 
 
 def test_layered_filter_lets_go_of_the_signals_planes_before_the_light_layers(

@@ -41,8 +41,9 @@ class PassShares:
               alpha: float) -> None:
         """Pass ``key``'s average ``mean`` (3, H, W) blended in place with its own last
         frame's, that clamped to ``mean +- spread`` (none: as it is; ``length`` None: no
-        history for its signal), and kept."""
-        previous = self.previous.get(key)
+        history for its signal), and kept. Last frame's is let go once read: a pass is
+        blended once a frame, so the passes' two frames of averages are not held at once."""
+        previous = self.previous.pop(key, None)
         if (previous is not None and length is not None and self.previous_mesh is not None
                 and previous.shape == mean.shape):
             blend_previous(mean, spread, previous, np.ascontiguousarray(motion, dtype=F32),

@@ -4,9 +4,10 @@ read one ahead by the reader thread and written behind by the writer thread.
 Memory holds about three frames whatever the sequence length: the one filtered, the one
 read and the one written (the writer thread reads a denoised frame's planes while the next
 one is filtered: safe because `DenoisedFrame` arrays are fresh per frame, not the filter's
-buffers). The one filtered has let go of the input pixels of the light layers a layered
-filter writes anew, the one written of every channel its output replaces
-(`output.release_light_inputs`, `output.release_replaced`). With ``--low-memory``, two: the
+buffers). The one filtered reads its light layers once its colour filter is done and then
+lets go of the input pixels a layered filter writes anew (`light.LightLayerReader`), the one
+written of every channel its output replaces (`output.release_light_inputs`,
+`output.release_replaced`). With ``--low-memory``, two: the
 next frame is read once the one before is filtered and handed to the writer.
 """
 
@@ -26,7 +27,6 @@ from svgf_cli.progress import Progress
 from svgf_cli.run.filter import FrameFilter, PassFilter
 from svgf_cli.run.history import HistoryFile
 from svgf_cli.run.light import LightLayerReader
-from svgf_cli.run.output import release_light_inputs
 from svgf_cli.run.stop import StopFlag, interrupted
 from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats, WarmupCount
 from svgf_cli.run.workers import (
@@ -101,9 +101,7 @@ def run_causal(
         frame_started = time.perf_counter()
         for task, result, read_seconds in reads:
             frames.admit(task, result)
-            light.attach(task, result)
-            if release_light:
-                release_light_inputs(result, task)
+            light.attach(task, result, release=release_light)
             if task.output is not None and task.frame in warm_colours:
                 result.frame = replace(result.frame, final_colour=warm_colours.pop(task.frame))
             writes.poll()  # report a finished write now rather than a frame later

@@ -13,9 +13,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from svgf_cli.progress import Progress
+from svgf_cli.run.output import release_light_inputs
 from svgf_cli.run.tasks import FrameTask, RunConfig
 
 if TYPE_CHECKING:
+    from svgf_cli.frame import LightLayers
     from svgf_cli.io.exr import ReadResult
     from svgf_cli.io.source import SourcePart
 
@@ -38,9 +40,26 @@ class LightLayerReader:
         self._progress = progress
         self.groups_ok: bool | None = None
 
-    def attach(self, task: FrameTask, result: ReadResult) -> None:
+    def attach(self, task: FrameTask, result: ReadResult, release: bool = False) -> None:
+        """Give the frame a loader of its light layers (`Frame.light_loader`): a layered
+        filter reads them from the decoded file once its colour filter is done, so their
+        float32 planes are not held beside its per-frame planes (the file's half-float
+        pixels are half their size). With ``release``, the input pixels the layers replace
+        are let go once read (`output.release_light_inputs`)."""
         if not self.enabled or getattr(result, "frame", None) is None:
             return
+
+        def load() -> LightLayers | None:
+            light = self.read(task, result)
+            if release:
+                release_light_inputs(result, task, light)
+            return light
+
+        result.frame.light_loader = load
+
+    def read(self, task: FrameTask, result: ReadResult) -> LightLayers | None:
+        """The frame's light layers (None: it has none to denoise), deciding on the first
+        frame read whether its light groups add up to the colour."""
         from svgf_cli.io.lightlayers import check_groups, read_light_layers
 
         light = read_light_layers(result, self._preset)
@@ -55,8 +74,7 @@ class LightLayerReader:
                 )
         if not self.groups_ok:
             light.groups = []
-        if light.passes or light.groups:
-            result.frame.light = light
+        return light if light.passes or light.groups else None
 
 
 def light_channels(part: SourcePart, planes: dict[str, np.ndarray]

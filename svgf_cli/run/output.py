@@ -121,15 +121,15 @@ def light_replaced(light: LightLayers) -> list[str]:
     return [name for layer in layers for name in layer.channels]
 
 
-def release_light_inputs(result: ReadResult, task: FrameTask) -> int:
-    """Let go of the input pixels that the light layers attached to ``result.frame`` will
-    replace in the output (`light_replaced`), in the part the output's colour and light
-    layers are written to (channels of other parts pass through as read): the filter has
-    its float32 copies, and the frame's file is held while it is filtered and written.
-    For a layered filter only. Returns the bytes let go."""
+def release_light_inputs(result: ReadResult, task: FrameTask,
+                         light: LightLayers | None) -> int:
+    """Let go of the input pixels that the frame's light layers ``light`` will replace in
+    the output (`light_replaced`), in the part the output's colour and light layers are
+    written to (channels of other parts pass through as read): the filter has its float32
+    copies, and the frame's file is held while it is filtered and written. For a layered
+    filter only. Returns the bytes let go."""
     frame = getattr(result, "frame", None)
-    light = getattr(frame, "light", None)
-    if light is None or getattr(result, "source", None) is None:
+    if light is None or frame is None or getattr(result, "source", None) is None:
         return 0
     source, part_index, _ = colour_layout(result, (frame.height, frame.width), task.input)
     return release_replaced(source.parts[part_index], light_replaced(light))
