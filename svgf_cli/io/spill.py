@@ -4,7 +4,7 @@ A bidirectional run's forward pass writes each output frame's state (named (H, W
 half or float, plus a few float factors) to a private scratch folder; the reverse pass reads
 them back in reverse order and deletes each once read, so the disk use falls as the run
 ends. Each file is one ZIP-compressed EXR, readable by any EXR tool: written by
-`zipchunks` (ISA-L's deflate), read by the OpenEXR library.
+`zipchunks` (zlib-ng's deflate), read by the OpenEXR library.
 
 The folder is ``.svgf-scratch.HOST_NS.PID.TOKEN`` under the chosen parent (the system
 temporary folder by default, never the output folder) and is removed when the run ends,

@@ -1,6 +1,7 @@
 """The light layers of each frame read (`--light-layers denoised`, the default): the light
-passes and light groups handed to the filter with the frame (`Frame.light`), and the denoised
-planes converted to each channel's stored type for the writer.
+passes and light groups handed to the filter with the frame (`Frame.light_loader`: read once
+its colour filter is done); the writer converts the denoised planes to each channel's stored
+type (`output.light_channels`).
 
 The light groups are checked on the sequence's first frame read (like the signal set): where
 they do not add up to the colour, every frame's groups are written as read, with one warning.
@@ -10,8 +11,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from svgf_cli.progress import Progress
 from svgf_cli.run.output import release_light_inputs
 from svgf_cli.run.tasks import FrameTask, RunConfig
@@ -19,7 +18,6 @@ from svgf_cli.run.tasks import FrameTask, RunConfig
 if TYPE_CHECKING:
     from svgf_cli.frame import LightLayers
     from svgf_cli.io.exr import ReadResult
-    from svgf_cli.io.source import SourcePart
 
 LIGHT_LAYER_MODES = ("denoised", "as-read")
 
@@ -75,21 +73,3 @@ class LightLayerReader:
         if not self.groups_ok:
             light.groups = []
         return light if light.passes or light.groups else None
-
-
-def light_channels(part: SourcePart, planes: dict[str, np.ndarray]
-                   ) -> tuple[dict[str, np.ndarray], int]:
-    """The denoised light channels of ``part`` in their stored pixel types (half clamped to
-    +-65504, non-finite -> 0) and how many values were fixed. Channels of other parts stay
-    as read."""
-    from svgf_cli.halfconv import storable
-
-    out: dict[str, np.ndarray] = {}
-    fixed = 0
-    for name, plane in planes.items():
-        channel = part.channels.get(name)
-        if channel is None:
-            continue
-        out[name], nonfinite, _clamped = storable(plane, channel.type_name == "half")
-        fixed += nonfinite
-    return out, fixed

@@ -158,8 +158,6 @@ def build_output(
         )
     channels = dict(zip(names, prepared.planes, strict=True))
     if denoised.light:
-        from svgf_cli.run.light import light_channels
-
         light, fixed = light_channels(part, denoised.light)
         channels.update(light)
         if fixed:
@@ -174,3 +172,21 @@ def build_output(
     return OutputFrame(
         source, part_index, channels, output_attributes(config, task), keep_only, warnings
     )
+
+
+def light_channels(part: SourcePart, planes: dict[str, np.ndarray]
+                   ) -> tuple[dict[str, np.ndarray], int]:
+    """The denoised light channels of ``part`` in their stored pixel types (half clamped to
+    +-65504, non-finite -> 0) and how many values were fixed. Channels of other parts stay
+    as read."""
+    from svgf_cli.halfconv import storable
+
+    out: dict[str, np.ndarray] = {}
+    fixed = 0
+    for name, plane in planes.items():
+        channel = part.channels.get(name)
+        if channel is None:
+            continue
+        out[name], nonfinite, _clamped = storable(plane, channel.type_name == "half")
+        fixed += nonfinite
+    return out, fixed
