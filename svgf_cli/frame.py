@@ -388,6 +388,9 @@ COUNT_KEYS = {
     " problem)",
     "despiked_lone": "output pixels whose filtering mode no neighbour shares, brought down"
     " to the despike ratio times their second-brightest output neighbour",
+    "medium_still": "medium pixels (fog, smoke) whose history is reprojected with no motion,"
+    " not the motion of the surface behind them: the medium's light follows none better"
+    " (information, not a problem)",
 }
 
 

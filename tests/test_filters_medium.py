@@ -16,6 +16,7 @@ from svgf_cli.filters.medium import (
     coverage,
     fill_sources,
     filled,
+    medium_motion,
 )
 from svgf_cli.filters.params import PRESETS
 from svgf_cli.frame import Frame, Signal
@@ -388,3 +389,72 @@ def test_the_coverage_radius_grows_with_the_image() -> None:
              (540, 960), (1080, 1920), (1920, 1080), (2160, 3840))
             ] == [1, 1, 1, 1, 2, 2, 2, 3, 3, 6]
     assert medium_coverage_radius_for(auto.replace(medium_coverage_radius=2), 72, 128) == 2
+
+
+def reference_medium_motion(light: np.ndarray, previous: np.ndarray, motion: np.ndarray,
+                            pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """medium_motion in plain Python, float64: the motion chosen and, per pixel, the two
+    candidates' errors' gap (for near ties, where float32 may choose the other)."""
+    _, height, width = light.shape
+
+    def mean(planes: np.ndarray, y: int, x: int) -> np.ndarray:
+        window = planes[:, max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].astype(np.float64)
+        return window.reshape(3, -1).mean(axis=1)
+
+    out = motion.astype(np.float64).copy()
+    gap = np.full((height, width), np.inf)
+    for y in range(height):
+        for x in range(width):
+            if not pixels[y, x]:
+                continue
+            now = mean(light, y, x)
+            resting = np.abs(now - mean(previous, y, x)).sum()
+            qx = int(np.floor(x + float(motion[0, y, x]) + 0.5))
+            qy = int(np.floor(y + float(motion[1, y, x]) + 0.5))
+            if 0 <= qx < width and 0 <= qy < height:
+                moving = np.abs(now - mean(previous, qy, qx)).sum()
+                gap[y, x] = abs(moving - resting)
+                if moving < resting:
+                    continue
+            out[:, y, x] = 0.0
+    return out, gap
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_medium_motion_matches_float64_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    height, width = 23, 31
+    light = rng.random((3, height, width)).astype(F32) * 4
+    previous = rng.random((3, height, width)).astype(F32) * 4
+    motion = (rng.random((2, height, width)).astype(F32) - 0.5) * 12
+    pixels = rng.random((height, width)) < 0.6
+    got, still = medium_motion(light, previous, motion, pixels)
+    want, gap = reference_medium_motion(light, previous, motion, pixels)
+    clear = gap > 1e-4
+    assert np.array_equal(got[:, clear], want[:, clear].astype(F32))
+    assert np.array_equal(got[:, ~pixels], motion[:, ~pixels])  # other pixels keep theirs
+    chosen_still = int((pixels & (want == 0).all(axis=0)).sum())
+    assert abs(still - chosen_still) <= int((pixels & ~clear).sum())
+    assert 0 < still < pixels.sum()
+
+
+def test_a_still_fog_in_front_of_a_moving_wall_takes_no_motion_and_a_moving_one_the_walls(
+) -> None:
+    """A fog whose light stays where it was while the surface behind it moves 5 pixels a
+    frame (a camera move's parallax) reprojects with no motion; a fog whose light moved as
+    the wall did keeps the wall's motion."""
+    height, width = 20, 60
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
+
+    def fog(shift: float) -> np.ndarray:  # smooth light with structure along x
+        pattern = 1.0 + 0.5 * np.sin((xs - shift) / 3.0) + 0.02 * ys
+        return np.repeat(pattern[None], 3, axis=0).astype(F32)
+
+    pixels = np.zeros((height, width), bool)
+    pixels[3:17, 12:48] = True
+    motion = np.zeros((2, height, width), F32)
+    motion[0] = -5.0  # backward: the wall was 5 pixels to the left a frame ago
+    still_fog, still = medium_motion(fog(0.0), fog(0.0), motion, pixels)
+    assert (still_fog[:, pixels] == 0.0).all() and still == pixels.sum()
+    moving_fog, still = medium_motion(fog(0.0), fog(-5.0), motion, pixels)
+    assert (moving_fog[:, pixels] == motion[:, pixels]).all() and still == 0

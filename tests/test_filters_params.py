@@ -38,7 +38,8 @@ HEADER = "| parameter | group | values | paper | falcor | meaning |"
 # plus departures (computed from the old PRESETS, 2026-11-27): they must never change, as
 # every output stores them in svgf/params. Added since: warm_start (2026-11-27, issue 29),
 # medium_fill_radius (2026-11-27, issue 30), medium_coverage_radius (2026-11-28),
-# samples_per_pixel, noisy_outline_weight (2026-11-28, issue 30). Changed
+# samples_per_pixel, noisy_outline_weight (2026-11-28, issue 30), medium_motion
+# (2026-12-07, issue 30). Changed
 # since: default's sigma_luminance 4 -> 2
 # and mixed_sigma_luminance 2.5 -> 1.5 (2026-11-27, issue 29:
 # docs/stability.md#a-tighter-luminance-stop).
@@ -69,6 +70,7 @@ PINNED: dict[str, dict[str, object]] = {
         "warm_start": 0,
         "medium_fill_radius": 0,
         "medium_coverage_radius": 0,
+        "medium_motion": False,
         "samples_per_pixel": 1,
         "noisy_outline_weight": 0.0,
     },
@@ -98,6 +100,7 @@ PINNED: dict[str, dict[str, object]] = {
         "warm_start": 8,
         "medium_fill_radius": 4,
         "medium_coverage_radius": -1,
+        "medium_motion": True,
         "samples_per_pixel": -1,
         "noisy_outline_weight": 0.25,
     },
@@ -127,6 +130,7 @@ PINNED: dict[str, dict[str, object]] = {
         "warm_start": 0,
         "medium_fill_radius": 0,
         "medium_coverage_radius": 0,
+        "medium_motion": False,
         "samples_per_pixel": 1,
         "noisy_outline_weight": 0.0,
     },

@@ -19,7 +19,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 TEMPORAL = ["values", "gradients", "demodulate", "reproject"]
 DEFAULT_TEMPORAL = ["values", "fill_medium", "medium_coverage", "gradients",
-                    "reflected_albedo", "reflected_lights", "demodulate", "reproject",
+                    "reflected_albedo", "reflected_lights", "demodulate", "medium_motion",
+                    "reproject",
                     "object_history", "history_clamp", "antilag", "adopt_object_history",
                     "spread_fireflies"]
 
@@ -29,7 +30,7 @@ DEFAULT_TEMPORAL = ["values", "fill_medium", "medium_coverage", "gradients",
                          "remodulate"]),
     ("falcor", "causal", [*TEMPORAL, "accumulate", "variance", "atrous", "store_history",
                           "remodulate"]),
-    ("default", "causal", [*DEFAULT_TEMPORAL[:9], "history_gain", *DEFAULT_TEMPORAL[9:],
+    ("default", "causal", [*DEFAULT_TEMPORAL[:10], "history_gain", *DEFAULT_TEMPORAL[10:],
                            "accumulate", "temporal_albedo", "variance",
                            "atrous", "store_history", "emission_mean", "despike",
                            "remodulate", "despike_lone", "taa", "pixel_filter",

@@ -1096,9 +1096,10 @@ def _read_production_frame():  # noqa: ANN202
 def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
     """The light groups' filter runs no fill_medium of its own: on the fog shot it filters
     the groups bit for bit as from the frame's own G-buffer (its own fill would compute the
-    same from the same planes and settings). The fog has a surface behind every medium
-    pixel: no medium surface, where the groups are filtered as radiance
-    (test_group_frame_filters_medium_surfaces_as_radiance)."""
+    same from the same planes and settings; without medium_motion, which the groups' filter
+    takes from the colour's: test_groups_filter_takes_the_colour_filters_medium_motion). The
+    fog has a surface behind every medium pixel: no medium surface, where the groups are
+    filtered as radiance (test_group_frame_filters_medium_surfaces_as_radiance)."""
     import dataclasses
 
     from svgf_cli.filters.composable import LayeredDenoiser, group_frame, group_params
@@ -1109,8 +1110,9 @@ def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
     from svgf_cli.io.lightlayers import read_light_layers
 
     mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
-    layered = LayeredDenoiser(PRESETS["default"])
-    own = Denoiser(group_params(PRESETS["default"]))
+    params = dataclasses.replace(PRESETS["default"], medium_motion=False)
+    layered = LayeredDenoiser(params)
+    own = Denoiser(group_params(params))
     own.setup = dataclasses.replace(own.setup, signal_outputs=True)
     taken: list[DenoisedFrame] = []
     process = layered.groups.process
@@ -1137,6 +1139,45 @@ def test_groups_filter_takes_the_colour_filters_filled_gbuffer() -> None:
         assert taken[-1].layers.keys() == want.layers.keys()
         for name, plane in want.layers.items():
             assert np.array_equal(taken[-1].layers[name], plane), name
+
+
+def test_groups_filter_takes_the_colour_filters_medium_motion() -> None:
+    """The medium pixels' motion the colour's filter chose (filters.stages.medium_motion:
+    none for some of the fog's pixels from the second frame on) is the motion the light
+    groups' filter reprojects with: the groups' fog light moves with the fog too. Every other
+    pixel's motion is the frame's."""
+    import dataclasses
+
+    from svgf_cli.filters.composable import LayeredDenoiser
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    motions: dict[bool, list[np.ndarray]] = {True: [], False: []}
+    for chosen in (True, False):
+        layered = LayeredDenoiser(dataclasses.replace(PRESETS["default"], medium_motion=chosen))
+        process = layered.groups.process
+
+        def keep(frame, process=process, chosen=chosen):  # noqa: ANN001, ANN202
+            motions[chosen].append(frame.motion.copy())
+            return process(frame)
+
+        layered.groups.process = keep  # type: ignore[method-assign]
+        for frame in (1, 2, 3):
+            result = read_frame(SHOT / f"in.{frame:04d}.exr", mapping)
+            result.frame.light = read_light_layers(result, "cycles")
+            denoised = layered.process(result.frame)
+            medium = denoised.medium
+            assert medium is not None and medium.any()
+            if chosen and frame > 1:
+                assert denoised.counts["medium_still"] > 0
+    first, *later = range(3)
+    assert np.array_equal(motions[True][first], motions[False][first])  # no history yet
+    for index in later:
+        differs = (motions[True][index] != motions[False][index]).any(axis=0)
+        assert differs.any()
+        assert (motions[True][index][:, differs] == 0.0).all()
 
 
 def test_layered_filter_holds_one_workspace_at_a_time_and_gives_the_same_bits() -> None:

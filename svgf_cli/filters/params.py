@@ -126,10 +126,9 @@ class SVGFParams:
         16.0, "Reprojection rejects a tap when |n - n_prev| > tolerance * (normal_gradient"
         " + 0.01).", group="temporal", valid=Range(0))
     history_catmull_rom: bool = _p(
-        False, "Resample the reprojected colour history and moments with a Catmull-Rom spline over"
-        " the 4x4 taps (clamped to the bilinear taps' range) where all 16 pass the"
-        " reprojection tests, bilinear elsewhere: bilinear resampling blurs the history a"
-        " little more every frame.", group="temporal")
+        False, "Resample the colour history and moments with a Catmull-Rom spline (clamped to"
+        " the bilinear taps' range) where all 16 taps pass the tests, else bilinear.",
+        group="temporal")
     bidirectional: bool = _p(
         False, "Offline: also run the filter backwards in time and combine both passes' histories"
         " per pixel before the spatial filter (frames after the current one count too;"
@@ -155,6 +154,9 @@ class SVGFParams:
         " else one per 360, at least 2 (docs/algorithm.md#the-mediums-coverage).",
         group="temporal", valid=Range(0, 8, auto=AUTO_COVERAGE, shown="0..8", noun="a radius"),
     )
+    medium_motion: bool = _p(
+        False, "Medium pixels reproject with the surface behind's motion or none, whichever"
+        " their light follows (docs/algorithm.md#the-mediums-motion).", group="temporal")
     # Variance estimation (paper section 4.2).
     variance_history_threshold: int = _p(
         4, "Below this history length the variance is estimated spatially (7x7 bilateral).",
@@ -205,11 +207,8 @@ class SVGFParams:
         " by one factor (a light switched or dimmed) and narrower windows agree; causal runs.",
         group="antilag")
     antilag_gradients: bool = _p(
-        True,
-        "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
-        " (svgf trace --gradient-samples).",
-        group="antilag",
-    )
+        True, "Anti-lag also uses temporal gradient samples (A-SVGF) when the input has them"
+        " (svgf trace --gradient-samples).", group="antilag")
     object_history: bool = _p(
         False,
         "On an object turning about its own axis (a rolling ball), also fetch the light's"
@@ -504,6 +503,9 @@ DEPARTURES: dict[str, tuple[Departure, ...]] = {
         Departure("medium_coverage_radius", AUTO_COVERAGE, "the fog's 1-spp light is a few bright"
                   " samples among zeros, which the a-trous darkened by 16 % and spread past the"
                   " fog's edge: docs/algorithm.md#the-mediums-coverage"),
+        Departure("medium_motion", True, "a fog does not move as the wall behind it does"
+                  " under a camera move: its history came from the wrong place (production"
+                  " fog relMSE -18 %): docs/algorithm.md#the-mediums-motion"),
         Departure("atrous_iterations", AUTO_ITERATIONS, "the filter's reach grows with the"
                   f" image (atrous_iterations_for): {_ALG}#the-filters-reach-grows-with-the-image"),
         Departure("taa_jittered", True, "a jittered frame's outline pixel shows one surface"

@@ -31,6 +31,7 @@ from svgf_cli.filters.stages.gradients import Gradients
 from svgf_cli.filters.stages.history_clamp import HistoryClamp
 from svgf_cli.filters.stages.history_gain import HistoryGain
 from svgf_cli.filters.stages.medium_coverage import MediumCoverage
+from svgf_cli.filters.stages.medium_motion import MediumMotion
 from svgf_cli.filters.stages.object_history import AdoptObjectHistory, ObjectHistory
 from svgf_cli.filters.stages.pass_history import PassHistory
 from svgf_cli.filters.stages.pixel_filter import PixelFilter
@@ -60,6 +61,7 @@ def temporal(causal: bool = False) -> list[Stage]:
         ReflectedAlbedo(),  # reflected_albedo
         MarkReflectedLights(),  # glossy_emitter_radiance
         Demodulate(),
+        MediumMotion(),  # medium_motion, frames with medium pixels and history
         FireflyClamp(),  # firefly_clamp
         Reproject(),
         ObjectHistory(),  # object_history
