@@ -436,6 +436,9 @@ def test_medium_motion_matches_float64_reference(seed: int) -> None:
     chosen_still = int((pixels & (want == 0).all(axis=0)).sum())
     assert abs(still - chosen_still) <= int((pixels & ~clear).sum())
     assert 0 < still < pixels.sum()
+    motion[:, ::2] = 0.0  # pixels with no motion already are not counted
+    _, fewer = medium_motion(light, previous, motion, pixels)
+    assert fewer < still
 
 
 def test_a_still_fog_in_front_of_a_moving_wall_takes_no_motion_and_a_moving_one_the_walls(

@@ -140,7 +140,7 @@ def medium_motion(light: np.ndarray, previous: np.ndarray, motion: np.ndarray,
     this frame's ``light`` (3, H, W), none on a tie or where the surface's points outside the
     frame. A fog's light moves with the fog, which the surface behind it does not (a camera
     move's parallax); Cycles writes no motion where a sample scattered. A copy of ``motion``
-    and how many pixels took none."""
+    and how many pixels that had some took none."""
     now = np.empty(light.shape, np.float32)
     box_mean(np.ascontiguousarray(light, dtype=np.float32), MOTION_CHOICE_RADIUS, now)
     before = np.empty(previous.shape, np.float32)
@@ -159,7 +159,8 @@ def _choose_motion(now: np.ndarray, before: np.ndarray, pixels: np.ndarray,
     _, height, width = now.shape
     for y in prange(height):
         for x in range(width):
-            if not pixels[y, x]:
+            # A medium surface's motion (no surface near) is none already.
+            if not pixels[y, x] or (motion[0, y, x] == 0.0 and motion[1, y, x] == 0.0):
                 continue
             resting = np.float32(0.0)
             for c in range(3):
