@@ -443,11 +443,47 @@ def test_spilled_colours_leave_a_sliver_without_colour() -> None:
     assert not covers[id(colour)].vacant[4, 4]
 
 
-def test_write_passes_divides_by_the_spilled_colour_and_adds_up() -> None:
+def _check_slivers(plain: dict[str, np.ndarray], lent: dict[str, np.ndarray],
+                   passes: tuple[str, ...], emission: tuple[str, ...], colour_pass: str,
+                   colour: np.ndarray, medium: np.ndarray | None = None,
+                   some: bool = True) -> None:
+    """``lent`` (write_passes' layers) against ``plain`` (the same without lend_slivers;
+    ``some``: some pixel takes a sliver):
+    the colour pass differs only on pixels without colour in ``plain`` (not ``medium``),
+    by at most half the largest colour among their 4 neighbours, the passes not at all,
+    and passes x colour + emission still add up to ``colour`` where it has light."""
+    def rgb(layers: dict[str, np.ndarray], name: str) -> np.ndarray:
+        return np.stack([layers[f"{name}.{c}"] for c in "RGB"])
+
+    before, after = rgb(plain, colour_pass), rgb(lent, colour_pass)
+    changed = (before != after).any(axis=0)
+    assert changed.any() == some
+    assert (before[:, changed] == 0.0).all()
+    if medium is not None:
+        assert not (changed & medium).any()
+    padded = np.pad(before.max(axis=0), 1)
+    around = np.max([padded[:-2, 1:-1], padded[2:, 1:-1], padded[1:-1, :-2],
+                     padded[1:-1, 2:]], axis=0)
+    assert (after.max(axis=0)[changed] <= 0.5 * around[changed] * (1 + 1e-6)).all()
+    for name in passes:
+        np.testing.assert_array_equal(rgb(lent, name), rgb(plain, name))
+    rebuilt = sum(rgb(lent, name) * after for name in passes)
+    rebuilt = rebuilt + sum((rgb(lent, name) for name in emission), np.zeros_like(after))
+    if emission:
+        np.testing.assert_allclose(rebuilt, colour, rtol=1e-4, atol=1e-5)
+    else:  # no emission pass takes what the slivers leave: they carry at most the colour
+        assert (rebuilt[:, changed] <= colour[:, changed] * (1 + 1e-5) + 1e-6).all()
+
+
+def test_write_passes_divides_by_the_spilled_colour_and_adds_up(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """With the noisy outlines' spill, the written colour pass of a signal's colour is the
     remodulated colour spilled, its pass is the signal's light over it, and passes and
     emission still add up to the colour; a pixel whose centre-sampled colour is 0 is not
-    filled from neighbours that have colour only from the mix."""
+    filled from neighbours that have colour only from the mix. The slivers the light left
+    there takes (lend_slivers, left out for these) change only pixels still without
+    colour, and the layers still add up."""
+    from svgf_cli.filters import composable
     from svgf_cli.filters.composable import write_passes
     from svgf_cli.frame import DenoisedFrame, LightLayer, LightLayers
 
@@ -464,13 +500,19 @@ def test_write_passes_divides_by_the_spilled_colour_and_adds_up() -> None:
                          albedo, "diffuse", ("DiffCol.R", "DiffCol.G", "DiffCol.B"))
     env = LightLayer(("Env.R", "Env.G", "Env.B"), sky, sky)
     layers = LightLayers(passes=[diffuse], emission=[env])
-    results = {}
-    for with_spill in (False, True):
+
+    def write(with_spill: bool) -> dict[str, np.ndarray]:
         denoised = DenoisedFrame(color=colour.copy(), layers={}, emission=sky.copy())
         write_passes(denoised, sky.copy(), {"diffuse": light.copy()}, {"diffuse": albedo},
                      layers, kept=sky[None].copy(), spill=spill if with_spill else None)
-        results[with_spill] = denoised.light
+        return denoised.light
+
+    lent = write(False)  # the light spilled, its colour not: light left beside the surface
+    with monkeypatch.context() as patch:
+        patch.setattr(composable, "lend_slivers", lambda *args: {})
+        results = {with_spill: write(with_spill) for with_spill in (False, True)}
     out = results[True]
+    _check_slivers(results[False], lent, ("DiffDir",), ("Env",), "DiffCol", colour)
     written = np.stack([out[f"DiffCol.{c}"] for c in "RGB"])
     np.testing.assert_array_equal(written, spill.apply(albedo))
     plain = np.stack([results[False][f"DiffCol.{c}"] for c in "RGB"])
@@ -488,11 +530,14 @@ def test_write_passes_divides_by_the_spilled_colour_and_adds_up() -> None:
     np.testing.assert_array_equal(passes[:, vacant], stored[:, vacant])
 
 
-def test_write_passes_mixes_a_glossy_colour_read_where_the_gbuffer_is_noise() -> None:
+def test_write_passes_mixes_a_glossy_colour_read_where_the_gbuffer_is_noise(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """A glossy signal's colour pass (remodulated by this frame's colour as read) is written
     anew only with the noisy outlines' spill: as read with its exchanges (bit for bit
     ``spill.apply``), as read on the medium's pixels; its passes are the light over it and
-    still add up to the colour. Without the spill it is not written (the file's stays)."""
+    still add up to the colour. Without the spill it is not written (the file's stays).
+    The slivers (lend_slivers, left out for these) change only pixels without colour."""
+    from svgf_cli.filters import composable
     from svgf_cli.filters.composable import write_passes
     from svgf_cli.frame import DenoisedFrame, LightLayer, LightLayers
 
@@ -513,12 +558,20 @@ def test_write_passes_mixes_a_glossy_colour_read_where_the_gbuffer_is_noise() ->
                           gloss_colour, "specular", names)
 
     layers = LightLayers(passes=[layer("GlossDir", 0.75), layer("GlossInd", 0.25)])
-    results = {}
-    for with_spill in (False, True):
+
+    def write(with_spill: bool) -> dict[str, np.ndarray]:
         denoised = DenoisedFrame(color=light.copy(), layers={}, emission=None, medium=medium)
         write_passes(denoised, None, {"specular": light.copy()}, {}, layers,
                      spill=spill if with_spill else None)
-        results[with_spill] = denoised.light
+        return denoised.light
+
+    lent = write(True)
+    with monkeypatch.context() as patch:
+        patch.setattr(composable, "lend_slivers", lambda *args: {})
+        results = {with_spill: write(with_spill) for with_spill in (False, True)}
+    # No emission pass: the passes share all of the light, none is left for a sliver.
+    _check_slivers(results[True], lent, ("GlossDir", "GlossInd"), (), "GlossCol", light,
+                   medium, some=False)
     assert "GlossCol.R" not in results[False]
     out = results[True]
     written = np.stack([out[name] for name in names])
@@ -530,6 +583,135 @@ def test_write_passes_mixes_a_glossy_colour_read_where_the_gbuffer_is_noise() ->
     coloured = written.max(axis=0) > 0.0
     np.testing.assert_allclose((passes * written)[:, coloured], light[:, coloured],
                                rtol=1e-4, atol=1e-6)
+
+
+def _wire_against_the_sky(extra: float = 0.0) -> dict[str, np.ndarray]:
+    """A one-pixel glossy wire (column 4 of 9x9: GlossCol 0.9, GlossDir 50) against a sky
+    (Env 0.25), the colour's pixel filter spilling the wire's glint onto the sky beside it,
+    written by ``write_passes``; ``extra``: light added to the colour at (4, 5) beyond the
+    spill."""
+    from svgf_cli.filters.composable import write_passes
+    from svgf_cli.filters.pixel_filter import pixel_filter
+    from svgf_cli.frame import DenoisedFrame, LightLayer, LightLayers
+
+    h = w = 9
+    gloss = np.zeros((3, h, w), np.float32)
+    gloss[:, :, 4] = 0.9
+    stored = np.where(gloss > 0, 50.0, 0.0).astype(np.float32)
+    light = (stored * gloss).astype(np.float32)
+    sky = np.where(gloss > 0, 0.0, 0.25).astype(np.float32)
+    colour = np.empty_like(light)
+    pixel_filter(light + sky, sky, np.float32(0.05), colour)
+    colour[:, 4, 5] += extra
+    layers = LightLayers(
+        passes=[LightLayer(("GlossDir.R", "GlossDir.G", "GlossDir.B"), light, stored, gloss,
+                           "specular", ("GlossCol.R", "GlossCol.G", "GlossCol.B"))],
+        emission=[LightLayer(("Env.R", "Env.G", "Env.B"), sky, sky)])
+    denoised = DenoisedFrame(color=colour.copy(), layers={}, emission=sky.copy())
+    write_passes(denoised, sky.copy(), {"specular": light.copy()}, {}, layers,
+                 kept=sky[None].copy(), pixel_weight=0.05)
+    out = {name: np.stack([denoised.light[f"{name}.{c}"] for c in "RGB"])
+           for name in ("GlossDir", "GlossCol", "Env")}
+    out["colour"], out["sky"] = colour, sky
+    return out
+
+
+def test_a_glint_spilled_onto_the_sky_stays_in_its_light_pass() -> None:
+    """The pixel filter spills a wire's glint onto the sky pixels beside it: that light is
+    the wire's glossy light, so those pixels get a sliver of its colour pass (what the
+    filter spreads of it) and its light pass at the wire's ratio, and the sky's pass keeps
+    the sky (all of the glint went to `Env` before: production 640x360, `Env` 1.16x its
+    input's relMSE); the passes still add up to the colour, and the sky two pixels away
+    is as read."""
+    out = _wire_against_the_sky()
+    beside = (slice(None), slice(None), [3, 5])
+    assert (out["GlossCol"][beside] > 0.01).all() and (out["GlossCol"][beside] < 0.1).all()
+    wire = out["GlossDir"][:, :, 4:5]  # the wire's light over its colour (45: the pixel
+    np.testing.assert_allclose(out["GlossDir"][beside], wire.repeat(2, axis=2), rtol=1e-4)
+    np.testing.assert_allclose(out["Env"][beside], 0.25, rtol=1e-4)  # filter dims it)
+    rebuilt = out["GlossDir"] * out["GlossCol"] + out["Env"]
+    np.testing.assert_allclose(rebuilt, out["colour"], rtol=1e-5)
+    far = (slice(None), slice(None), [0, 1, 2, 6, 7, 8])
+    assert (out["GlossCol"][far] == 0.0).all()
+    np.testing.assert_array_equal(out["Env"][far], out["sky"][far])
+
+
+def test_a_sliver_carries_no_more_light_than_the_pixel_has() -> None:
+    """A sliver carries light at its neighbours' ratio, the light its pixel has beyond its
+    emission, never the light over the sliver: with part of the spilled glint taken away
+    at one pixel the sliver there shrinks to what is left, with far more light it grows to
+    at most SLIVER_CAP of the colour beside it and the rest stays with `Env`; the passes
+    add up to the colour in every case."""
+    dim = _wire_against_the_sky(extra=-0.1)
+    full = _wire_against_the_sky()
+    assert 0.0 < dim["GlossCol"][0, 4, 5] < full["GlossCol"][0, 4, 5]
+    np.testing.assert_allclose(dim["GlossDir"][:, 4, 5], dim["GlossDir"][:, 4, 4], rtol=1e-4)
+    np.testing.assert_allclose(dim["Env"][:, 4, 5], 0.25, rtol=1e-4)
+    for out in (dim, _wire_against_the_sky(extra=2.0), _wire_against_the_sky(extra=30.0)):
+        rebuilt = out["GlossDir"] * out["GlossCol"] + out["Env"]
+        np.testing.assert_allclose(rebuilt, out["colour"], rtol=1e-5)
+    # Far more light than the glint: the sliver stops at SLIVER_CAP of the colour beside
+    # it (0.9); the rest stays with Env.
+    from svgf_cli.filters.composable import SLIVER_CAP
+
+    bright = _wire_against_the_sky(extra=30.0)
+    np.testing.assert_allclose(bright["GlossCol"][:, 4, 5], SLIVER_CAP * 0.9, rtol=1e-5)
+    carried = bright["GlossDir"][:, 4, 5] * bright["GlossCol"][:, 4, 5]
+    np.testing.assert_allclose(bright["Env"][:, 4, 5], bright["colour"][:, 4, 5] - carried,
+                               rtol=1e-5)
+    assert (bright["Env"][:, 4, 5] > 10.0).all()  # 32.5 of colour, 45 x 0.45 carried
+
+
+def test_sliver_kernels_match_float64_references() -> None:
+    from svgf_cli.filters.shares import claim_share, lend_sliver, sliver_claims
+
+    rng = np.random.default_rng(31)
+    h, w = 7, 11
+    source = rng.random((h, w)) < 0.3
+    vacant = ~source & (rng.random((h, w)) < 0.8)
+    medium = rng.random((h, w)) < 0.2
+    residual = (rng.random((3, h, w)) - 0.1).astype(np.float32)
+    lit = (residual > 0).all(axis=0)
+    colour = rng.random((3, h, w)).astype(np.float32)
+    stored = rng.random((3, 3, h, w)).astype(np.float32)
+    members = np.array([0, 2], np.int64)
+    offsets = ((-1, 0), (1, 0), (0, -1), (0, 1))
+
+    def neighbours(y: int, x: int) -> list[tuple[int, int]]:
+        return [(y + dy, x + dx) for dy, dx in offsets
+                if 0 <= y + dy < h and 0 <= x + dx < w and source[y + dy, x + dx]]
+
+    for mask in (medium, np.zeros((0, 0), bool)):
+        targets = vacant & lit & ~(mask if mask.size else False)
+        targets &= np.array([[bool(neighbours(y, x)) for x in range(w)] for y in range(h)])
+        want = np.zeros((3, h, w))
+        for y, x in zip(*np.nonzero(targets), strict=True):
+            for yy, xx in neighbours(y, x):
+                want[:, y, x] += stored[members][:, :, yy, xx].astype(np.float64).sum(
+                    axis=0) * colour[:, yy, xx]
+        claims = np.zeros((3, h, w), np.float32)
+        assert sliver_claims(colour, stored, members, source, vacant, mask, lit,
+                             claims) == targets.sum()
+        np.testing.assert_allclose(claims, want, rtol=1e-5)
+    share = np.empty((h, w), np.float32)
+    claim_share(residual, claims, share)
+    r64, c64 = residual.astype(np.float64), claims.astype(np.float64)
+    claimed = (c64 > 0).all(axis=0)
+    ratio = np.divide(r64, c64, out=np.zeros_like(r64), where=claimed[None]).min(axis=0)
+    np.testing.assert_allclose(share, np.where(claimed, np.maximum(ratio, 0.0), 0.0),
+                               rtol=1e-6)
+    out = np.empty_like(colour)
+    left = residual.copy()
+    lend_sliver(colour, stored, members, source, vacant, np.zeros((0, 0), bool), lit, share,
+                0.5, left, out)
+    want_out, want_left = colour.astype(np.float64), r64.copy()
+    for y, x in zip(*np.nonzero(targets), strict=True):
+        near = neighbours(y, x)
+        part = min(float(share[y, x]), 0.5 / len(near))
+        want_out[:, y, x] = sum(colour[:, yy, xx].astype(np.float64) for yy, xx in near) * part
+        want_left[:, y, x] -= stored[members][:, :, y, x].sum(axis=0) * want_out[:, y, x]
+    np.testing.assert_allclose(out, want_out, rtol=1e-5)
+    np.testing.assert_allclose(left, want_left, rtol=1e-5, atol=1e-6)
 
 
 def test_compose_passes_of_no_signal_weigh_by_the_colour_as_written() -> None:

@@ -445,3 +445,97 @@ def covered_pixel_filter_kernel(colour: np.ndarray, weight: float) -> None:
             for c in range(3):
                 colour[c, y, x] = (centre * rows[c, y, x]
                                    + weight * (rows[c, up, x] + rows[c, down, x])) / total
+
+
+@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
+      error_model="numpy")
+def _is_sliver(source: np.ndarray, vacant: np.ndarray, medium: np.ndarray,
+               lit: np.ndarray, y: int, x: int) -> bool:
+    """Whether pixel (y, x) may take a sliver: ``vacant``, a ``source`` pixel among its 4
+    neighbours, not ``medium`` (empty: none), ``lit`` (light no pass carries, in every
+    channel)."""
+    height, width = vacant.shape
+    if not vacant[y, x] or not lit[y, x] or (medium.shape[0] > 0 and medium[y, x]):
+        return False
+    return ((y > 0 and source[y - 1, x]) or (y + 1 < height and source[y + 1, x])
+            or (x > 0 and source[y, x - 1]) or (x + 1 < width and source[y, x + 1]))
+
+
+@njit(**_JIT)
+def sliver_claims(colour: np.ndarray, stored: np.ndarray, members: np.ndarray,
+                  source: np.ndarray, vacant: np.ndarray, medium: np.ndarray,
+                  lit: np.ndarray, claims: np.ndarray) -> int:
+    """In place, on each pixel that may take a sliver of ``colour`` (3, H, W): ``claims``
+    (3, H, W) += the light of its light passes (``stored[k]`` (K, 3, H, W) for k in
+    ``members``, times ``colour``) on its 4 neighbours that are ``source`` (vacant: its
+    colour is 0; medium: (H, W) bool or empty; lit: where light is left, (H, W) bool).
+    Returns how many such pixels."""
+    height, width = vacant.shape
+    found = np.zeros(height, np.int64)
+    for y in prange(height):
+        for x in range(width):
+            if not _is_sliver(source, vacant, medium, lit, y, x):
+                continue
+            found[y] += 1
+            for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                yy, xx = y + dy, x + dx
+                if 0 <= yy < height and 0 <= xx < width and source[yy, xx]:
+                    for c in range(3):
+                        light = 0.0
+                        for k in members:
+                            light += stored[k, c, yy, xx]
+                        claims[c, y, x] += light * colour[c, yy, xx]
+    return int(found.sum())
+
+
+@njit(**_JIT)
+def claim_share(residual: np.ndarray, claims: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (H, W): the share of ``claims`` (3, H, W) the light ``residual`` there can
+    give, the same in every channel: ``max(min_c residual / claims, 0)`` where every
+    channel claims some, else 0."""
+    _, height, width = residual.shape
+    for y in prange(height):
+        for x in range(width):
+            share = 0.0
+            if claims[0, y, x] > 0.0 and claims[1, y, x] > 0.0 and claims[2, y, x] > 0.0:
+                share = residual[0, y, x] / claims[0, y, x]
+                for c in range(1, 3):
+                    share = min(share, residual[c, y, x] / claims[c, y, x])
+                share = max(share, 0.0)
+            out[y, x] = share
+
+
+@njit(**_JIT)
+def lend_sliver(colour: np.ndarray, stored: np.ndarray, members: np.ndarray,
+                source: np.ndarray, vacant: np.ndarray, medium: np.ndarray, lit: np.ndarray,
+                share: np.ndarray, cap: float, residual: np.ndarray, out: np.ndarray) -> None:
+    """On each pixel that may take a sliver of ``colour`` (as :func:`sliver_claims`):
+    ``out`` (3, H, W; elsewhere ``colour``) = its 4 ``source`` neighbours' colour summed,
+    times ``min(share, cap / their count)`` (at most ``cap`` times their mean), and in
+    place ``residual -= `` the light its passes carry under it (their stored values there,
+    filled from those neighbours, times ``out``)."""
+    height, width = vacant.shape
+    for y in prange(height):
+        for x in range(width):
+            lent = _is_sliver(source, vacant, medium, lit, y, x)
+            if lent:
+                count = 0
+                for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                    yy, xx = y + dy, x + dx
+                    count += 0 <= yy < height and 0 <= xx < width and source[yy, xx]
+                part = min(share[y, x], cap / count)
+                for c in range(3):
+                    total = 0.0
+                    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                        yy, xx = y + dy, x + dx
+                        if 0 <= yy < height and 0 <= xx < width and source[yy, xx]:
+                            total += colour[c, yy, xx]
+                    sliver = total * part
+                    out[c, y, x] = sliver
+                    light = 0.0
+                    for k in members:
+                        light += stored[k, c, y, x]
+                    residual[c, y, x] -= light * sliver
+            else:
+                for c in range(3):
+                    out[c, y, x] = colour[c, y, x]
