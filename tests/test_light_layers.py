@@ -1513,6 +1513,40 @@ def test_colour_and_data_layers_as_without_light_layers(outputs: dict[str, Path]
         assert {"Combined_key", "Combined_env", "DiffDir", "DiffInd"} <= changed
 
 
+def test_a_bidirectional_run_writes_the_light_layers_denoised(tmp_path: Path) -> None:
+    """`--bidirectional` splits its combined colour into the light layers as a causal run
+    does (composable.LayeredReversePass; frames 3-6, the reverse pass's warm-up frames 7-8
+    included): they add up to it, the groups are denoised (each at most 0.3x its input's
+    relMSE, as the causal run's), and `Combined` and the data layers are the bits of a
+    bidirectional run that writes the light layers as read (before 2026-12-07 they were
+    written as read, so nothing added up to the denoised colour)."""
+    frames = range(3, 7)
+    result = {}
+    for mode in ("denoised", "as-read"):
+        result[mode] = tmp_path / mode
+        assert exit_code(["denoise", "--preset-aovs", "cycles", "-q", "--bidirectional",
+                          SHOT / "in.####.exr", "-o", f"{result[mode]}/", "--frames", "3-6",
+                          "--light-layers", mode]) == 0
+    mapping = build_mapping("cycles")
+    for frame in frames:
+        name = f"in.{frame:04d}.exr"
+        for check in file_additivity(str(result["denoised"] / name), mapping):
+            assert check.passed, check.describe()
+        den, plain = channels(result["denoised"] / name), channels(result["as-read"] / name)
+        for channel, pixels in den.items():
+            if channel.split(".")[1] == "Combined" or channel.split(".")[1] in DATA:
+                assert np.array_equal(pixels, plain[channel], equal_nan=True), channel
+    for group in GROUPS:
+        out = np.mean([relmse_trimmed(layer(channels(result["denoised"] / f"in.{f:04d}.exr"),
+                                            group),
+                                      layer(channels(SHOT / f"ref.{f:04d}.exr"), group))
+                       for f in frames])
+        noisy = np.mean([relmse_trimmed(layer(channels(SHOT / f"in.{f:04d}.exr"), group),
+                                        layer(channels(SHOT / f"ref.{f:04d}.exr"), group))
+                         for f in frames])
+        assert out <= 0.3 * noisy, (group, out, noisy)
+
+
 def test_a_group_switching_on_is_not_lagged(outputs: dict[str, Path]) -> None:
     """The fill light is off on frames 1-4 and on from frame 5: its group's own history and
     anti-lag bring it up at once. Its output/reference brightness on frame 5 is within 15% of

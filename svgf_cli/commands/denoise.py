@@ -157,7 +157,7 @@ SECTIONS = [
     default="denoised",
     show_default=True,
     help="Light passes and light groups: denoised, adding up to the denoised colour, or as "
-    "read (causal runs; a bidirectional run writes them as read).",
+    "read.",
 )
 @click.option(
     "--save-history",
@@ -368,12 +368,8 @@ def _read_first_frame(run: _Run) -> str | None:
     return decided.signal_warning
 
 
-def params_bidirectional(run: _Run) -> bool:
-    return bool(run.params.bidirectional)
-
-
 def _light_text(run: _Run, options: dict[str, Any]) -> str:
-    if options["light_layers"] == "as-read" or params_bidirectional(run):
+    if options["light_layers"] == "as-read":
         return "; every other channel as read"
     return ("; light layers (lobe passes, light groups) denoised, adding up to the colour; "
             "every other channel as read")
@@ -473,7 +469,7 @@ def _execute(run: _Run) -> Any:
         mapping=run.mapping,
         float_colour=options["float_output"],
         colour_only=options["colour_only"],
-        light_layers="as-read" if params_bidirectional(run) else options["light_layers"],
+        light_layers=options["light_layers"],
         compression=options["compression"],
         debug_aovs=options["debug_aovs"],
         warmup_label=warmup_label(run.warmup),

@@ -38,10 +38,12 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from svgf_cli.filters.edge_filter import OutlineSpill
+from svgf_cli.filters.engine import PipelineFilter
 from svgf_cli.filters.medium import MEDIUM_DEPTH
 from svgf_cli.filters.params import SVGFParams, params_for_samples
 from svgf_cli.filters.pass_shares import PassShares
@@ -800,12 +802,16 @@ class LayeredDenoiser:
     it (`DenoisedFrame.light`). The light groups' filter keeps its own history; ``state()``
     is the colour's (a history file resumes the colour; the groups then start cold)."""
 
-    def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
+    def __init__(self, params: SVGFParams, debug_layers: bool = False,
+                 colour: PipelineFilter | None = None) -> None:
         from svgf_cli.filters.denoiser import Denoiser
 
         self.params = params
         self.debug_layers = debug_layers
-        self.colour = Denoiser(params, debug_layers=debug_layers)
+        # The colour's filter (the causal Denoiser unless given): its process(frame, ...)
+        # hands back a DenoisedFrame with its G-buffer, or None (no output for that frame).
+        self.colour: Any = Denoiser(params, debug_layers=debug_layers) if colour is None \
+            else colour
         self.colour.setup = dataclasses.replace(self.colour.setup, signal_outputs=True)
         self.colour.gbuffer_output = True
         self.groups = Denoiser(group_params(params))
@@ -836,15 +842,16 @@ class LayeredDenoiser:
         self.colour.load_state(state)
         self.shares.reset()
 
-    def process(self, frame: Frame) -> DenoisedFrame:
-        """Denoise the next frame and its light layers. The light groups' filter takes the
-        G-buffer as the colour's filter used it (medium pixels filled: its own fill_medium
-        would compute the same from the same planes and settings)."""
-        denoised = self.colour.process(frame)
-        # The two filters run one after the other: each lets go of its per-frame planes
-        # when done (scratch: outputs are the same), so one workspace is held at a time,
-        # not two (1080p production frames: peak 4.14 -> 3.72 GB, same speed).
+    def process(self, frame: Frame, *args: Any) -> DenoisedFrame:
+        """Denoise the next frame (``args``: the colour filter's) and its light layers; None
+        where the colour's filter gives no output (a reverse pass's warm-up). The groups'
+        filter takes the G-buffer as the colour's filter used it (medium pixels filled)."""
+        denoised = self.colour.process(frame, *args)
+        # The two filters run one after the other, each letting go of its per-frame planes
+        # when done: one workspace held at a time (1080p production: peak 4.14 -> 3.72 GB).
         self.colour.resident.release_workspace()
+        if denoised is None:
+            return None  # type: ignore[return-value]
         light = frame_light(frame)
         gbuffer, denoised.gbuffer = denoised.gbuffer, None  # for the groups' filter only
         assert gbuffer is not None
@@ -915,3 +922,23 @@ class LayeredDenoiser:
                 _write(layer.channels, part, denoised.light)
             clock["groups"] = time.perf_counter() - started
         return denoised
+
+
+class LayeredReversePass(LayeredDenoiser):
+    """The reverse pass of a bidirectional run (``filters.two_pass.ReversePass``) plus the
+    light layers of its output frames, as :class:`LayeredDenoiser` makes them: split from the
+    combined colour by the same shares. The light groups' filter and the passes' shares go
+    the reverse pass's way (their history from the later frames, reprojected with its motion
+    to the next frame), from its first output frame on (its warm-up frames have no output
+    colour to split)."""
+
+    def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
+        from svgf_cli.filters.two_pass import ReversePass
+
+        super().__init__(params, debug_layers,
+                         colour=ReversePass(params, debug_layers=debug_layers))
+
+    def forward_buffers(self, num_signals: int, height: int, width: int) -> Any:
+        """The reverse pass's (``ReversePass.forward_buffers``)."""
+        return self.colour.forward_buffers(num_signals, height, width)
+

@@ -77,10 +77,10 @@ class Denoiser(PipelineFilter):
                              emission=ctx.frame.emission, medium=ctx.medium_pixels,
                              emission_averaged=ctx.emission_averaged,
                              outline_spill=ctx.outline_spill,
-                             gbuffer=_used_gbuffer(ctx) if self.gbuffer_output else None)
+                             gbuffer=used_gbuffer(ctx) if self.gbuffer_output else None)
 
 
-def _used_gbuffer(ctx: FrameContext) -> Frame:
+def used_gbuffer(ctx: FrameContext) -> Frame:
     """The frame's G-buffer as the stages used it: depth, normal and motion after the value
     policy, every plane with the medium pixels filled (``filters.stages.fill_medium``); a
     frame with no signals and no medium left to fill (what a filter with the same value and

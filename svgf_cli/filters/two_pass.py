@@ -24,6 +24,7 @@ import numpy as np
 
 from svgf_cli.filters.bidirectional import SideHistory, unpack_history
 from svgf_cli.filters.buffers import combined_role
+from svgf_cli.filters.denoiser import used_gbuffer
 from svgf_cli.filters.engine import PipelineFilter
 from svgf_cli.filters.invert_motion import NO_MOTION, invert_motion
 from svgf_cli.filters.params import SVGFParams
@@ -62,6 +63,10 @@ class ReversePass(PipelineFilter):
     reverse order and, for each frame to output, the forward pass's history there."""
 
     kind = "reverse"
+
+    # Also hand back each output frame's G-buffer as the stages used it, its motion the one
+    # to the next frame (``filters.composable.LayeredDenoiser``, as the Denoiser's).
+    gbuffer_output = False
 
     def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
         super().__init__(params, debug_layers=debug_layers)
@@ -129,7 +134,11 @@ class ReversePass(PipelineFilter):
         result = None
         if forward is not None:
             assert ctx.output is not None
-            result = DenoisedFrame(color=ctx.output, layers=ctx.layers, counts=ctx.counts)
+            result = DenoisedFrame(color=ctx.output, layers=ctx.layers, counts=ctx.counts,
+                                   emission=ctx.frame.emission, medium=ctx.medium_pixels,
+                                   emission_averaged=ctx.emission_averaged,
+                                   outline_spill=ctx.outline_spill,
+                                   gbuffer=used_gbuffer(ctx) if self.gbuffer_output else None)
         # The frame before this one (processed next) gets its motion to this one now.
         self._derived_ready = False
         if frame.motion_next is None:

@@ -33,10 +33,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from svgf_cli.filters.bidirectional import unpack_history
+from svgf_cli.filters.composable import LayeredReversePass
+from svgf_cli.filters.params import SVGFParams
 from svgf_cli.filters.two_pass import ForwardPass, Keep, ReversePass
 from svgf_cli.io.spill import ScratchFolder
 from svgf_cli.progress import Progress
 from svgf_cli.run.filter import FrameFilter
+from svgf_cli.run.light import LightLayerReader
 from svgf_cli.run.scratch import SpillWrites, StateReads
 from svgf_cli.run.stop import StopFlag, interrupted
 from svgf_cli.run.tasks import FrameTask, RunConfig, RunStats, WarmupCount
@@ -136,10 +139,18 @@ def _forward_pass(run: _Pass, tasks: Sequence[FrameTask],
         spills.finish()
 
 
+def layered_reverse(params: SVGFParams, debug_layers: bool) -> LayeredReversePass:
+    """The reverse pass with the light layers of its output frames."""
+    return LayeredReversePass(params, debug_layers=debug_layers)
+
+
 def _reverse_pass(run: _Pass, tasks: Sequence[FrameTask]) -> None:
     config, stats = run.config, run.stats
     writes_to = [t.frame for t in tasks if t.output is not None]
-    frames = FrameFilter(config, run.progress, stats, ReversePass)
+    # The light layers are split from the combined colour, as a causal run's from its own.
+    light = LightLayerReader(config, run.progress)
+    frames = FrameFilter(config, run.progress, stats,
+                         layered_reverse if light.enabled else ReversePass)
     with (
         WriteBehind(run.write, run.progress, stats) as writes,
         StateReads(run.scratch, writes_to) as states,
@@ -155,6 +166,8 @@ def _reverse_pass(run: _Pass, tasks: Sequence[FrameTask]) -> None:
             writes.poll()
             forward = None
             if task.output is not None:
+                # Read once the colour is filtered; their input pixels let go once read.
+                light.attach(task, result, release=True)
                 # Unpacked straight into the reverse pass's combination buffers, where it
                 # is combined in place: no other copy of the state is held.
                 frame = result.frame
