@@ -1547,6 +1547,27 @@ def test_a_bidirectional_run_writes_the_light_layers_denoised(tmp_path: Path) ->
         assert out <= 0.3 * noisy, (group, out, noisy)
 
 
+def test_the_reverse_pass_warms_the_groups_filter_on_its_warm_up_frames() -> None:
+    """A reverse pass's warm-up frames (no forward history: no output) give no light layers
+    but do go through the light groups' filter, as a causal run's warm-up frames do (the
+    shot's last output frame, 6, with frames 7-8 as warm-up: `Combined_key` relMSE 0.0220
+    -> 0.0174, `Combined_fill` 0.0412 -> 0.0255)."""
+    from svgf_cli.filters.composable import LayeredReversePass
+    from svgf_cli.filters.params import PRESETS
+    from svgf_cli.io.exr import fix_signal_set, read_frame
+    from svgf_cli.io.lightlayers import read_light_layers
+
+    mapping, _ = fix_signal_set(SHOT / "in.0001.exr", build_mapping("cycles"))
+    layered = LayeredReversePass(PRESETS["default"])
+    for number in (8, 7):
+        result = read_frame(SHOT / f"in.{number:04d}.exr", mapping)
+        result.frame.light = read_light_layers(result, "cycles")
+        assert layered.process(result.frame, None) is None
+        assert layered.colour.warmup_gbuffer is None  # handed on, not kept
+    assert layered.colour.frames_processed == 2
+    assert layered.groups.frames_processed == 2
+
+
 def test_a_group_switching_on_is_not_lagged(outputs: dict[str, Path]) -> None:
     """The fill light is off on frames 1-4 and on from frame 5: its group's own history and
     anti-lag bring it up at once. Its output/reference brightness on frame 5 is within 15% of

@@ -929,8 +929,8 @@ class LayeredReversePass(LayeredDenoiser):
     light layers of its output frames, as :class:`LayeredDenoiser` makes them: split from the
     combined colour by the same shares. The light groups' filter and the passes' shares go
     the reverse pass's way (their history from the later frames, reprojected with its motion
-    to the next frame), from its first output frame on (its warm-up frames have no output
-    colour to split)."""
+    to the next frame): the groups' filter from the pass's first frame (its warm-up frames
+    too, as a causal run's), the shares from its first output frame."""
 
     def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
         from svgf_cli.filters.two_pass import ReversePass
@@ -941,4 +941,18 @@ class LayeredReversePass(LayeredDenoiser):
     def forward_buffers(self, num_signals: int, height: int, width: int) -> Any:
         """The reverse pass's (``ReversePass.forward_buffers``)."""
         return self.colour.forward_buffers(num_signals, height, width)
+
+    def process(self, frame: Frame, *args: Any) -> DenoisedFrame:
+        """As :meth:`LayeredDenoiser.process`; on a warm-up frame (no output) the light
+        groups' filter still takes the frame, as a causal run's warm-up frames give it a
+        history before the first output."""
+        denoised = super().process(frame, *args)
+        warmup, self.colour.warmup_gbuffer = self.colour.warmup_gbuffer, None
+        if denoised is None and warmup is not None:
+            light = frame_light(frame)
+            if light.groups:
+                gbuffer, medium = warmup
+                self.groups.process(group_frame(gbuffer, light.groups, medium))
+                self.groups.resident.release_workspace()
+        return denoised
 

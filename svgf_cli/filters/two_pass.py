@@ -71,6 +71,10 @@ class ReversePass(PipelineFilter):
     def __init__(self, params: SVGFParams, debug_layers: bool = False) -> None:
         super().__init__(params, debug_layers=debug_layers)
         self.derived_holes = 0  # holes of the last derived motion (information)
+        # With gbuffer_output: the G-buffer as used and the medium pixels of the last frame
+        # processed without output (a warm-up frame), for a filter of the same frame's
+        # other layers to warm up on (``filters.composable.LayeredReversePass``).
+        self.warmup_gbuffer: tuple[Frame, np.ndarray | None] | None = None
         # The motion to the next frame derived for the frame processed next (from the
         # frame just processed, so none of its planes is kept): reused frame after frame
         # (the pipeline keeps no reference to a motion). The inversion's scratch is
@@ -132,6 +136,9 @@ class ReversePass(PipelineFilter):
         into = None if forward is None else self._receive(reverse, forward)
         ctx = self._run(reverse, bidirectional=True, forward=forward, into=into)
         result = None
+        self.warmup_gbuffer = None
+        if forward is None and self.gbuffer_output:
+            self.warmup_gbuffer = (used_gbuffer(ctx), ctx.medium_pixels)
         if forward is not None:
             assert ctx.output is not None
             result = DenoisedFrame(color=ctx.output, layers=ctx.layers, counts=ctx.counts,

@@ -165,9 +165,9 @@ def _reverse_pass(run: _Pass, tasks: Sequence[FrameTask]) -> None:
             frames.admit(task, result)
             writes.poll()
             forward = None
+            # Read once the colour is filtered; their input pixels let go once read.
+            light.attach(task, result, release=True)
             if task.output is not None:
-                # Read once the colour is filtered; their input pixels let go once read.
-                light.attach(task, result, release=True)
                 # Unpacked straight into the reverse pass's combination buffers, where it
                 # is combined in place: no other copy of the state is held.
                 frame = result.frame
