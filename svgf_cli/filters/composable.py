@@ -842,7 +842,7 @@ class LayeredDenoiser:
         self.colour.load_state(state)
         self.shares.reset()
 
-    def process(self, frame: Frame, *args: Any) -> DenoisedFrame:
+    def process(self, frame: Frame, *args: Any) -> DenoisedFrame | None:
         """Denoise the next frame (``args``: the colour filter's) and its light layers; None
         where the colour's filter gives no output (a reverse pass's warm-up). The groups'
         filter takes the G-buffer as the colour's filter used it (medium pixels filled)."""
@@ -851,7 +851,7 @@ class LayeredDenoiser:
         # when done: one workspace held at a time (1080p production: peak 4.14 -> 3.72 GB).
         self.colour.resident.release_workspace()
         if denoised is None:
-            return None  # type: ignore[return-value]
+            return None
         light = frame_light(frame)
         gbuffer, denoised.gbuffer = denoised.gbuffer, None  # for the groups' filter only
         assert gbuffer is not None
@@ -942,10 +942,11 @@ class LayeredReversePass(LayeredDenoiser):
         """The reverse pass's (``ReversePass.forward_buffers``)."""
         return self.colour.forward_buffers(num_signals, height, width)
 
-    def process(self, frame: Frame, *args: Any) -> DenoisedFrame:
+    def process(self, frame: Frame, *args: Any) -> DenoisedFrame | None:
         """As :meth:`LayeredDenoiser.process`; on a warm-up frame (no output) the light
         groups' filter still takes the frame, as a causal run's warm-up frames give it a
-        history before the first output."""
+        history before the first output (the frame's light passes are read with its groups
+        and not used: warm-up frames only)."""
         denoised = super().process(frame, *args)
         warmup, self.colour.warmup_gbuffer = self.colour.warmup_gbuffer, None
         if denoised is None and warmup is not None:
