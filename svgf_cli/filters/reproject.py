@@ -194,184 +194,220 @@ def _reproject_rows(
     origin_x: int,
 ) -> None:
     """All rows of :func:`reproject`, balanced over the threads (see ``rows``)."""
+    rows = depth.shape[0]
+    for i in prange(balanced_row_count(rows, threads)):
+        y = balanced_row(i, rows, threads)
+        if y < rows:
+            _reproject_row(
+                y, motion, depth, normal, mesh_id, mode, depth_slope, normal_width, prev_depth,
+                prev_normal, prev_mesh_id, prev_mode, prev_illumination, prev_moments,
+                prev_history_length, depth_tolerance, depth_slack, normal_tolerance,
+                out_illumination, out_moments, out_history_length, catmull_rom, origin_y, origin_x,
+            )
+
+
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _reproject_row(
+    y: int,
+    motion: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray,
+    mesh_id: np.ndarray,
+    mode: np.ndarray,
+    depth_slope: np.ndarray,
+    normal_width: np.ndarray,
+    prev_depth: np.ndarray,
+    prev_normal: np.ndarray,
+    prev_mesh_id: np.ndarray,
+    prev_mode: np.ndarray,
+    prev_illumination: np.ndarray,
+    prev_moments: np.ndarray,
+    prev_history_length: np.ndarray,
+    depth_tolerance: np.float32,
+    depth_slack: np.float32,
+    normal_tolerance: np.float32,
+    out_illumination: np.ndarray,
+    out_moments: np.ndarray,
+    out_history_length: np.ndarray,
+    catmull_rom: bool,
+    origin_y: int,
+    origin_x: int,
+) -> None:
+    """Row ``y`` of :func:`reproject` (its own function: a parallel loop compiles faster
+    with its body outside)."""
     num_signals = prev_illumination.shape[0]
-    rows, columns = depth.shape
+    columns = depth.shape[1]
     height, width = prev_depth.shape
     fwidth = F32(width)
     fheight = F32(height)
-    for i in prange(balanced_row_count(rows, threads)):
-        y = balanced_row(i, rows, threads)
-        if y >= rows:
+    uy = U(y)
+    # Pixels whose usable taps all agree with their modes (the common case) only record
+    # their taps and weights here; their signals are resampled after the row's pass,
+    # one signal at a time (fewer memory streams at once than all signals per pixel).
+    # 1: bilinear taps recorded; 2: and the Catmull-Rom support (``catmull_rom``).
+    agreed = np.zeros(columns, dtype=np.uint8)
+    tap_rows = np.empty((2, columns), dtype=np.uint64)
+    tap_columns = np.empty((2, columns), dtype=np.uint64)
+    tap_weights = np.empty((4, columns), dtype=np.float32)
+    support_rows = np.empty((4, columns), dtype=np.uint64)
+    support_columns = np.empty((4, columns), dtype=np.uint64)
+    support_weights = np.empty((8, columns), dtype=np.float32)
+    for x in range(columns):
+        ux = U(x)
+        z = depth[uy, ux]
+        px = F32(x + origin_x) + motion[0, uy, ux]
+        py = F32(y + origin_y) + motion[1, uy, ux]
+        # Positions this far outside cannot reach a tap (the Denoiser replaces
+        # non-finite motion by a far-away one), which also keeps the int conversions
+        # below in range.
+        reachable = (
+            z > _ZERO
+            and px > F32(-2.0)
+            and py > F32(-2.0)
+            and px < fwidth + F32(1.0)
+            and py < fheight + F32(1.0)
+        )
+        if not reachable:
+            for s in range(num_signals):
+                _clear(s, uy, ux, out_illumination, out_moments, out_history_length)
             continue
-        uy = U(y)
-        # Pixels whose usable taps all agree with their modes (the common case) only record
-        # their taps and weights here; their signals are resampled after the row's pass,
-        # one signal at a time (fewer memory streams at once than all signals per pixel).
-        # 1: bilinear taps recorded; 2: and the Catmull-Rom support (``catmull_rom``).
-        agreed = np.zeros(columns, dtype=np.uint8)
-        tap_rows = np.empty((2, columns), dtype=np.uint64)
-        tap_columns = np.empty((2, columns), dtype=np.uint64)
-        tap_weights = np.empty((4, columns), dtype=np.float32)
-        support_rows = np.empty((4, columns), dtype=np.uint64)
-        support_columns = np.empty((4, columns), dtype=np.uint64)
-        support_weights = np.empty((8, columns), dtype=np.float32)
+        nx = normal[0, uy, ux]
+        ny = normal[1, uy, ux]
+        nz = normal[2, uy, ux]
+        mesh = mesh_id[uy, ux]
+        max_depth_diff = depth_tolerance * (depth_slope[uy, ux] + depth_slack * z)
+        max_normal_diff = normal_tolerance * (normal_width[uy, ux] + _NORMAL_SLACK)
+        max_normal_diff_sq = max_normal_diff * max_normal_diff
+
+        fx0 = np.floor(px)
+        fy0 = np.floor(py)
+        x0 = int(fx0)
+        y0 = int(fy0)
+        fx = px - fx0
+        fy = py - fy0
+        g00 = (_ONE - fx) * (_ONE - fy)
+        g10 = fx * (_ONE - fy)
+        g01 = (_ONE - fx) * fy
+        g11 = fx * fy
+        ok00 = _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
+                               max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+        ok10 = _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
+                               max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+        ok01 = _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+                               max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+        ok11 = _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
+                               max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
+        if not ok00:
+            g00 = _ZERO
+        if not ok10:
+            g10 = _ZERO
+        if not ok01:
+            g01 = _ZERO
+        if not ok11:
+            g11 = _ZERO
+        # Taps with zero weight may lie outside the image: clamp their index.
+        xa = U(min(max(x0, 0), width - 1))
+        xb = U(min(max(x0 + 1, 0), width - 1))
+        ya = U(min(max(y0, 0), height - 1))
+        yb = U(min(max(y0 + 1, 0), height - 1))
+        m = mode[uy, ux]
+        t00 = prev_mode[ya, xa]
+        t10 = prev_mode[ya, xb]
+        t01 = prev_mode[yb, xa]
+        t11 = prev_mode[yb, xb]
+        if (
+            (g00 == _ZERO or t00 == m) and (g10 == _ZERO or t10 == m)
+            and (g01 == _ZERO or t01 == m) and (g11 == _ZERO or t11 == m)
+        ):
+            # Every usable tap has the pixel's modes in every signal (the common case):
+            # one set of weights for all signals.
+            weight_sum = g00 + g10 + g01 + g11
+            if weight_sum >= MIN_BILINEAR_WEIGHT:
+                inv = _ONE / weight_sum
+                agreed[ux] = 1
+                tap_rows[0, ux], tap_rows[1, ux] = ya, yb
+                tap_columns[0, ux], tap_columns[1, ux] = xa, xb
+                tap_weights[0, ux] = g00 * inv
+                tap_weights[1, ux] = g10 * inv
+                tap_weights[2, ux] = g01 * inv
+                tap_weights[3, ux] = g11 * inv
+                # The taps a fraction uses (both columns only where fx > 0) must pass.
+                inner = ok00 and (ok10 or fx == _ZERO) and (ok01 or fy == _ZERO) and (
+                    ok11 or fx == _ZERO or fy == _ZERO)
+                if catmull_rom and inner and _catmull_rom_support(
+                    x0, y0, fx, fy, z, nx, ny, nz, mesh, m, max_depth_diff,
+                    max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id, prev_mode,
+                    ux, support_rows, support_columns, support_weights,
+                ):
+                    agreed[ux] = 2
+                continue
+        # Per signal: a tap counts only where its stored mode equals the pixel's (a
+        # history pixel marked NO_HISTORY matches no signal).
+        box_mask = -1  # the 3x3 fallback's geometric tests, once, if a signal needs them
+        for s in range(num_signals):
+            relevant = np.uint16(1 << s) | NO_HISTORY
+            w00 = g00 if (t00 ^ m) & relevant == 0 else _ZERO
+            w10 = g10 if (t10 ^ m) & relevant == 0 else _ZERO
+            w01 = g01 if (t01 ^ m) & relevant == 0 else _ZERO
+            w11 = g11 if (t11 ^ m) & relevant == 0 else _ZERO
+            weight_sum = w00 + w10 + w01 + w11
+            if weight_sum >= MIN_BILINEAR_WEIGHT:
+                inv = _ONE / weight_sum
+                _bilinear(s, uy, ux, ya, yb, xa, xb, w00 * inv, w10 * inv, w01 * inv,
+                          w11 * inv, prev_illumination, prev_moments, prev_history_length,
+                          out_illumination, out_moments, out_history_length)
+                continue
+
+            # 3x3 box of consistent taps (of the same mode) around the rounded position.
+            cx = int(np.floor(px + F32(0.5)))
+            cy = int(np.floor(py + F32(0.5)))
+            if box_mask < 0:
+                box_mask = 0
+                for k in range(9):
+                    if _tap_consistent(cx - 1 + k % 3, cy - 1 + k // 3, z, nx, ny, nz, mesh,
+                                       max_depth_diff, max_normal_diff_sq, prev_depth,
+                                       prev_normal, prev_mesh_id):
+                        box_mask |= 1 << k
+            _clear(s, uy, ux, out_illumination, out_moments, out_history_length)
+            count = 0
+            h_sum = _ZERO
+            for k in range(9):
+                if not (box_mask >> k) & 1:
+                    continue
+                qy, qx = U(cy - 1 + k // 3), U(cx - 1 + k % 3)
+                if (prev_mode[qy, qx] ^ m) & relevant != 0:
+                    continue
+                count += 1
+                h_sum += prev_history_length[s, qy, qx]
+                for c in range(3):
+                    out_illumination[s, c, uy, ux] += prev_illumination[s, c, qy, qx]
+                out_moments[s, 0, uy, ux] += prev_moments[s, 0, qy, qx]
+                out_moments[s, 1, uy, ux] += prev_moments[s, 1, qy, qx]
+            if count == 0:
+                continue
+            inv = _ONE / F32(count)
+            out_history_length[s, uy, ux] = _whole_if_close(h_sum * inv)
+            for c in range(3):
+                out_illumination[s, c, uy, ux] *= inv
+            out_moments[s, 0, uy, ux] *= inv
+            out_moments[s, 1, uy, ux] *= inv
+    for s in range(num_signals):
         for x in range(columns):
             ux = U(x)
-            z = depth[uy, ux]
-            px = F32(x + origin_x) + motion[0, uy, ux]
-            py = F32(y + origin_y) + motion[1, uy, ux]
-            # Positions this far outside cannot reach a tap (the Denoiser replaces
-            # non-finite motion by a far-away one), which also keeps the int conversions
-            # below in range.
-            reachable = (
-                z > _ZERO
-                and px > F32(-2.0)
-                and py > F32(-2.0)
-                and px < fwidth + F32(1.0)
-                and py < fheight + F32(1.0)
-            )
-            if not reachable:
-                for s in range(num_signals):
-                    _clear(s, uy, ux, out_illumination, out_moments, out_history_length)
-                continue
-            nx = normal[0, uy, ux]
-            ny = normal[1, uy, ux]
-            nz = normal[2, uy, ux]
-            mesh = mesh_id[uy, ux]
-            max_depth_diff = depth_tolerance * (depth_slope[uy, ux] + depth_slack * z)
-            max_normal_diff = normal_tolerance * (normal_width[uy, ux] + _NORMAL_SLACK)
-            max_normal_diff_sq = max_normal_diff * max_normal_diff
-
-            fx0 = np.floor(px)
-            fy0 = np.floor(py)
-            x0 = int(fx0)
-            y0 = int(fy0)
-            fx = px - fx0
-            fy = py - fy0
-            g00 = (_ONE - fx) * (_ONE - fy)
-            g10 = fx * (_ONE - fy)
-            g01 = (_ONE - fx) * fy
-            g11 = fx * fy
-            ok00 = _tap_consistent(x0, y0, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
-            ok10 = _tap_consistent(x0 + 1, y0, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
-            ok01 = _tap_consistent(x0, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
-            ok11 = _tap_consistent(x0 + 1, y0 + 1, z, nx, ny, nz, mesh, max_depth_diff,
-                                   max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id)
-            if not ok00:
-                g00 = _ZERO
-            if not ok10:
-                g10 = _ZERO
-            if not ok01:
-                g01 = _ZERO
-            if not ok11:
-                g11 = _ZERO
-            # Taps with zero weight may lie outside the image: clamp their index.
-            xa = U(min(max(x0, 0), width - 1))
-            xb = U(min(max(x0 + 1, 0), width - 1))
-            ya = U(min(max(y0, 0), height - 1))
-            yb = U(min(max(y0 + 1, 0), height - 1))
-            m = mode[uy, ux]
-            t00 = prev_mode[ya, xa]
-            t10 = prev_mode[ya, xb]
-            t01 = prev_mode[yb, xa]
-            t11 = prev_mode[yb, xb]
-            if (
-                (g00 == _ZERO or t00 == m) and (g10 == _ZERO or t10 == m)
-                and (g01 == _ZERO or t01 == m) and (g11 == _ZERO or t11 == m)
-            ):
-                # Every usable tap has the pixel's modes in every signal (the common case):
-                # one set of weights for all signals.
-                weight_sum = g00 + g10 + g01 + g11
-                if weight_sum >= MIN_BILINEAR_WEIGHT:
-                    inv = _ONE / weight_sum
-                    agreed[ux] = 1
-                    tap_rows[0, ux], tap_rows[1, ux] = ya, yb
-                    tap_columns[0, ux], tap_columns[1, ux] = xa, xb
-                    tap_weights[0, ux] = g00 * inv
-                    tap_weights[1, ux] = g10 * inv
-                    tap_weights[2, ux] = g01 * inv
-                    tap_weights[3, ux] = g11 * inv
-                    # The taps a fraction uses (both columns only where fx > 0) must pass.
-                    inner = ok00 and (ok10 or fx == _ZERO) and (ok01 or fy == _ZERO) and (
-                        ok11 or fx == _ZERO or fy == _ZERO)
-                    if catmull_rom and inner and _catmull_rom_support(
-                        x0, y0, fx, fy, z, nx, ny, nz, mesh, m, max_depth_diff,
-                        max_normal_diff_sq, prev_depth, prev_normal, prev_mesh_id, prev_mode,
-                        ux, support_rows, support_columns, support_weights,
-                    ):
-                        agreed[ux] = 2
-                    continue
-            # Per signal: a tap counts only where its stored mode equals the pixel's (a
-            # history pixel marked NO_HISTORY matches no signal).
-            box_mask = -1  # the 3x3 fallback's geometric tests, once, if a signal needs them
-            for s in range(num_signals):
-                relevant = np.uint16(1 << s) | NO_HISTORY
-                w00 = g00 if (t00 ^ m) & relevant == 0 else _ZERO
-                w10 = g10 if (t10 ^ m) & relevant == 0 else _ZERO
-                w01 = g01 if (t01 ^ m) & relevant == 0 else _ZERO
-                w11 = g11 if (t11 ^ m) & relevant == 0 else _ZERO
-                weight_sum = w00 + w10 + w01 + w11
-                if weight_sum >= MIN_BILINEAR_WEIGHT:
-                    inv = _ONE / weight_sum
-                    _bilinear(s, uy, ux, ya, yb, xa, xb, w00 * inv, w10 * inv, w01 * inv,
-                              w11 * inv, prev_illumination, prev_moments, prev_history_length,
-                              out_illumination, out_moments, out_history_length)
-                    continue
-
-                # 3x3 box of consistent taps (of the same mode) around the rounded position.
-                cx = int(np.floor(px + F32(0.5)))
-                cy = int(np.floor(py + F32(0.5)))
-                if box_mask < 0:
-                    box_mask = 0
-                    for k in range(9):
-                        if _tap_consistent(cx - 1 + k % 3, cy - 1 + k // 3, z, nx, ny, nz, mesh,
-                                           max_depth_diff, max_normal_diff_sq, prev_depth,
-                                           prev_normal, prev_mesh_id):
-                            box_mask |= 1 << k
-                _clear(s, uy, ux, out_illumination, out_moments, out_history_length)
-                count = 0
-                h_sum = _ZERO
-                for k in range(9):
-                    if not (box_mask >> k) & 1:
-                        continue
-                    qy, qx = U(cy - 1 + k // 3), U(cx - 1 + k % 3)
-                    if (prev_mode[qy, qx] ^ m) & relevant != 0:
-                        continue
-                    count += 1
-                    h_sum += prev_history_length[s, qy, qx]
-                    for c in range(3):
-                        out_illumination[s, c, uy, ux] += prev_illumination[s, c, qy, qx]
-                    out_moments[s, 0, uy, ux] += prev_moments[s, 0, qy, qx]
-                    out_moments[s, 1, uy, ux] += prev_moments[s, 1, qy, qx]
-                if count == 0:
-                    continue
-                inv = _ONE / F32(count)
-                out_history_length[s, uy, ux] = _whole_if_close(h_sum * inv)
-                for c in range(3):
-                    out_illumination[s, c, uy, ux] *= inv
-                out_moments[s, 0, uy, ux] *= inv
-                out_moments[s, 1, uy, ux] *= inv
-        for s in range(num_signals):
-            for x in range(columns):
-                ux = U(x)
-                if agreed[ux] == 1:
-                    _bilinear(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux], tap_columns[0, ux],
-                              tap_columns[1, ux], tap_weights[0, ux], tap_weights[1, ux],
-                              tap_weights[2, ux], tap_weights[3, ux], prev_illumination,
-                              prev_moments, prev_history_length, out_illumination,
-                              out_moments, out_history_length)
-                elif agreed[ux] == 2:
-                    _bilinear_length(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux],
-                                     tap_columns[0, ux], tap_columns[1, ux], tap_weights[0, ux],
-                                     tap_weights[1, ux], tap_weights[2, ux], tap_weights[3, ux],
-                                     prev_history_length, out_history_length)
-                    catmull_rom_history(s, uy, ux, support_rows, support_columns,
-                                        support_weights, prev_illumination, prev_moments,
-                                        out_illumination, out_moments)
-
+            if agreed[ux] == 1:
+                _bilinear(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux], tap_columns[0, ux],
+                          tap_columns[1, ux], tap_weights[0, ux], tap_weights[1, ux],
+                          tap_weights[2, ux], tap_weights[3, ux], prev_illumination,
+                          prev_moments, prev_history_length, out_illumination,
+                          out_moments, out_history_length)
+            elif agreed[ux] == 2:
+                _bilinear_length(s, uy, ux, tap_rows[0, ux], tap_rows[1, ux],
+                                 tap_columns[0, ux], tap_columns[1, ux], tap_weights[0, ux],
+                                 tap_weights[1, ux], tap_weights[2, ux], tap_weights[3, ux],
+                                 prev_history_length, out_history_length)
+                catmull_rom_history(s, uy, ux, support_rows, support_columns,
+                                    support_weights, prev_illumination, prev_moments,
+                                    out_illumination, out_moments)
 
 @njit(
     inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,

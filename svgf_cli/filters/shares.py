@@ -55,8 +55,7 @@ def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray
                 row[x] = reach * np.sqrt(max(row[x] - mean[x] * mean[x], 0.0) / count)
 
 
-@njit(inline="always", fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False,
-      error_model="numpy")
+@njit(fastmath=FASTMATH, cache=True, nogil=True, boundscheck=False, error_model="numpy")
 def _tent_channel(plane: np.ndarray, surface: np.ndarray, squared: bool, coverage: np.ndarray,
                   radius: int, out: np.ndarray) -> None:
     """One channel (H, W) of :func:`covered_average` (``squared``: of the squares): the box

@@ -86,8 +86,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "no-3x3-fallback", "filters", "3x3 reprojection fallback removed",
         "svgf_cli/filters/reproject.py",
-        (("                if count == 0:\n                    continue\n",
-          "                if True:\n                    continue\n"),),
+        (("            if count == 0:\n                continue\n",
+          "            if True:\n                continue\n"),),
         FILTER_TESTS,
     ),
     Mutant(
@@ -166,9 +166,9 @@ MUTANTS: tuple[Mutant, ...] = (
         "reproject-motion-sign", "filters", "motion sign flipped in reprojection",
         "svgf_cli/filters/reproject.py",
         (("px = F32(x + origin_x) + motion[0, uy, ux]\n"
-          "            py = F32(y + origin_y) + motion[1, uy, ux]",
+          "        py = F32(y + origin_y) + motion[1, uy, ux]",
           "px = F32(x + origin_x) - motion[0, uy, ux]\n"
-          "            py = F32(y + origin_y) - motion[1, uy, ux]"),),
+          "        py = F32(y + origin_y) - motion[1, uy, ux]"),),
         FILTER_TESTS + ("tests/test_cli_ground_truth.py",),
     ),
     Mutant(
