@@ -122,6 +122,17 @@ def tent_filter(planes: np.ndarray, radius: int = SHARE_TENT_RADIUS,
     return out
 
 
+def each_filtered(planes: list[np.ndarray],
+                  filter_: Callable[..., np.ndarray] = tent_filter) -> np.ndarray:
+    """The K (3, H, W) planes each through ``filter_`` (:func:`box_filter` or
+    :func:`tent_filter`, its own radius), written straight into one (K, 3, H, W) array: no
+    stack of K filtered copies (:func:`split_by_shares` takes one array as it is)."""
+    out = np.empty((len(planes), *planes[0].shape), dtype=F32)
+    for plane, filtered in zip(planes, out, strict=True):
+        filter_(plane, out=filtered)
+    return out
+
+
 Planes = np.ndarray | list[np.ndarray]  # K (3, H, W) planes: a list, or one (K, 3, H, W) array
 Fallback = Planes | Callable[[], Planes] | None
 Last = np.ndarray | Callable[[], np.ndarray] | None  # (K, 3) weights for the whole image
@@ -212,8 +223,9 @@ def compose_groups(colour: np.ndarray, filtered: np.ndarray,
     """The denoised light groups, (K, 3, H, W), into ``filtered`` (the K filtered groups,
     stacked): ``colour`` split by their shares (the input groups' box-filtered shares where
     the filtered ones are 0)."""
-    return split_by_shares(colour, filtered, lambda: [box_filter(g.radiance) for g in groups],
-                           out=filtered, last=lambda: frame_totals([g.radiance for g in groups]))
+    radiance = [g.radiance for g in groups]
+    return split_by_shares(colour, filtered, lambda: each_filtered(radiance, box_filter),
+                           out=filtered, last=lambda: frame_totals(radiance))
 
 
 def spill_groups(filtered: np.ndarray, weight: float) -> None:
@@ -298,7 +310,7 @@ def compose_passes(light: np.ndarray, signal_outputs: dict[str, np.ndarray],
         # pixel's 1-spp light, or the frame's totals, gave a defocused horizon's rare
         # GlossInd sample the whole signal (a speckled band on cycles/dof).
         parts = split_by_shares(
-            filtered, weights, lambda own=own: [tent_filter(p.radiance) for p in own],
+            filtered, weights, lambda own=own: each_filtered([p.radiance for p in own]),
             out=estimates[indexes[0]:indexes[-1] + 1] if side_by_side else weights,
             last=lambda own=own: frame_totals([p.radiance for p in own]))
         if not side_by_side:
@@ -567,7 +579,7 @@ def emission_shares(passes: list[np.ndarray]) -> np.ndarray:
     else over the 7x7 around (``box_filter``), else equal parts."""
     raw = np.stack(passes).astype(F32)
     total = raw.sum(axis=0)
-    around = np.stack([box_filter(plane) for plane in raw])
+    around = box_filter(raw.reshape(-1, *raw.shape[2:])).reshape(raw.shape)
     around_total = around.sum(axis=0)
     equal = np.full_like(raw, 1.0 / len(passes))
     own = np.divide(raw, total, out=equal.copy(), where=total > SHARE_FLOOR)
