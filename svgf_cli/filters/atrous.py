@@ -113,14 +113,15 @@ def luminance_stop_guides(
     num_signals = illumination.shape[0]
     if num_signals not in (1, 2, 3):
         raise ValueError("luminance_stop_guides takes one to three signals")
-    sigmas = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma_luminance, dtype=F32),
-                                                  (num_signals,)))
+    # Writable arrays always (a read-only view is another numba signature: another compile).
+    sigmas = np.empty(num_signals, dtype=F32)
+    sigmas[:] = sigma_luminance
     check_disjoint(
         {"out_luminance": out_luminance, "out_inverse_scale": out_inverse_scale},
         {"illumination": illumination, "variance": variance, "mode": mode, "depth": depth},
     )
-    roots = np.ascontiguousarray(np.broadcast_to(np.asarray(symmetric, dtype=np.bool_),
-                                                 (num_signals,)))
+    roots = np.empty(num_signals, dtype=np.bool_)
+    roots[:] = symmetric
     _guide_rows(illumination, variance, mode, np.int64(first_signal), depth, sigmas,
                 float32_weights(luminance_weights), out_luminance, out_inverse_scale,
                 bool(blur), roots, np.int64(get_num_threads()))
