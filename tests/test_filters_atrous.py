@@ -405,3 +405,25 @@ def test_noalias_njit_marks_arrays_and_lets_a_many_array_loop_vectorize() -> Non
     assert definition.count("noalias") >= 9
     assert "x float>" in ir  # a vector loop exists
 
+
+
+def test_guides_compile_once_for_one_sigma_or_one_per_signal() -> None:
+    """One sigma for all signals and one per signal (a tuple, or an array numba may see
+    read-only) reach the kernel as the same array type: one compiled signature, not one
+    per way of passing them (each costs seconds of a clean clone's compile)."""
+    from svgf_cli.filters import atrous
+
+    scene = _scene(3, 6, 7, seed=3)
+    luminance = np.empty((3, 6, 7), dtype=F32)
+    inverse_scale = np.empty_like(luminance)
+    read_only = np.array([4.0, 1.0, 2.5], dtype=F32)
+    read_only.setflags(write=False)
+    stops = np.array([True, False, True])
+    stops.setflags(write=False)
+    for sigmas, symmetric in ((2.0, False), ((4.0, 1.0, 2.5), (True, False, True)),
+                              (read_only, stops)):
+        luminance_stop_guides(scene["illumination"], scene["variance"], scene["mode"], 0,
+                              scene["depth"], sigmas, REC709, luminance, inverse_scale,
+                              symmetric=symmetric)
+    kinds = {(str(s[5]), str(s[10])) for s in atrous._guide_rows.signatures}
+    assert kinds == {("array(float32, 1d, C)", "array(bool, 1d, C)")}
