@@ -25,7 +25,6 @@ def box_mean(planes: np.ndarray, radius: int, out: np.ndarray) -> None:
         _box_channel(planes[c], planes[c], False, False, radius, out[c])
 
 
-@njit(**_JIT)
 def covered_average(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
                     radius: int, out: np.ndarray) -> None:
     """``out`` = the tent mean ``T`` (:func:`box_mean` of ``radius`` twice: weights
@@ -34,11 +33,9 @@ def covered_average(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarra
     above 0: ``T(stored surface) / T(surface)``, a pass stored divided by its colour averaged
     over the window's pixels that have that colour, nearer pixels weighing more (a lone
     bright sample leaves a peak, not a flat square). Each box rounds to float32."""
-    for c in prange(stored.shape[0]):
-        _tent_channel(stored[c], surface, False, coverage, radius, out[c])
+    _covered_moments(stored, surface, coverage, radius, False, out)
 
 
-@njit(**_JIT)
 def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
                    average: np.ndarray, radius: int, reach: float, samples: float,
                    out: np.ndarray) -> None:
@@ -46,10 +43,29 @@ def covered_spread(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray
     values' spread about it, ``sqrt(max(T(stored^2 surface) / T(surface) - average^2, 0))``,
     over the square root of how many samples the weights are worth (``coverage`` x
     ``samples``, the tent's ``1 / sum w^2``, at least 1)."""
+    _covered_moments(stored, surface, coverage, radius, True, out)
+    _spread_of_moments(out, average, coverage, float(reach), float(samples))
+
+
+# The two kernels the covered tent means share: a flag from Python is a plain bool to numba,
+# where a constant in a kernel's call would compile one more copy of _tent_channel.
+@njit(**_JIT)
+def _covered_moments(stored: np.ndarray, surface: np.ndarray, coverage: np.ndarray,
+                     radius: int, squared: bool, out: np.ndarray) -> None:
+    """``out`` = ``T(stored surface) / T(surface)`` per channel (``squared``: of
+    ``stored^2``), as :func:`covered_average` describes."""
     for c in prange(stored.shape[0]):
-        _tent_channel(stored[c], surface, True, coverage, radius, out[c])
-        for y in range(stored.shape[1]):
-            row, mean, share = out[c, y], average[c, y], coverage[y]
+        _tent_channel(stored[c], surface, squared, coverage, radius, out[c])
+
+
+@njit(**_JIT)
+def _spread_of_moments(moments: np.ndarray, average: np.ndarray, coverage: np.ndarray,
+                       reach: float, samples: float) -> None:
+    """``moments`` (the covered tent means of the squares) become :func:`covered_spread`,
+    in place."""
+    for c in prange(moments.shape[0]):
+        for y in range(moments.shape[1]):
+            row, mean, share = moments[c, y], average[c, y], coverage[y]
             for x in range(row.shape[0]):
                 count = max(share[x] * samples, 1.0)
                 row[x] = reach * np.sqrt(max(row[x] - mean[x] * mean[x], 0.0) / count)
