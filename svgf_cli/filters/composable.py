@@ -492,9 +492,10 @@ def lend_slivers(residual: np.ndarray, parts: np.ndarray, written: list[np.ndarr
     no_medium = np.zeros((0, 0), dtype=bool) if medium is None else medium
     lit = (residual > 0.0).all(axis=0)
     claims = np.zeros_like(residual)
+    indexes = {key: np.array(passes, np.int64) for key, passes in members.items()}
     taking = [key for key in members
-              if sliver_claims(colours[key], parts, np.array(members[key], np.int64),
-                               covers[key].source, covers[key].vacant, no_medium, lit, claims)]
+              if sliver_claims(colours[key], parts, indexes[key], covers[key].source,
+                               covers[key].vacant, no_medium, lit, claims)]
     if not taking:
         return {}
     share = np.empty(lit.shape, dtype=F32)
@@ -503,7 +504,7 @@ def lend_slivers(residual: np.ndarray, parts: np.ndarray, written: list[np.ndarr
     for key in taking:
         cover = covers[key]
         out = np.empty_like(colours[key])
-        lend_sliver(colours[key], parts, np.array(members[key], np.int64), cover.source,
+        lend_sliver(colours[key], parts, indexes[key], cover.source,
                     cover.vacant, no_medium, lit, share, SLIVER_CAP, residual, out)
         lent[key] = out
     return lent
