@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numba
 import numpy as np
@@ -25,6 +26,7 @@ from svgf_cli.filters.params import (
     AUTO_STOP_SCALE,
     SVGFParams,
     antilag_radius_for,
+    colour_blend_for,
     luminance_stop_scale_for,
     params_for_samples,
     resolve_params,
@@ -433,7 +435,8 @@ def test_pixel_filter_auto_blurs_only_centre_sampled_frames() -> None:
 def test_a_frame_of_several_samples_is_blended_as_that_many_frames() -> None:
     """A frame whose header says N samples per pixel is blended with ``1 - (1 - alpha)^N``
     (and the moments likewise) under ``auto``; the same frames marked 1 sample with those
-    blends set explicitly give the very same output, and 1 sample changes nothing."""
+    blends set explicitly give the very same output, and 1 sample changes nothing. (The
+    colours' running means blend at their own rate, which no setting names: off here.)"""
     frames = static_sequence(5, 28, 20, noise=0.3)
     auto = resolve_params("default", warm_start=0)
     assert auto.samples_per_pixel == AUTO_SAMPLES
@@ -441,11 +444,13 @@ def test_a_frame_of_several_samples_is_blended_as_that_many_frames() -> None:
     def marked(n: int) -> list[Frame]:
         return [dataclasses.replace(f, samples_per_pixel=n) for f in frames]
 
-    four, _ = _run(auto, marked(4))
+    plain = auto.replace(temporal_albedo=False)
+    four, _ = _run(plain, marked(4))
     blend = 1.0 - 0.8**4
-    # And one a-trous iteration fewer (atrous_iterations_for): 28x20 frames 3 -> 2.
-    explicit, _ = _run(auto.replace(alpha=blend, moments_alpha=blend, atrous_iterations=2),
-                       marked(1))
+    # And one a-trous iteration fewer (atrous_iterations_for): 28x20 frames 3 -> 2; the
+    # anti-lag window halved (antilag_radius_for): 2 -> 1.
+    explicit, _ = _run(plain.replace(alpha=blend, moments_alpha=blend, atrous_iterations=2,
+                                     antilag_radius=1), marked(1))
     for a, b in zip(four, explicit, strict=True):
         np.testing.assert_array_equal(a.color, b.color)
     one, _ = _run(auto, marked(1))
@@ -456,8 +461,43 @@ def test_a_frame_of_several_samples_is_blended_as_that_many_frames() -> None:
         np.testing.assert_array_equal(a.color, c.color)
     # The larger blend is a different, shorter-memory filter.
     assert not np.array_equal(four[-1].color, one[-1].color)
-    forced_four, _ = _run(auto.replace(samples_per_pixel=4), marked(1))
+    forced_four, _ = _run(plain.replace(samples_per_pixel=4), marked(1))
     np.testing.assert_array_equal(forced_four[-1].color, four[-1].color)
+
+
+def test_a_frame_of_several_samples_has_its_own_colour_blend_and_anti_lag_window(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stages are handed the rates of the frame's sample count: the colours' running
+    means blend at ``colour_blend_for`` (0.36 at 4 samples, not the light's 0.59), anti-lag,
+    the history gain and the turning objects' test use ``antilag_radius_for``'s halved
+    window; at one sample ``alpha`` and the image's window, as before."""
+    from svgf_cli.filters.stages import antilag, temporal_albedo
+
+    blends: list[float] = []
+    radii: list[int] = []
+    real_accumulate, real_antilag = temporal_albedo.accumulate_albedo, antilag.antilag
+
+    def accumulate(*args: Any, **kwargs: Any) -> None:
+        blends.append(float(args[8]))
+        real_accumulate(*args, **kwargs)
+
+    def tested(*args: Any, **kwargs: Any) -> int:
+        radii.append(int(args[5]))
+        return real_antilag(*args, **kwargs)
+
+    monkeypatch.setattr(temporal_albedo, "accumulate_albedo", accumulate)
+    monkeypatch.setattr(antilag, "antilag", tested)
+    frames = static_sequence(4, 28, 20, noise=0.3)
+    auto = resolve_params("default", warm_start=0)
+    _run(auto, [dataclasses.replace(f, samples_per_pixel=4) for f in frames])
+    assert blends and set(blends) == {float(np.float32(colour_blend_for(auto, 4)))}
+    assert colour_blend_for(auto, 4) == pytest.approx(0.358, abs=1e-3)
+    assert radii and set(radii) == {1}
+    blends.clear()
+    radii.clear()
+    _run(auto, frames)
+    assert set(blends) == {float(np.float32(0.2))}
+    assert radii and set(radii) == {2}
 
 
 def test_params_for_samples() -> None:

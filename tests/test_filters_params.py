@@ -26,8 +26,10 @@ from svgf_cli.filters.params import (
     GROUPS,
     PRESETS,
     SVGFParams,
+    antilag_radius_for,
     atrous_iterations_for,
     check_params,
+    colour_blend_for,
     param_fields,
 )
 
@@ -268,6 +270,42 @@ def test_auto_iterations_fall_by_one_per_factor_four_of_samples(samples: int,
     # A count set by hand, or one sample said by the settings, keeps the image's count.
     assert atrous_iterations_for(auto.replace(samples_per_pixel=1), 1080, 1920, samples) == 5
     assert atrous_iterations_for(auto.replace(atrous_iterations=4), 1080, 1920, samples) == 4
+
+
+@pytest.mark.parametrize(("samples", "radii"), [
+    (1, (2, 4, 6)), (3, (2, 4, 6)), (4, (1, 2, 3)), (15, (1, 2, 3)), (16, (1, 1, 2)),
+    (64, (1, 1, 1)),
+])
+def test_auto_antilag_window_halves_per_factor_four_of_samples(
+        samples: int, radii: tuple[int, int, int]) -> None:
+    """The window's area falls by 4 per factor 4 of samples (its side, rounded up, at least
+    one cell), at 72, 216 and 360 rows; one set by hand, or one sample said by the
+    settings, keeps the image's."""
+    auto = PRESETS["default"]
+    sizes = ((72, 128), (216, 384), (360, 640))
+    assert tuple(antilag_radius_for(auto, h, w, samples) for h, w in sizes) == radii
+    assert antilag_radius_for(auto.replace(antilag_radius=3), 216, 384, samples) == 3
+    assert antilag_radius_for(auto.replace(samples_per_pixel=1), 360, 640, samples) == 6
+    assert antilag_radius_for(auto.replace(samples_per_pixel=samples), 360, 640) == radii[2]
+
+
+@pytest.mark.parametrize("alpha", [0.05, 0.2, 0.5])
+def test_colour_blend_is_the_steady_gain_of_a_kalman_filter(alpha: float) -> None:
+    """The colours' blend at N samples: ``K^2 / (1 - K) = N alpha^2 / (1 - alpha)``, growing
+    with N, above one sample's and below the light's ``1 - (1 - alpha)^N``; ``alpha``
+    itself (the same float) at one sample."""
+    params = PRESETS["default"].replace(alpha=alpha)
+    assert colour_blend_for(params, 1) == alpha
+    previous = alpha
+    for samples in (2, 4, 16, 64):
+        gain = colour_blend_for(params, samples)
+        assert gain**2 / (1.0 - gain) == pytest.approx(samples * alpha**2 / (1.0 - alpha))
+        assert previous < gain < 1.0 - (1.0 - alpha) ** samples
+        previous = gain
+    assert colour_blend_for(params.replace(samples_per_pixel=1), 16) == alpha
+    assert colour_blend_for(params.replace(samples_per_pixel=4), 1) == colour_blend_for(
+        params, 4)
+    assert colour_blend_for(params.replace(alpha=1.0), 4) == 1.0
 
 
 @pytest.mark.parametrize("explicit", [0, 1, 5, 12])

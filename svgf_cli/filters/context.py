@@ -47,20 +47,32 @@ class Setup:
     squarings: int
     colour_counts: np.ndarray
     moment_counts: np.ndarray
+    # The demodulation colours' running means: their blend (``params.colour_blend_for``;
+    # ``alpha`` at one sample) and its effective sample counts (a bidirectional run's).
+    albedo_blend: float
+    albedo_counts: np.ndarray
     # Return each signal's own remodulated radiance as the layers ``<signal>.R/G/B`` (the
     # light layers are composed from them: ``filters.composable``); implied by debug_layers.
     signal_outputs: bool = False
 
     @classmethod
-    def of(cls, params: SVGFParams, debug_layers: bool) -> Setup:
+    def of(cls, params: SVGFParams, debug_layers: bool,
+           albedo_blend: float | None = None) -> Setup:
+        """``albedo_blend``: the colours' running means' blend (None: ``params.alpha``)."""
         rules = {
             guide: (F32(max(params.albedo_epsilon, params.guide_albedo_floor if guide else 0.0)),
                     F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
             for guide in (False, True)
         }
+        colour_counts = effective_counts(params.alpha, params.history_cap)
+        albedo_counts = colour_counts
+        if albedo_blend is None:
+            albedo_blend = params.alpha
+        elif albedo_blend != params.alpha:
+            albedo_counts = effective_counts(albedo_blend, params.history_cap)
         return cls(params, debug_layers, rules, normal_squarings(params.sigma_normal),
-                   effective_counts(params.alpha, params.history_cap),
-                   effective_counts(params.moments_alpha, params.history_cap))
+                   colour_counts, effective_counts(params.moments_alpha, params.history_cap),
+                   albedo_blend, albedo_counts)
 
 
 @dataclass

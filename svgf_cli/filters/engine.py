@@ -15,6 +15,7 @@ from svgf_cli.filters.params import (
     SVGFParams,
     atrous_iterations_for,
     check_params,
+    colour_blend_for,
     params_for_samples,
 )
 from svgf_cli.filters.pipeline import build
@@ -112,8 +113,9 @@ class PipelineFilter:
         setup = self._setups.get(samples_per_pixel)
         if setup is None:
             params = params_for_samples(self.params, samples_per_pixel)
+            albedo_blend = colour_blend_for(self.params, samples_per_pixel)
             setup = (self.setup if params is self.params
-                     else dataclasses.replace(Setup.of(params, self.debug_layers),
+                     else dataclasses.replace(Setup.of(params, self.debug_layers, albedo_blend),
                                               signal_outputs=self.setup.signal_outputs))
             self._setups[samples_per_pixel] = setup
         return setup

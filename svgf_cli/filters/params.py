@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple, TypeVar
 
@@ -108,9 +109,10 @@ class SVGFParams:
     moments_alpha: float = _p(0.2, "Minimum blend factor of the luminance moments.",
                               group="temporal", valid=Range(0, 1, low_open=True))
     samples_per_pixel: int = _p(
-        1, "Samples per pixel of the inputs: a frame of N samples is blended as N one-sample"
-        " frames, alpha and moments_alpha -> 1 - (1 - alpha)^N; auto (-1 in svgf/params) = the"
-        " frame's header (Cycles'; else 1): docs/algorithm.md#frames-of-several-samples.",
+        1, "Samples per pixel of the inputs: N-sample frames blend as N one-sample frames"
+        " (alpha, moments_alpha -> 1 - (1 - alpha)^N; colour means: K^2/(1-K) = N a^2/(1-a)),"
+        " the auto reaches halved per factor 4; auto (-1 in svgf/params) = the frame's header"
+        " (Cycles'; else 1): docs/algorithm.md#frames-of-several-samples.",
         group="temporal", valid=Range(1, 65536, auto=AUTO_SAMPLES, shown="1..65536"),
     )
     history_cap: int = _p(32, "Maximum history length in frames.", group="temporal", valid=Range(1))
@@ -186,7 +188,7 @@ class SVGFParams:
     antilag_radius: int = _p(
         2, "Anti-lag window radius in cells of 2x2 pixels (2 = 5x5 cells, 10x10 pixels); auto"
         " (-1 in svgf/params) = from the image's shorter side: 2 below 160 pixels, 4 below"
-        " 320, else 6.",
+        " 320, else 6; halved per factor 4 of samples_per_pixel.",
         group="antilag", valid=Range(1, 16, auto=AUTO_ANTILAG_RADIUS, shown="1..16"))
     antilag_sigma: float = _p(
         3.5, "Anti-lag significance: the history is stale, with its full weight, where it"
@@ -565,13 +567,21 @@ def atrous_iterations_for(params: SVGFParams, height: int, width: int,
         return params.atrous_iterations
     side = min(height, width)
     count = next(count for smallest, count in _ITERATION_SIDES if side >= smallest)
+    return max(1, count - factors_of_four(params, samples_per_pixel))
+
+
+def factors_of_four(params: SVGFParams, samples_per_pixel: int) -> int:
+    """How many whole factors of 4 a frame's samples per pixel hold (the header's
+    ``samples_per_pixel``; ``params.samples_per_pixel`` wins when not auto): 0 for 1-3
+    samples, 1 for 4-15, 2 for 16-63. Each needs a quarter of the area for the same noise,
+    half the reach, which the auto windows follow."""
     samples = (samples_per_pixel if params.samples_per_pixel == AUTO_SAMPLES
                else params.samples_per_pixel)
-    fewer = 0
+    factors = 0
     while samples >= 4:
-        fewer += 1
+        factors += 1
         samples //= 4
-    return max(1, count - fewer)
+    return factors
 
 
 # The shorter image side from which each wider clamp window is used (as the a-trous count).
@@ -616,10 +626,14 @@ def luminance_stop_scale_for(params: SVGFParams, height: int, width: int) -> flo
 _ANTILAG_SIDES = ((320, 6), (160, 4), (0, 2))
 
 
-def antilag_radius_for(params: SVGFParams, height: int, width: int) -> int:
+def antilag_radius_for(params: SVGFParams, height: int, width: int,
+                       samples_per_pixel: int = 1) -> int:
     """The anti-lag window's radius (in cells of 2x2 pixels) for an image of ``height`` x
-    ``width``: an explicit one is kept; ``AUTO_ANTILAG_RADIUS`` is 2 (10x10 pixels) below
-    160 rows of the shorter side, 4 (18x18) below 320 and 6 (26x26) from 320. Anti-lag tests
+    ``width`` whose frames hold ``samples_per_pixel`` samples: an explicit one is kept;
+    ``AUTO_ANTILAG_RADIUS`` is 2 (10x10 pixels) below 160 rows of the shorter side, 4
+    (18x18) below 320 and 6 (26x26) from 320, halved (rounded up, at least 1) per whole
+    factor of 4 samples (:func:`factors_of_four`: the same noise in a quarter of the area;
+    measured on cycles/roll at 4 spp, docs/algorithm.md#frames-of-several-samples). Anti-lag tests
     the history against the window's mean of this frame's samples; the window's noise sets
     how small a change it can tell from noise, and a false alarm restarts the history from
     this frame's mostly dark one-sample values (noise, and a darker frame). On a larger image
@@ -627,8 +641,13 @@ def antilag_radius_for(params: SVGFParams, height: int, width: int) -> int:
     Measured (docs/algorithm.md#the-anti-lag-window-grows-with-the-image): 144 rows best at
     2, 216 rows at 4 (a Blender shot with moving lights on a metal sphere +0.04 JOD), 360
     rows at 4-6, 6 best where the light changes."""
-    return _by_image_side(params.antilag_radius, AUTO_ANTILAG_RADIUS, _ANTILAG_SIDES,
-                          height, width)
+    if params.antilag_radius != AUTO_ANTILAG_RADIUS:
+        return params.antilag_radius
+    radius = _by_image_side(params.antilag_radius, AUTO_ANTILAG_RADIUS, _ANTILAG_SIDES,
+                            height, width)
+    for _ in range(factors_of_four(params, samples_per_pixel)):
+        radius = max(1, (radius + 1) // 2)
+    return radius
 
 
 _T = TypeVar("_T", int, float)
@@ -678,6 +697,25 @@ def params_for_samples(params: SVGFParams, samples_per_pixel: int) -> SVGFParams
         alpha=_frame_blend(params.alpha, n),
         moments_alpha=_frame_blend(params.moments_alpha, n),
     )
+
+
+def colour_blend_for(params: SVGFParams, samples_per_pixel: int) -> float:
+    """The blend of the demodulation colours' running means (``temporal_albedo``) for a
+    frame of ``samples_per_pixel`` samples (the header's; ``params.samples_per_pixel`` wins
+    when not auto): ``alpha`` for one sample, else the steady-state gain ``K`` of a Kalman
+    filter whose measurement noise falls as 1/N while its loss per frame (the means'
+    resampling blur, which does not depend on N) stays: ``K^2 / (1 - K) = N alpha^2 /
+    (1 - alpha)`` (0.36 at 4 samples and ``alpha`` 0.2, against the light's 0.59). A colour
+    changes on a surface only where the texture does; the light's blend (``params_for_samples``)
+    also has to follow lights, so it trusts the frame more (measured on cycles/roll at 4
+    spp, docs/algorithm.md#frames-of-several-samples)."""
+    n = params.samples_per_pixel
+    if n == AUTO_SAMPLES:
+        n = samples_per_pixel
+    if n <= 1 or params.alpha >= 1.0:
+        return params.alpha
+    ratio = n * params.alpha ** 2 / (1.0 - params.alpha)
+    return min(1.0, (math.sqrt(ratio * ratio + 4.0 * ratio) - ratio) / 2.0)
 
 
 def _frame_blend(alpha: float, samples: int) -> float:

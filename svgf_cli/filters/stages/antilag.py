@@ -38,7 +38,7 @@ class AntiLag(StageBase):
         ctx.counts["antilag"] = antilag(
             temporal.current, temporal.history_moments, temporal.history_length,
             temporal.depth, np.array(temporal.luminance_weights, dtype=F32),
-            antilag_radius_for(p, ctx.frame.height, ctx.frame.width),
+            antilag_radius_for(p, ctx.frame.height, ctx.frame.width, ctx.frame.samples_per_pixel),
             antilag_sigma(p, temporal.bidirectional), p.antilag_spatial_samples,
             p.antilag_tolerance, p.moments_alpha, scratch, work["antilag_lambda"],
             temporal.gradients, p.antilag_sigma_start,

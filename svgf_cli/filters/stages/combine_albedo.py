@@ -39,7 +39,7 @@ class CombineAlbedo(StageBase):
             signal = frame.signals[slots.index(slot)]
             combine_albedo(
                 forward.albedo[slot], forward.albedo_length[slot], reverse[slot],
-                reverse_length[slot], signal.albedo, ctx.setup.colour_counts,
+                reverse_length[slot], signal.albedo, ctx.setup.albedo_counts,
                 *ctx.setup.rules[signal.guide_albedo], forward.albedo[slot],
             )
         signals = [signal if slot < 0 else dataclasses.replace(signal, albedo=forward.albedo[slot])

@@ -38,7 +38,8 @@ class HistoryGain(StageBase):
             temporal.current, temporal.history_illumination, temporal.history_moments,
             temporal.history_length, temporal.depth,
             np.array(temporal.luminance_weights, dtype=F32),
-            antilag_radius_for(p, ctx.frame.height, ctx.frame.width), p.antilag_sigma,
+            antilag_radius_for(p, ctx.frame.height, ctx.frame.width,
+                               ctx.frame.samples_per_pixel), p.antilag_sigma,
             p.antilag_sigma_start, p.antilag_tolerance, p.moments_alpha, scratch,
         )
         return True

@@ -69,7 +69,8 @@ class ObjectHistory(StageBase):
         turning = np.isfinite(translation[0])
         if not turning.any():
             return False
-        radius = antilag_radius_for(ctx.params, ctx.frame.height, ctx.frame.width)
+        radius = antilag_radius_for(ctx.params, ctx.frame.height, ctx.frame.width,
+                                    ctx.frame.samples_per_pixel)
         rows, columns = _box(turning, CELL * (radius + 1) + 2)
         ctx.turned = _resample(ctx, temporal, history, translation, turning, rows, columns)
         return True
@@ -179,7 +180,8 @@ def _tested(ctx: FrameContext, temporal: TemporalState, current: np.ndarray,
     weights = np.array(temporal.luminance_weights, dtype=F32)
     scratch = np.empty(scratch_shape(num_signals, height, width), F32)
     weight = np.empty((num_signals, *cell_shape(height, width)), F32)
-    radius = antilag_radius_for(p, ctx.frame.height, ctx.frame.width)  # the frame's, not the box's
+    # The frame's, not the box's.
+    radius = antilag_radius_for(p, ctx.frame.height, ctx.frame.width, ctx.frame.samples_per_pixel)
 
     def tested(moments: np.ndarray, length: np.ndarray,
                gradients: list[tuple[np.ndarray, ...] | None] | None = None) -> np.ndarray:

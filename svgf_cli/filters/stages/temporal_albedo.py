@@ -51,7 +51,8 @@ class TemporalAlbedo(StageBase):
             signal = frame.signals[source]
             accumulate_albedo(
                 signal.albedo, history[0][slot], history[1][slot], ctx.motion, ctx.depth,
-                frame.mesh_id, prev_depth, prev_mesh_id, F32(p.alpha), F32(p.history_cap),
+                frame.mesh_id, prev_depth, prev_mesh_id, F32(ctx.setup.albedo_blend),
+                F32(p.history_cap),
                 *ctx.setup.rules[signal.guide_albedo], colour[slot], length[slot],
                 catmull_rom=p.albedo_catmull_rom,
             )
