@@ -532,3 +532,22 @@ def test_every_frame_is_decoded_once(
     assert run_cli(["denoise", sequence / "in.####.exr", "-o", tmp_path / "colour" /
                     "den.####.exr", "--warm-start", "0", "--colour-only"], capsys)[0] == 0
     assert reads.count("in.0001.exr") == 2 and len(reads) == len(FRAMES) + 1
+
+
+def test_verbose_says_what_several_samples_per_pixel_change(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`-v` on Blender's 4-sample frames names the blends and the anti-lag window they get;
+    on one-sample frames, or with the count forced to 1, it says nothing of samples."""
+    cycles = BUNDLED.parent / "cycles"
+    args = ["denoise", "--preset-aovs", "cycles", "-v", "--frames", "1"]
+    code, stdout, err = run_cli([*args, cycles / "roll4" / "in.0001.exr", "-o",
+                                 tmp_path / "a.exr"], capsys)
+    assert code == 0, err
+    assert ("Samples: 4 per pixel (the header's): the light blends at 0.59, the colours' means"
+            " at 0.358, anti-lag window radius 1") in stdout
+    for extra, frame in (([], "roll"), (["--set", "samples_per_pixel=1"], "roll4")):
+        code, stdout, err = run_cli([*args, *extra, cycles / frame / "in.0001.exr", "-o",
+                                     tmp_path / f"{frame}{len(extra)}.exr"], capsys)
+        assert code == 0, err
+        assert "Samples:" not in stdout

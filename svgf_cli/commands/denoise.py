@@ -28,8 +28,12 @@ from svgf_cli.farm.plan import DEFAULT_WARMUP, WARMUP_ERROR_NOTE
 from svgf_cli.filters.params import (
     AUTO_ITERATIONS,
     AUTO_PIXEL_FILTER,
+    AUTO_SAMPLES,
     SVGFParams,
+    antilag_radius_for,
     atrous_iterations_for,
+    colour_blend_for,
+    params_for_samples,
 )
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS, SIGNAL_CHOICES
 from svgf_cli.progress import PROGRESS_MODES, Progress
@@ -375,6 +379,22 @@ def _light_text(run: _Run, options: dict[str, Any]) -> str:
             "every other channel as read")
 
 
+def _log_samples(run: _Run, header_samples: int, height: int, width: int) -> None:
+    """What a frame of several samples per pixel changes (the header's count, or the
+    setting's): the light's and the colours' blends and the anti-lag window."""
+    params = run.params
+    samples = header_samples if params.samples_per_pixel == AUTO_SAMPLES else (
+        params.samples_per_pixel)
+    if samples <= 1:
+        return
+    light = params_for_samples(params, samples).alpha
+    radius = antilag_radius_for(params, height, width, samples)
+    source = "the header's" if params.samples_per_pixel == AUTO_SAMPLES else "samples_per_pixel"
+    run.progress.info(
+        f"Samples: {samples} per pixel ({source}): the light blends at {light:.3g}, the colours'"
+        f" means at {colour_blend_for(params, samples):.3g}, anti-lag window radius {radius}")
+
+
 def _log_start(run: _Run, info: Any) -> None:
     """Version, threads, preset, every parameter, and what auto resolved to on ``info``."""
     from svgf_cli.filters.edge_filter import edge_filter_weight
@@ -395,6 +415,7 @@ def _log_start(run: _Run, info: Any) -> None:
         count = atrous_iterations_for(params, info.height, info.width, samples)
         at = f" at {samples} samples per pixel" if samples > 1 else ""
         progress.info(f"A-trous: {count} iterations (auto, for {info.width}x{info.height}{at})")
+    _log_samples(run, samples_per_pixel(info.attributes), info.height, info.width)
     if params.pixel_filter == AUTO_PIXEL_FILTER:
         centre = centre_sampled(info.attributes)
         weight = pixel_filter_weight(params.pixel_filter, centre)
