@@ -34,6 +34,7 @@ from svgf_cli.filters.params import (
     atrous_iterations_for,
     colour_blend_for,
     params_for_samples,
+    resolved_samples,
 )
 from svgf_cli.io.layers import AOV_PRESETS, MOTION_CONVENTIONS, SIGNAL_CHOICES
 from svgf_cli.progress import PROGRESS_MODES, Progress
@@ -383,8 +384,7 @@ def _log_samples(run: _Run, header_samples: int, height: int, width: int) -> Non
     """What a frame of several samples per pixel changes (the header's count, or the
     setting's): the light's and the colours' blends and the anti-lag window."""
     params = run.params
-    samples = header_samples if params.samples_per_pixel == AUTO_SAMPLES else (
-        params.samples_per_pixel)
+    samples = resolved_samples(params, header_samples)
     if samples <= 1:
         return
     light = params_for_samples(params, samples).alpha

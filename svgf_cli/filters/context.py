@@ -64,15 +64,11 @@ class Setup:
                     F32(MAX_REFLECTANCE), F32(RELATIVE_ALBEDO_FLOOR))
             for guide in (False, True)
         }
-        colour_counts = effective_counts(params.alpha, params.history_cap)
-        albedo_counts = colour_counts
-        if albedo_blend is None:
-            albedo_blend = params.alpha
-        elif albedo_blend != params.alpha:
-            albedo_counts = effective_counts(albedo_blend, params.history_cap)
+        albedo_blend = params.alpha if albedo_blend is None else albedo_blend
         return cls(params, debug_layers, rules, normal_squarings(params.sigma_normal),
-                   colour_counts, effective_counts(params.moments_alpha, params.history_cap),
-                   albedo_blend, albedo_counts)
+                   effective_counts(params.alpha, params.history_cap),
+                   effective_counts(params.moments_alpha, params.history_cap),
+                   albedo_blend, effective_counts(albedo_blend, params.history_cap))
 
 
 @dataclass

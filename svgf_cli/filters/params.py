@@ -570,13 +570,19 @@ def atrous_iterations_for(params: SVGFParams, height: int, width: int,
     return max(1, count - factors_of_four(params, samples_per_pixel))
 
 
+def resolved_samples(params: SVGFParams, samples_per_pixel: int) -> int:
+    """A frame's samples per pixel as the filter takes them: the header's
+    ``samples_per_pixel`` under auto, else ``params.samples_per_pixel``."""
+    if params.samples_per_pixel == AUTO_SAMPLES:
+        return samples_per_pixel
+    return params.samples_per_pixel
+
+
 def factors_of_four(params: SVGFParams, samples_per_pixel: int) -> int:
-    """How many whole factors of 4 a frame's samples per pixel hold (the header's
-    ``samples_per_pixel``; ``params.samples_per_pixel`` wins when not auto): 0 for 1-3
-    samples, 1 for 4-15, 2 for 16-63. Each needs a quarter of the area for the same noise,
-    half the reach, which the auto windows follow."""
-    samples = (samples_per_pixel if params.samples_per_pixel == AUTO_SAMPLES
-               else params.samples_per_pixel)
+    """How many whole factors of 4 a frame's samples per pixel hold
+    (:func:`resolved_samples`): 0 for 1-3 samples, 1 for 4-15, 2 for 16-63. Each needs a
+    quarter of the area for the same noise, half the reach, which the auto windows follow."""
+    samples = resolved_samples(params, samples_per_pixel)
     factors = 0
     while samples >= 4:
         factors += 1
@@ -687,9 +693,7 @@ def params_for_samples(params: SVGFParams, samples_per_pixel: int) -> SVGFParams
     (measured on cycles/roll at 4 spp: docs/algorithm.md#frames-of-several-samples).
     N = 1 gives back ``params`` itself.
     """
-    n = params.samples_per_pixel
-    if n == AUTO_SAMPLES:
-        n = samples_per_pixel
+    n = resolved_samples(params, samples_per_pixel)
     if n <= 1:
         return params
     return dataclasses.replace(
@@ -709,9 +713,7 @@ def colour_blend_for(params: SVGFParams, samples_per_pixel: int) -> float:
     changes on a surface only where the texture does; the light's blend (``params_for_samples``)
     also has to follow lights, so it trusts the frame more (measured on cycles/roll at 4
     spp, docs/algorithm.md#frames-of-several-samples)."""
-    n = params.samples_per_pixel
-    if n == AUTO_SAMPLES:
-        n = samples_per_pixel
+    n = resolved_samples(params, samples_per_pixel)
     if n <= 1 or params.alpha >= 1.0:
         return params.alpha
     ratio = n * params.alpha ** 2 / (1.0 - params.alpha)
