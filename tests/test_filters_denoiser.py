@@ -258,6 +258,20 @@ def test_reset_makes_the_next_frame_cold() -> None:
     np.testing.assert_array_equal(out.layers["history_length.direct"], 1.0)
 
 
+def test_a_cold_frame_shows_no_anti_lag_response() -> None:
+    """The anti-lag debug layer of a frame that had no history to test (after a reset) is 0,
+    not the response the workspace still holds from the frame before the reset."""
+    lights = [1.0, 1.0, 4.0, 4.0]  # a light switched up: anti-lag responds on frame 3
+    frames = [make_frame(32, 24, illumination=light, noise=0.05, seed=k)
+              for k, light in enumerate(lights)]
+    denoiser = Denoiser(resolve_params("default"), debug_layers=True)
+    responses = [denoiser.process(f).layers["antilag.direct"] for f in frames[:3]]
+    assert responses[2].max() > 0.0
+    denoiser.reset()
+    cold = denoiser.process(frames[3]).layers["antilag.direct"]
+    assert not cold.any()
+
+
 def test_resolution_change_raises() -> None:
     denoiser = Denoiser(resolve_params("paper"))
     denoiser.process(make_frame(32, 24))

@@ -91,8 +91,10 @@ def debug_layers(ctx: FrameContext, index: int, emission_plane: np.ndarray,
     layers[f"history_length.{name}"] = spatial.history_length[index].copy()
     layers[f"radiance_mode.{name}"] = ((mode >> index) & 1).astype(F32)
     if ctx.params.antilag:
-        layers[f"antilag.{name}"] = cells_to_pixels(
-            ctx.work["antilag_lambda"][index], height, width)
+        # Anti-lag's response where it ran this frame (it counts then), else none: 0.
+        layers[f"antilag.{name}"] = (
+            cells_to_pixels(ctx.work["antilag_lambda"][index], height, width)
+            if "antilag" in ctx.counts else np.zeros((height, width), F32))
     return alone
 
 
