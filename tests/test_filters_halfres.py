@@ -136,3 +136,4 @@ def test_layered_groups_on_blocks_add_up_to_the_colour(monkeypatch: pytest.Monke
         np.testing.assert_allclose(total, out.color, rtol=1e-3, atol=1e-6)
     history = denoiser.groups.resident.history
     assert history is not None and history["prev_depth"].shape == (8, 11)
+    assert denoiser.layers.stage_seconds["group_blocks"] > 0.0  # -v prints the blocks' cost

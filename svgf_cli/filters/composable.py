@@ -804,7 +804,8 @@ def group_frame(frame: Frame, groups: list[LightLayer],
 class LayerClock:
     """The wall seconds of the light layers' own work on the last frame, by part: the
     light passes' shares (``passes``), the light groups' (``groups``: their pixel filter,
-    the outlines' exchanges and the split; their filter has its own stages). `svgf denoise
+    the outlines' exchanges and the split; their filter has its own stages; on 2x2 blocks,
+    ``group_blocks``: making the blocks and upsampling their output). `svgf denoise
     -v` prints them after the inner filters' stages."""
 
     stage_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -947,13 +948,21 @@ class LayeredDenoiser:
         """The light groups' filter on ``groups`` (:func:`group_frame`), its outputs as one
         (K, 3, H, W) array; on 2x2 blocks (``filters.halfres``) from
         ``GROUP_BLOCKS_MIN_PIXELS`` up."""
+        started = time.perf_counter()
         small = (halve_frame(groups) if groups.depth.size >= GROUP_BLOCKS_MIN_PIXELS
                  else None)
+        blocks = time.perf_counter() - started
         layers = self.groups.process(groups if small is None else small).layers
         self.groups.resident.release_workspace()
         # A view of the filter's outputs (side by side: filters.stages.remodulate).
         filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
-        return filtered if small is None else upsample(filtered, small, groups)
+        if small is None:
+            return filtered
+        started = time.perf_counter()
+        filtered = upsample(filtered, small, groups)
+        # -v prints it with the light layers' own work (LayerClock).
+        self.layers.stage_seconds["group_blocks"] = blocks + time.perf_counter() - started
+        return filtered
 
 
 class LayeredReversePass(LayeredDenoiser):
