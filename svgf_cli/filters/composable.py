@@ -44,7 +44,6 @@ import numpy as np
 
 from svgf_cli.filters.edge_filter import OutlineSpill
 from svgf_cli.filters.engine import PipelineFilter
-from svgf_cli.filters.halfres import halve_frame, upsample
 from svgf_cli.filters.medium import MEDIUM_DEPTH
 from svgf_cli.filters.params import SVGFParams, params_for_samples
 from svgf_cli.filters.pass_shares import PassShares
@@ -804,19 +803,10 @@ def group_frame(frame: Frame, groups: list[LightLayer],
 class LayerClock:
     """The wall seconds of the light layers' own work on the last frame, by part: the
     light passes' shares (``passes``), the light groups' (``groups``: their pixel filter,
-    the outlines' exchanges and the split; their filter has its own stages; on 2x2 blocks,
-    ``group_blocks``: making the blocks and upsampling their output). `svgf denoise
+    the outlines' exchanges and the split; their filter has its own stages). `svgf denoise
     -v` prints them after the inner filters' stages."""
 
     stage_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
-
-
-# The light groups' filter runs on 2x2 blocks (filters.halfres) from 720p up: at 1080p its
-# cost falls from ~0.64 to ~0.14 s a frame (the blocks' making and upsampling 0.1-0.2 more)
-# and the run's peak by ~250 MB. At 640x360 the groups' relMSE moved by -8 to -19 % on the
-# dof shot and by -2 to +17 % on the smoke shot, all under 0.015x their input's; at 128x72
-# by -32 to +24 % (docs/performance.md, session 42): not below 720p.
-GROUP_BLOCKS_MIN_PIXELS = 1280 * 720
 
 
 class LayeredDenoiser:
@@ -930,8 +920,11 @@ class LayeredDenoiser:
             self.shares.advance(gbuffer.mesh_id)
             clock["passes"] = time.perf_counter() - started
         if groups is not None:
-            filtered = self.filter_groups(groups)
+            layers = self.groups.process(groups).layers
+            self.groups.resident.release_workspace()
             started = time.perf_counter()
+            # A view of the filter's outputs (side by side: filters.stages.remodulate).
+            filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
             if spill is not None:
@@ -942,27 +935,6 @@ class LayeredDenoiser:
                 _write(layer.channels, part, denoised.light)
             clock["groups"] = time.perf_counter() - started
         return denoised
-
-
-    def filter_groups(self, groups: Frame) -> np.ndarray:
-        """The light groups' filter on ``groups`` (:func:`group_frame`), its outputs as one
-        (K, 3, H, W) array; on 2x2 blocks (``filters.halfres``) from
-        ``GROUP_BLOCKS_MIN_PIXELS`` up."""
-        started = time.perf_counter()
-        small = (halve_frame(groups) if groups.depth.size >= GROUP_BLOCKS_MIN_PIXELS
-                 else None)
-        blocks = time.perf_counter() - started
-        layers = self.groups.process(groups if small is None else small).layers
-        self.groups.resident.release_workspace()
-        # A view of the filter's outputs (side by side: filters.stages.remodulate).
-        filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
-        if small is None:
-            return filtered
-        started = time.perf_counter()
-        filtered = upsample(filtered, small, groups)
-        # -v prints it with the light layers' own work (LayerClock).
-        self.layers.stage_seconds["group_blocks"] = blocks + time.perf_counter() - started
-        return filtered
 
 
 class LayeredReversePass(LayeredDenoiser):
@@ -994,6 +966,7 @@ class LayeredReversePass(LayeredDenoiser):
             light = frame_light(frame)
             if light.groups:
                 gbuffer, medium = warmup
-                self.filter_groups(group_frame(gbuffer, light.groups, medium))
+                self.groups.process(group_frame(gbuffer, light.groups, medium))
+                self.groups.resident.release_workspace()
         return denoised
 
