@@ -44,6 +44,13 @@ import numpy as np
 
 from svgf_cli.filters.edge_filter import OutlineSpill
 from svgf_cli.filters.engine import PipelineFilter
+from svgf_cli.filters.lone_lights import (
+    Pixels,
+    bound_by_total,
+    give_to_their_groups,
+    lone_lights,
+    neighbours_albedo,
+)
 from svgf_cli.filters.medium import MEDIUM_DEPTH
 from svgf_cli.filters.params import SVGFParams, params_for_samples
 from svgf_cli.filters.pass_shares import PassShares
@@ -218,12 +225,17 @@ def frame_totals(planes: list[np.ndarray]) -> np.ndarray:
     return totals
 
 
-def compose_groups(colour: np.ndarray, filtered: np.ndarray,
-                   groups: list[LightLayer]) -> np.ndarray:
+def compose_groups(colour: np.ndarray, filtered: np.ndarray, groups: list[LightLayer],
+                   lone: Pixels | None = None) -> np.ndarray:
     """The denoised light groups, (K, 3, H, W), into ``filtered`` (the K filtered groups,
     stacked): ``colour`` split by their shares (the input groups' box-filtered shares where
-    the filtered ones are 0)."""
+    the filtered ones are 0); near the ``lone`` lights of the G-buffer albedo no filtered
+    group counts for more than the colour, and on them what the colour kept is the lit
+    group's (``filters.lone_lights``: ``bound_by_total``, ``give_to_their_groups``)."""
     radiance = [g.radiance for g in groups]
+    if lone is not None:
+        bound_by_total(filtered, colour, lone)
+        give_to_their_groups(filtered, colour, radiance, lone)
     return split_by_shares(colour, filtered, lambda: each_filtered(radiance, box_filter),
                            out=filtered, last=lambda: frame_totals(radiance))
 
@@ -777,8 +789,20 @@ def frame_light(frame: Frame) -> LightLayers:
     return frame.light or LightLayers()
 
 
-def group_frame(frame: Frame, groups: list[LightLayer],
-                medium: np.ndarray | None = None) -> Frame:
+def group_lone_lights(frame: Frame, medium: np.ndarray | None) -> Pixels:
+    """The lone lights of the G-buffer albedo (``filters.lone_lights``) the groups' filter
+    demodulates: not on the ``medium`` pixels that are a medium surface of their own, where
+    that albedo is the medium's per-sample noise (smoke: above 1 on a pixel in 20) and
+    :func:`group_frame` filters the groups as radiance."""
+    ys, xs = lone_lights(frame.albedo, frame.depth)
+    if medium is None or not ys.size:
+        return ys, xs
+    kept = ~(medium[ys, xs] & (frame.depth[ys, xs] == MEDIUM_DEPTH))
+    return ys[kept], xs[kept]
+
+
+def group_frame(frame: Frame, groups: list[LightLayer], medium: np.ndarray | None = None,
+                lone: Pixels | None = None) -> Frame:
     """The frame whose signals are the light groups (each filtered like a combined colour:
     demodulated by the G-buffer albedo, direct and indirect light together), same guides.
     On the ``medium`` pixels (the colour filter's, its G-buffer filled: ``frame``) that are
@@ -786,17 +810,29 @@ def group_frame(frame: Frame, groups: list[LightLayer],
     filtered as radiance, as the colour's medium signal is: the G-buffer albedo there is
     the medium's on this pixel's sample (Cycles' ``Denoising Albedo`` inside smoke: 0.2 to
     1.8 from one pixel to the next), and remodulating by it puts that noise back into the
-    groups' shares."""
-    albedo = frame.albedo
+    groups' shares. The ``lone`` lights of that albedo (``filters.lone_lights``) take their
+    neighbours' albedo: their light is a firefly to the groups' filter, as to the colour's."""
+    albedo = (frame.albedo if lone is None
+              else neighbours_albedo(frame.albedo, frame.depth, lone))
     if medium is not None:
         own = medium & (frame.depth == MEDIUM_DEPTH)
         if own.any():
-            albedo = albedo.copy()
+            albedo = albedo.copy() if albedo is frame.albedo else albedo
             albedo[:, own] = 1.0
     signals = [Signal(f"group{k}", np.ascontiguousarray(g.radiance, dtype=F32), albedo,
                       guide_albedo=True, mixed=True) for k, g in enumerate(groups)]
     return dataclasses.replace(frame, signals=signals, emission=None, light=None,
                                final_colour=None)
+
+
+def group_input(gbuffer: Frame, groups: list[LightLayer], medium: np.ndarray | None
+                ) -> tuple[Frame | None, Pixels | None]:
+    """The groups' filter's frame (:func:`group_frame`) and the lone lights it found
+    (:func:`group_lone_lights`); None, None without groups."""
+    if not groups:
+        return None, None
+    lone = group_lone_lights(gbuffer, medium)
+    return group_frame(gbuffer, groups, medium, lone), lone
 
 
 @dataclasses.dataclass
@@ -868,8 +904,7 @@ class LayeredDenoiser:
         light = frame_light(frame)
         gbuffer, denoised.gbuffer = denoised.gbuffer, None  # for the groups' filter only
         assert gbuffer is not None
-        groups = (group_frame(gbuffer, light.groups, denoised.medium) if light.groups
-                  else None)
+        groups, lone = group_input(gbuffer, light.groups, denoised.medium)
         emission = denoised.emission  # the frame's, less what the filter took into a signal
         names = self.colour.signal_names or ()
         outputs = _planes(denoised.layers, names)
@@ -931,7 +966,8 @@ class LayeredDenoiser:
                 for group in filtered:
                     spill.apply(group, group)
             for layer, part in zip(light.groups, compose_groups(denoised.color, filtered,
-                                                                light.groups), strict=True):
+                                                                light.groups, lone),
+                                   strict=True):
                 _write(layer.channels, part, denoised.light)
             clock["groups"] = time.perf_counter() - started
         return denoised
@@ -966,7 +1002,7 @@ class LayeredReversePass(LayeredDenoiser):
             light = frame_light(frame)
             if light.groups:
                 gbuffer, medium = warmup
-                self.groups.process(group_frame(gbuffer, light.groups, medium))
+                self.groups.process(group_input(gbuffer, light.groups, medium)[0])
                 self.groups.resident.release_workspace()
         return denoised
 

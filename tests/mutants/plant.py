@@ -836,6 +836,50 @@ MUTANTS: tuple[Mutant, ...] = (
         (("if \"antilag\" in ctx.counts else", "if True else"),),
         ("tests/test_filters_denoiser.py",),
     ),
+    Mutant(
+        "lone-light-unbounded", "filters",
+        "near a lone light the filtered groups are no longer held to the colour",
+        "svgf_cli/filters/composable.py",
+        (("    if lone is not None:\n        bound_by_total(",
+          "    if False:\n        bound_by_total("),),
+        ("tests/test_light_layers.py",),
+    ),
+    Mutant(
+        "lone-light-albedo-kept", "filters",
+        "the groups' filter demodulates a lone light by its own (emission) albedo",
+        "svgf_cli/filters/composable.py",
+        (("    albedo = (frame.albedo if lone is None\n", "    albedo = (frame.albedo if True\n"),),
+        ("tests/test_light_layers.py",),
+    ),
+    Mutant(
+        "lone-light-in-smoke", "filters",
+        "the medium's own noisy albedo counts as lone lights (bounds the groups all over smoke)",
+        "svgf_cli/filters/composable.py",
+        (("    kept = ~(medium[ys, xs] & ", "    kept = (medium[ys, xs] | ~"),),
+        ("tests/test_light_layers.py",),
+    ),
+    Mutant(
+        "lone-light-rest-shared", "filters",
+        "what the colour kept of a lone light's sample is shared by all the groups",
+        "svgf_cli/filters/composable.py",
+        (("        give_to_their_groups(filtered, colour, radiance, lone)\n", ""),),
+        ("tests/test_light_layers.py",),
+    ),
+    Mutant(
+        "lone-light-owner-last", "filters",
+        "a lone light's rest goes to the group with the least light there",
+        "svgf_cli/filters/lone_lights.py",
+        (("    owner = np.argmax([inp[:, ys, xs]", "    owner = np.argmin([inp[:, ys, xs]"),),
+        ("tests/test_filters_lone_lights.py",),
+    ),
+    Mutant(
+        "lone-light-tent-clipped", "filters",
+        "the lone lights' tents cut at the image's border before their second box",
+        "svgf_cli/filters/lone_lights.py",
+        (("    top, left = int(ys.min()) - reach, int(xs.min()) - reach\n",
+          "    top, left = max(int(ys.min()) - reach, 0), max(int(xs.min()) - reach, 0)\n"),),
+        ("tests/test_filters_lone_lights.py",),
+    ),
 )
 
 
