@@ -44,6 +44,7 @@ import numpy as np
 
 from svgf_cli.filters.edge_filter import OutlineSpill
 from svgf_cli.filters.engine import PipelineFilter
+from svgf_cli.filters.halfres import halve_frame, upsample
 from svgf_cli.filters.lone_lights import (
     Pixels,
     bound_by_total,
@@ -839,10 +840,20 @@ def group_input(gbuffer: Frame, groups: list[LightLayer], medium: np.ndarray | N
 class LayerClock:
     """The wall seconds of the light layers' own work on the last frame, by part: the
     light passes' shares (``passes``), the light groups' (``groups``: their pixel filter,
-    the outlines' exchanges and the split; their filter has its own stages). `svgf denoise
+    the outlines' exchanges and the split; their filter has its own stages; on 2x2 blocks,
+    ``group_blocks``: making the blocks and upsampling their output). `svgf denoise
     -v` prints them after the inner filters' stages."""
 
     stage_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+# The light groups' filter runs on 2x2 blocks (filters.halfres) from 720p up: at 1080p its
+# cost falls from ~0.64 to ~0.14 s a frame (the blocks' making and upsampling 0.1-0.2 more)
+# and the run's peak by ~250 MB. At 640x360 the groups' relMSE moved by -8 to -19 % on the
+# dof shot and by -2 to +17 % on the smoke shot, all under 0.015x their input's; at 128x72
+# by -32 to +24 % (docs/performance.md, session 42): not below 720p. Its sparkles' dark blobs
+# went with the lone lights' handling (filters.lone_lights; session 43).
+GROUP_BLOCKS_MIN_PIXELS = 1280 * 720
 
 
 class LayeredDenoiser:
@@ -955,11 +966,8 @@ class LayeredDenoiser:
             self.shares.advance(gbuffer.mesh_id)
             clock["passes"] = time.perf_counter() - started
         if groups is not None:
-            layers = self.groups.process(groups).layers
-            self.groups.resident.release_workspace()
+            filtered = self.filter_groups(groups)
             started = time.perf_counter()
-            # A view of the filter's outputs (side by side: filters.stages.remodulate).
-            filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
             if spill is not None:
@@ -971,6 +979,27 @@ class LayeredDenoiser:
                 _write(layer.channels, part, denoised.light)
             clock["groups"] = time.perf_counter() - started
         return denoised
+
+
+    def filter_groups(self, groups: Frame) -> np.ndarray:
+        """The light groups' filter on ``groups`` (:func:`group_frame`), its outputs as one
+        (K, 3, H, W) array; on 2x2 blocks (``filters.halfres``) from
+        ``GROUP_BLOCKS_MIN_PIXELS`` up."""
+        started = time.perf_counter()
+        small = (halve_frame(groups) if groups.depth.size >= GROUP_BLOCKS_MIN_PIXELS
+                 else None)
+        blocks = time.perf_counter() - started
+        layers = self.groups.process(groups if small is None else small).layers
+        self.groups.resident.release_workspace()
+        # A view of the filter's outputs (side by side: filters.stages.remodulate).
+        filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
+        if small is None:
+            return filtered
+        started = time.perf_counter()
+        filtered = upsample(filtered, small, groups)
+        # -v prints it with the light layers' own work (LayerClock).
+        self.layers.stage_seconds["group_blocks"] = blocks + time.perf_counter() - started
+        return filtered
 
 
 class LayeredReversePass(LayeredDenoiser):
@@ -1002,7 +1031,6 @@ class LayeredReversePass(LayeredDenoiser):
             light = frame_light(frame)
             if light.groups:
                 gbuffer, medium = warmup
-                self.groups.process(group_input(gbuffer, light.groups, medium)[0])
-                self.groups.resident.release_workspace()
+                self.filter_groups(group_input(gbuffer, light.groups, medium)[0])
         return denoised
 

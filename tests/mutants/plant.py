@@ -830,6 +830,20 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_run_warm_start.py",),
     ),
     Mutant(
+        "halfres-upsample-ignores-surface", "filters",
+        "the groups' upsampling blends blocks of another object into a pixel",
+        "svgf_cli/filters/halfres.py",
+        (("w *= F32(FOREIGN_WEIGHT)", "w *= F32(1.0)"),),
+        ("tests/test_filters_halfres.py",),
+    ),
+    Mutant(
+        "halfres-farthest-surface", "filters",
+        "a block takes its farthest pixel's G-buffer, not its nearest",
+        "svgf_cli/filters/halfres.py",
+        (("if depth[y, x] < best:", "if depth[y, x] > best:"),),
+        ("tests/test_filters_halfres.py",),
+    ),
+    Mutant(
         "antilag-debug-stale", "filters",
         "a cold frame's anti-lag layer shows the response kept from before a reset",
         "svgf_cli/filters/stages/remodulate.py",
