@@ -852,7 +852,9 @@ class LayerClock:
 # and the run's peak by ~250 MB. At 640x360 the groups' relMSE moved by -8 to -19 % on the
 # dof shot and by -2 to +17 % on the smoke shot, all under 0.015x their input's; at 128x72
 # by -32 to +24 % (docs/performance.md, session 42): not below 720p. Its sparkles' dark blobs
-# went with the lone lights' handling (filters.lone_lights; session 43).
+# went with the lone lights' handling (filters.lone_lights). At 1280x720 (smoke, 256-spp
+# references) the key group's relMSE is 15 % above full resolution's, env 4 % below
+# (session 43): the lever, should that show, is this threshold.
 GROUP_BLOCKS_MIN_PIXELS = 1280 * 720
 
 
@@ -967,6 +969,7 @@ class LayeredDenoiser:
             clock["passes"] = time.perf_counter() - started
         if groups is not None:
             filtered = self.filter_groups(groups)
+            assert filtered is not None
             started = time.perf_counter()
             spill_groups(filtered, pixel_filter_weight(self.params.pixel_filter,
                                                        frame.centre_sampled))
@@ -980,17 +983,19 @@ class LayeredDenoiser:
             clock["groups"] = time.perf_counter() - started
         return denoised
 
-
-    def filter_groups(self, groups: Frame) -> np.ndarray:
+    def filter_groups(self, groups: Frame, outputs: bool = True) -> np.ndarray | None:
         """The light groups' filter on ``groups`` (:func:`group_frame`), its outputs as one
         (K, 3, H, W) array; on 2x2 blocks (``filters.halfres``) from
-        ``GROUP_BLOCKS_MIN_PIXELS`` up."""
+        ``GROUP_BLOCKS_MIN_PIXELS`` up. Without ``outputs`` (a warm-up frame: the filter's
+        history alone is wanted) None, and the blocks are not brought back."""
         started = time.perf_counter()
         small = (halve_frame(groups) if groups.depth.size >= GROUP_BLOCKS_MIN_PIXELS
                  else None)
         blocks = time.perf_counter() - started
         layers = self.groups.process(groups if small is None else small).layers
         self.groups.resident.release_workspace()
+        if not outputs:
+            return None
         # A view of the filter's outputs (side by side: filters.stages.remodulate).
         filtered = _joined([_rgb(layers, s.name) for s in groups.signals])
         if small is None:
@@ -1031,6 +1036,8 @@ class LayeredReversePass(LayeredDenoiser):
             light = frame_light(frame)
             if light.groups:
                 gbuffer, medium = warmup
-                self.filter_groups(group_input(gbuffer, light.groups, medium)[0])
+                warm, _ = group_input(gbuffer, light.groups, medium)
+                assert warm is not None
+                self.filter_groups(warm, outputs=False)
         return denoised
 

@@ -90,7 +90,9 @@ def neighbours_albedo(albedo: np.ndarray, depth: np.ndarray, pixels: Pixels) -> 
 
 
 def _box_sums(plane: np.ndarray, radius: int, axis: int) -> np.ndarray:
-    """Sums of ``plane`` over windows of 2 ``radius`` + 1 along ``axis`` (zeros beyond)."""
+    """Sums of ``plane`` over windows of 2 ``radius`` + 1 along ``axis`` (zeros beyond).
+    Not ``filters.shares.box_mean``: that one divides by the pixels a window covers, which
+    would raise a tent where it meets the border."""
     padded = np.pad(plane, [(radius + 1, radius) if a == axis else (0, 0) for a in (0, 1)])
     running = np.cumsum(padded, axis=axis)
     size = plane.shape[axis]
